@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Idempotent set-up from nothing: project-local venv from the lock file, then a colcon build
+# of every package under src/ into ros2_ws/install. Re-running it only redoes what changed.
+#
+#   scripts/setup.sh            # create/update .venv and build the workspace
+#   FORCE=1 scripts/setup.sh    # rebuild everything
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+venv="$root/.venv"
+python_bin="${PYTHON:-python3.11}"
+command -v "$python_bin" >/dev/null 2>&1 || python_bin=python3
+
+log() { printf '[setup] %s\n' "$*"; }
+
+hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
+
+# 1. The virtual environment, reinstalled only when the lock files change.
+req_hash="$(hash_of requirements/lock.txt requirements/mediapipe.txt)"
+if [ "${FORCE:-0}" = 1 ] || [ ! -x "$venv/bin/python" ] || [ "$(cat "$venv/.lock-hash" 2>/dev/null)" != "$req_hash" ]; then
+  log "creating $venv with $("$python_bin" --version 2>&1)"
+  [ -x "$venv/bin/python" ] || "$python_bin" -m venv "$venv"
+  "$venv/bin/python" -m pip install --quiet --upgrade pip 2>&1 | { grep -v "is ignored: it is neither" || true; }
+  log "installing requirements/lock.txt (torch==2.13.0 CPU, ROS 2 Jazzy wheels, Pinocchio, ...)"
+  "$venv/bin/python" -m pip install --quiet -r requirements/lock.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
+  "$venv/bin/python" -m pip install --quiet --no-deps -r requirements/mediapipe.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
+  echo "$req_hash" > "$venv/.lock-hash"
+else
+  log "venv up to date"
+fi
+
+# 2. The colcon workspace; rebuilt when any package manifest changes or install/ is missing.
+pkg_hash="$(hash_of $(find src -maxdepth 2 \( -name package.xml -o -name setup.py -o -name setup.cfg \) | sort))"
+stamp="ros2_ws/install/.pkg-hash"
+if [ "${FORCE:-0}" = 1 ] || [ ! -f ros2_ws/install/setup.bash ] || [ "$(cat "$stamp" 2>/dev/null)" != "$pkg_hash" ]; then
+  log "colcon build (symlink install) of src/*"
+  (
+    cd ros2_ws
+    # shellcheck disable=SC1091
+    source "$venv/bin/activate"
+    rm -rf build install log
+    colcon --log-base log build --symlink-install --event-handlers console_direct- >/dev/null
+  )
+  echo "$pkg_hash" > "$stamp"
+else
+  log "workspace up to date"
+fi
+log "done: source env.sh to use ros2, mocap and the nodes"

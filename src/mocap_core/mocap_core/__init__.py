@@ -1,0 +1,1 @@
+"""Core library of the monocular motion-capture pipeline: skeleton, rotations, forward kinematics, URDF, ROS message conversions, QoS, diagnostics, bag I/O and the ros2/mocap command-line tools. No node."""

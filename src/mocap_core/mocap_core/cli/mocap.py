@@ -1,0 +1,169 @@
+"""``mocap``: the project's user-facing command (later issues add data, train, eval, process,
+export and bench sub-commands).
+
+    mocap --help
+    mocap doctor                      # versions and what this machine can run
+    mocap bag check <bag>             # per-topic counts, rates and message validation
+    mocap skeleton [--urdf FILE]      # the default skeleton, its bone lengths and URDF
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import platform
+import sys
+from typing import Callable, Dict, List, Optional
+
+import numpy as np
+
+def validator_for(topic: str, msgtype: str) -> Optional[Callable]:
+    """The converter that parses a message of a pipeline topic (raises on a bad message), or
+    None for topics this project does not define."""
+    from .. import ros_conversions as rc
+    from ..skeleton import NUM_JOINTS
+
+    kind = msgtype.replace('/msg/', '/')
+    if kind == 'sensor_msgs/PointCloud2' and topic.endswith('keypoints2d'):
+        return rc.cloud_to_keypoints
+    if kind == 'sensor_msgs/PointCloud2' and topic.endswith('joints3d'):
+        return lambda m: rc.cloud_to_positions(m, NUM_JOINTS)
+    if kind == 'trajectory_msgs/MultiDOFJointTrajectory' and topic.endswith('/motion'):
+        return rc.motion_to_pose
+    if kind == 'sensor_msgs/JointState' and topic.endswith('contacts'):
+        return rc.msg_to_contacts
+    if kind == 'sensor_msgs/CameraInfo':
+        return rc.camera_info_to_intrinsics
+    return None
+
+
+def cmd_bag_check(args: argparse.Namespace) -> int:
+    """Counts, rates and validation of every message of the pipeline's topics in a bag."""
+    from ..bag_io import BagError, BagReader, deserialize
+
+    try:
+        with BagReader(args.bag) as reader:
+            topics = reader.topics
+            stamps: Dict[str, List[int]] = {t: [] for t in topics}
+            errors: Dict[str, List[str]] = {t: [] for t in topics}
+            for m in reader.messages():
+                stamps[m.topic].append(m.timestamp_ns)
+                fn = validator_for(m.topic, m.msgtype)
+                if fn is None:
+                    continue
+                try:
+                    fn(deserialize(m.data, m.msgtype))
+                except Exception as exc:  # noqa: BLE001 - report any decoding problem
+                    errors[m.topic].append(f'{type(exc).__name__}: {exc}')
+    except BagError as exc:
+        print(f'mocap bag check: error: {exc}', file=sys.stderr)
+        return 1
+    bad = 0
+    print(f'{"topic":40s} {"type":42s} {"count":>6s} {"rate Hz":>8s}  status')
+    for name, info in sorted(topics.items()):
+        ts = np.asarray(stamps[name], dtype=np.int64)
+        rate = (1e9 / np.median(np.diff(ts))) if len(ts) > 2 and np.median(np.diff(ts)) > 0 \
+            else float('nan')
+        checked = validator_for(name, info.msgtype) is not None
+        errs = errors[name]
+        bad += len(errs)
+        status = (f'{len(errs)} invalid: {errs[0]}' if errs
+                  else ('valid' if checked else 'not checked'))
+        print(f'{name:40s} {info.msgtype:42s} {len(ts):6d} {rate:8.2f}  {status}')
+    return 1 if bad else 0
+
+
+def cmd_doctor(args: argparse.Namespace) -> int:
+    """Print versions of the stack and whether each part imports."""
+    print(f'python      {platform.python_version()} ({sys.executable})')
+    print(f'machine     {platform.machine()}, {os.cpu_count()} CPU cores')
+    ok = True
+    for mod, attr in (('numpy', '__version__'), ('scipy', '__version__'),
+                      ('torch', '__version__'), ('pinocchio', '__version__'),
+                      ('cv2', '__version__'), ('mediapipe', '__version__'),
+                      ('rosbags', None), ('osqp', None), ('clarabel', None), ('rclpy', None)):
+        try:
+            m = importlib.import_module(mod)
+            version = getattr(m, attr, '') if attr else ''
+            if not version:
+                from importlib.metadata import PackageNotFoundError, version as dist_version
+                try:
+                    version = dist_version({'rclpy': 'ros-rclpy'}.get(mod, mod))
+                except PackageNotFoundError:
+                    version = 'installed'
+            extra = ''
+            if mod == 'torch':
+                extra = f' (cuda available: {m.cuda.is_available()})'
+            print(f'{mod:11s} {version}{extra}')
+        except Exception as exc:  # noqa: BLE001
+            ok = False
+            print(f'{mod:11s} MISSING ({type(exc).__name__}: {exc})')
+    print(f"AMENT_PREFIX_PATH {'set' if os.environ.get('AMENT_PREFIX_PATH') else 'NOT SET'}")
+    return 0 if ok else 1
+
+
+def cmd_skeleton(args: argparse.Namespace) -> int:
+    """Show the default skeleton; optionally write its URDF."""
+    from ..skeleton import BONE_GROUP_NAMES, JOINT_NAMES, PARENTS, Skeleton
+    from ..urdf import skeleton_to_urdf
+
+    sk = Skeleton.default()
+    if args.urdf:
+        text = skeleton_to_urdf(sk, body_mass=args.body_mass)
+        if args.urdf == '-':
+            sys.stdout.write(text)
+            return 0
+        with open(args.urdf, 'w') as f:
+            f.write(text)
+        print(f'wrote {args.urdf} (body mass {args.body_mass:g} kg)')
+        return 0
+    print('joints (parent):')
+    for name, parent in zip(JOINT_NAMES, PARENTS):
+        print(f'  {name:16s} {JOINT_NAMES[parent] if parent >= 0 else "-"}')
+    print('bone groups (m):')
+    for name, length in zip(BONE_GROUP_NAMES, sk.group_lengths()):
+        print(f'  {name:16s} {length:.3f}')
+    print(f'height ~ {sk.height():.2f} m, rest root height {sk.rest_root_height():.3f} m')
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='mocap', description='Monocular motion capture pipeline: tools.')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND')
+
+    p = sub.add_parser('doctor', help='check the installation')
+    p.set_defaults(func=cmd_doctor)
+
+    p = sub.add_parser('bag', help='bag tools')
+    bag_sub = p.add_subparsers(dest='bag_command', metavar='BAG_COMMAND')
+    pc = bag_sub.add_parser('check', help='per-topic counts and rates; validate every '
+                            'message of the pipeline topics')
+    pc.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
+    pc.set_defaults(func=cmd_bag_check)
+
+    p = sub.add_parser('skeleton', help='the default skeleton and its URDF')
+    p.add_argument('--urdf', metavar='FILE', help="write the URDF to FILE ('-' = stdout)")
+    p.add_argument('--body-mass', type=float, default=70.0, help='body mass, kg (default 70)')
+    p.set_defaults(func=cmd_skeleton)
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not hasattr(args, 'func'):
+        parser.print_help()
+        return 0 if args.command is None else 2
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except (OSError, ValueError) as exc:
+        print(f'mocap: error: {exc}', file=sys.stderr)
+        return 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

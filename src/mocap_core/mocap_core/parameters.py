@@ -1,0 +1,62 @@
+"""Declaring node parameters with descriptions, types and ranges in one table.
+
+Example::
+
+    PARAMS = (
+        ParamSpec('source', 'openpose_json', 'Input: camera | video | images | topic | ...'),
+        ParamSpec('fps', 30.0, 'Playback rate in frames per second', min_value=0.1),
+    )
+    values = declare_parameters(node, PARAMS)   # -> {'source': ..., 'fps': ...}
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Dict, Iterable, Optional
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: name, default (its type is the parameter's type), description."""
+
+    name: str
+    default: Any
+    description: str
+    read_only: bool = False
+    min_value: Optional[float] = None
+    max_value: Optional[float] = None
+    additional_constraints: str = ''
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(description=self.description, read_only=self.read_only,
+                                additional_constraints=self.additional_constraints)
+        if self.min_value is not None or self.max_value is not None:
+            lo = self.min_value if self.min_value is not None else -1e300
+            hi = self.max_value if self.max_value is not None else 1e300
+            if isinstance(self.default, bool):
+                pass
+            elif isinstance(self.default, int):
+                d.integer_range = [IntegerRange(from_value=int(max(lo, -2**63)),
+                                                to_value=int(min(hi, 2**63 - 1)), step=0)]
+            elif isinstance(self.default, float):
+                d.floating_point_range = [FloatingPointRange(from_value=float(lo),
+                                                             to_value=float(hi), step=0.0)]
+        return d
+
+
+def declare_parameters(node, specs: Iterable[ParamSpec]) -> Dict[str, Any]:
+    """Declare every spec on ``node`` and return ``{name: current value}``."""
+    values: Dict[str, Any] = {}
+    for spec in specs:
+        param = node.declare_parameter(spec.name, spec.default, spec.descriptor())
+        values[spec.name] = param.value
+    return values
+
+
+def describe_parameters(specs: Iterable[ParamSpec]) -> str:
+    """Markdown table of the parameters (for READMEs and --help)."""
+    rows = ['| parameter | default | description |', '|---|---|---|']
+    rows += [f'| `{s.name}` | `{s.default!r}` | {s.description} |' for s in specs]
+    return '\n'.join(rows)

@@ -1,0 +1,444 @@
+"""Thin conversion layer between the core types and standard ROS 2 messages (DESIGN §2).
+
+Every ``*_to_*`` function has its inverse and a round-trip test. Parsing functions validate the
+message and raise :class:`MessageError` (a ``ValueError``) with a one-line reason, so a node
+can log it and drop the message instead of crashing.
+
+Topic contracts implemented here:
+
+* keypoints: ``sensor_msgs/PointCloud2``, organised: height = persons, width = 23 keypoints
+  (:data:`~mocap_core.skeleton.KEYPOINT_NAMES`), float32 fields ``u``, ``v`` (pixels),
+  ``confidence`` in [0, 1] (0 = not seen); frame = camera optical frame;
+* joint positions: ``sensor_msgs/PointCloud2``, height 1, width J, float32 ``x, y, z`` (m);
+* motion: ``trajectory_msgs/MultiDOFJointTrajectory`` with one point whose ``transforms[i]``
+  is joint i's rotation relative to its parent (x, y, z, w) and translation = its rest offset
+  from the parent; the root transform is the root pose in ``header.frame_id``;
+* joint states: ``sensor_msgs/JointState`` with the URDF's revolute joints (3 per ball joint,
+  see :mod:`mocap_core.urdf`); ``effort`` optionally carries joint torques (N m);
+* foot contacts: ``sensor_msgs/JointState`` whose ``name`` lists the contact points
+  (``left_heel, left_toe, right_heel, right_toe``) and whose ``position`` holds the contact
+  probabilities in [0, 1] (stamped and self-describing; velocity/effort empty);
+* ground reaction force: ``geometry_msgs/WrenchStamped`` (N, N m);
+* root trajectory: ``nav_msgs/Odometry`` and ``nav_msgs/Path``;
+* stick figure: ``visualization_msgs/MarkerArray``.
+"""
+
+from __future__ import annotations
+
+from typing import Dict, Iterable, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+from builtin_interfaces.msg import Duration, Time
+from geometry_msgs.msg import (Point, Pose as PoseMsg, PoseStamped, Quaternion, Transform,
+                               Vector3, Wrench, WrenchStamped)
+from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import CameraInfo, JointState, PointCloud2, PointField
+from std_msgs.msg import ColorRGBA, Header, String
+from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+from visualization_msgs.msg import Marker, MarkerArray
+
+from .camera import CameraIntrinsics
+from .pose import Pose
+from .skeleton import CONTACT_POINT_NAMES, JOINT_NAMES, NUM_KEYPOINTS, Skeleton
+from .urdf import revolute_joint_names
+
+KEYPOINT_FIELDS: Tuple[str, ...] = ('u', 'v', 'confidence')
+POSITION_FIELDS: Tuple[str, ...] = ('x', 'y', 'z')
+
+
+class MessageError(ValueError):
+    """A message that cannot be converted: missing fields, wrong sizes, NaN, unknown names."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Stamps and headers
+# ---------------------------------------------------------------------------------------------
+def ns_to_stamp(ns: int) -> Time:
+    """Nanoseconds since the epoch -> builtin_interfaces/Time."""
+    ns = int(ns)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def stamp_to_ns(stamp: Time) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def make_header(stamp_ns: int, frame_id: str) -> Header:
+    """A std_msgs/Header from integer nanoseconds and a frame id."""
+    return Header(stamp=ns_to_stamp(stamp_ns), frame_id=str(frame_id))
+
+
+# ---------------------------------------------------------------------------------------------
+# PointCloud2 (float32 fields only)
+# ---------------------------------------------------------------------------------------------
+def array_to_cloud(values: np.ndarray, fields: Sequence[str], header: Header) -> PointCloud2:
+    """(H, W, F) values -> organised PointCloud2 with float32 fields ``fields`` (packed, LE)."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 3 or values.shape[-1] != len(fields):
+        raise MessageError(f'expected values of shape (H, W, {len(fields)}), got {values.shape}')
+    height, width, nf = values.shape
+    msg = PointCloud2()
+    msg.header = header
+    msg.height = int(height)
+    msg.width = int(width)
+    msg.fields = [PointField(name=f, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+                  for i, f in enumerate(fields)]
+    msg.is_bigendian = False
+    msg.point_step = 4 * nf
+    msg.row_step = 4 * nf * width
+    msg.data = values.astype('<f4').tobytes()
+    msg.is_dense = bool(np.all(np.isfinite(values)))
+    return msg
+
+
+def cloud_to_array(msg: PointCloud2, fields: Sequence[str],
+                   width: Optional[int] = None) -> np.ndarray:
+    """PointCloud2 -> (H, W, F) float32 array of the named float32 fields.
+
+    Raises:
+        MessageError: a field is missing or not one float32, the width differs from
+            ``width``, or the data size does not match height, width and steps.
+    """
+    by_name = {f.name: f for f in msg.fields}
+    missing = [f for f in fields if f not in by_name]
+    if missing:
+        raise MessageError(f'PointCloud2 lacks field(s) {missing}; has {sorted(by_name)}')
+    for f in fields:
+        pf = by_name[f]
+        if pf.datatype != PointField.FLOAT32 or pf.count != 1:
+            raise MessageError(f'PointCloud2 field {f!r} must be one FLOAT32 '
+                               f'(datatype {PointField.FLOAT32}), got datatype {pf.datatype} '
+                               f'count {pf.count}')
+        if pf.offset + 4 > msg.point_step:
+            raise MessageError(f'PointCloud2 field {f!r} at offset {pf.offset} exceeds '
+                               f'point_step {msg.point_step}')
+    if width is not None and msg.width != width:
+        raise MessageError(f'PointCloud2 width is {msg.width}, expected {width}')
+    height, w = int(msg.height), int(msg.width)
+    if msg.row_step < msg.point_step * w:
+        raise MessageError(f'PointCloud2 row_step {msg.row_step} < point_step {msg.point_step}'
+                           f' x width {w}')
+    data = bytes(msg.data) if not isinstance(msg.data, (bytes, bytearray)) else msg.data
+    if len(data) != msg.row_step * height:
+        raise MessageError(f'PointCloud2 data has {len(data)} bytes, expected row_step '
+                           f'{msg.row_step} x height {height} = {msg.row_step * height}')
+    order = '>' if msg.is_bigendian else '<'
+    dtype = np.dtype({'names': list(fields), 'formats': [order + 'f4'] * len(fields),
+                      'offsets': [by_name[f].offset for f in fields],
+                      'itemsize': msg.point_step})
+    out = np.empty((height, w, len(fields)), dtype=np.float32)
+    for r in range(height):
+        row = np.frombuffer(data, dtype=dtype, count=w, offset=r * msg.row_step)
+        for i, f in enumerate(fields):
+            out[r, :, i] = row[f]
+    return out
+
+
+def keypoints_to_cloud(keypoints: np.ndarray, header: Header) -> PointCloud2:
+    """Keypoints (P, 23, 3) or (23, 3) of (u px, v px, confidence) -> PointCloud2.
+
+    Confidences are clipped to [0, 1]; a keypoint with a non-finite coordinate or confidence
+    is written as (0, 0, 0) (not seen), so consumers never receive NaN.
+    """
+    kp = np.array(keypoints, dtype=np.float64)
+    if kp.ndim == 2:
+        kp = kp[None]
+    if kp.ndim != 3 or kp.shape[1:] != (NUM_KEYPOINTS, 3):
+        raise MessageError(f'keypoints must have shape (P, {NUM_KEYPOINTS}, 3), got {kp.shape}')
+    return array_to_cloud(sanitize_keypoints(kp), KEYPOINT_FIELDS, header)
+
+
+def cloud_to_keypoints(msg: PointCloud2) -> np.ndarray:
+    """PointCloud2 -> (P, 23, 3) float64 keypoints (u, v, confidence), sanitised like
+    :func:`keypoints_to_cloud`. Raises MessageError for a malformed cloud."""
+    return sanitize_keypoints(cloud_to_array(msg, KEYPOINT_FIELDS, width=NUM_KEYPOINTS))
+
+
+def sanitize_keypoints(kp: np.ndarray) -> np.ndarray:
+    """Copy of (..., 3) keypoints with confidence clipped to [0, 1] and every keypoint that has
+    a non-finite value set to (0, 0, 0)."""
+    kp = np.array(kp, dtype=np.float64)
+    bad = ~np.all(np.isfinite(kp), axis=-1)
+    kp[bad] = 0.0
+    kp[..., 2] = np.clip(kp[..., 2], 0.0, 1.0)
+    return kp
+
+
+def positions_to_cloud(positions: np.ndarray, header: Header) -> PointCloud2:
+    """(J, 3) joint positions (m) -> PointCloud2 (height 1, width J, fields x, y, z)."""
+    pos = np.asarray(positions, dtype=np.float64)
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise MessageError(f'positions must have shape (J, 3), got {pos.shape}')
+    return array_to_cloud(pos[None], POSITION_FIELDS, header)
+
+
+def cloud_to_positions(msg: PointCloud2, num_points: Optional[int] = None) -> np.ndarray:
+    """PointCloud2 with x, y, z -> (N, 3) float64 positions (all rows concatenated)."""
+    arr = cloud_to_array(msg, POSITION_FIELDS, width=num_points)
+    return arr.reshape(-1, 3).astype(np.float64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Motion: MultiDOFJointTrajectory
+# ---------------------------------------------------------------------------------------------
+def _quat_msg(q: np.ndarray) -> Quaternion:
+    return Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+
+
+def _vec_msg(v: np.ndarray) -> Vector3:
+    return Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def pose_to_motion(pose: Pose, header: Header) -> MultiDOFJointTrajectory:
+    """Pose -> MultiDOFJointTrajectory (one point; lossless, see module docstring)."""
+    msg = MultiDOFJointTrajectory()
+    msg.header = header
+    msg.joint_names = list(pose.joint_names)
+    translations = np.array(pose.skeleton.offsets)
+    translations[0] = pose.root_position
+    point = MultiDOFJointTrajectoryPoint()
+    point.transforms = [Transform(translation=_vec_msg(t), rotation=_quat_msg(q))
+                        for t, q in zip(translations, pose.rotations)]
+    point.time_from_start = Duration(sec=0, nanosec=0)
+    msg.points = [point]
+    return msg
+
+
+def motion_to_pose(msg: MultiDOFJointTrajectory,
+                   joint_names: Sequence[str] = JOINT_NAMES) -> Pose:
+    """MultiDOFJointTrajectory -> Pose with joints in the order of ``joint_names``.
+
+    The message may list the joints in any order; extra joints are ignored. Raises
+    MessageError for no point, a size mismatch, a missing joint, NaN or a zero quaternion.
+    """
+    if len(msg.points) == 0:
+        raise MessageError('MultiDOFJointTrajectory has no point')
+    transforms = msg.points[0].transforms
+    if len(transforms) != len(msg.joint_names):
+        raise MessageError(f'MultiDOFJointTrajectory has {len(msg.joint_names)} joint names '
+                           f'but {len(transforms)} transforms')
+    index = {n: i for i, n in enumerate(msg.joint_names)}
+    missing = [n for n in joint_names if n not in index]
+    if missing:
+        raise MessageError(f'MultiDOFJointTrajectory lacks joint(s) {missing}')
+    if msg.joint_names[0] != joint_names[0]:
+        raise MessageError(f'first joint must be the root {joint_names[0]!r}, '
+                           f'got {msg.joint_names[0]!r}')
+    trans = np.array([[transforms[index[n]].translation.x, transforms[index[n]].translation.y,
+                       transforms[index[n]].translation.z] for n in joint_names])
+    quats = np.array([[transforms[index[n]].rotation.x, transforms[index[n]].rotation.y,
+                       transforms[index[n]].rotation.z, transforms[index[n]].rotation.w]
+                      for n in joint_names])
+    offsets = trans.copy()
+    offsets[0] = 0.0
+    try:
+        return Pose(Skeleton(offsets=offsets), quats, trans[0])
+    except ValueError as exc:
+        raise MessageError(f'invalid motion message: {exc}') from None
+
+
+# ---------------------------------------------------------------------------------------------
+# JointState (revolute angles, optional torques) and contacts
+# ---------------------------------------------------------------------------------------------
+def pose_to_joint_state(pose: Pose, header: Header,
+                        efforts: Optional[np.ndarray] = None) -> JointState:
+    """Pose -> JointState of the URDF's revolute joints (rad); ``efforts`` (J-1, 3) N m in the
+    same z, y, x order fills ``effort`` (the physics stage's joint torques)."""
+    msg = JointState()
+    msg.header = header
+    msg.name = revolute_joint_names(pose.skeleton)
+    msg.position = [float(a) for a in pose.revolute_angles().reshape(-1)]
+    if efforts is not None:
+        eff = np.asarray(efforts, dtype=np.float64).reshape(-1)
+        if eff.size != len(msg.name):
+            raise MessageError(f'expected {len(msg.name)} efforts, got {eff.size}')
+        msg.effort = [float(e) for e in eff]
+    return msg
+
+
+def joint_state_to_angles(msg: JointState, skeleton: Skeleton) -> np.ndarray:
+    """JointState -> (J-1, 3) z, y, x revolute angles (rad) for ``skeleton``'s joints.
+
+    Names may come in any order. Raises MessageError for missing names, a length mismatch or
+    non-finite angles."""
+    if len(msg.position) != len(msg.name):
+        raise MessageError(f'JointState has {len(msg.name)} names but {len(msg.position)} '
+                           'positions')
+    index = {n: i for i, n in enumerate(msg.name)}
+    wanted = revolute_joint_names(skeleton)
+    missing = [n for n in wanted if n not in index]
+    if missing:
+        raise MessageError(f'JointState lacks {len(missing)} joint(s), e.g. {missing[:3]}')
+    angles = np.array([msg.position[index[n]] for n in wanted], dtype=np.float64)
+    if not np.all(np.isfinite(angles)):
+        raise MessageError('JointState has non-finite positions')
+    return angles.reshape(-1, 3)
+
+
+def contacts_to_msg(probabilities: Mapping[str, float] | Sequence[float] | np.ndarray,
+                    header: Header) -> JointState:
+    """Foot contact probabilities -> JointState (name = contact points, position = p)."""
+    if isinstance(probabilities, Mapping):
+        values = [probabilities[n] for n in CONTACT_POINT_NAMES]
+    else:
+        values = list(np.asarray(probabilities, dtype=np.float64).reshape(-1))
+    if len(values) != len(CONTACT_POINT_NAMES):
+        raise MessageError(f'expected {len(CONTACT_POINT_NAMES)} contact probabilities, '
+                           f'got {len(values)}')
+    msg = JointState()
+    msg.header = header
+    msg.name = list(CONTACT_POINT_NAMES)
+    msg.position = [float(np.clip(v, 0.0, 1.0)) for v in values]
+    return msg
+
+
+def msg_to_contacts(msg: JointState) -> np.ndarray:
+    """Contacts JointState -> (4,) probabilities in :data:`CONTACT_POINT_NAMES` order."""
+    if len(msg.position) != len(msg.name):
+        raise MessageError(f'contacts message has {len(msg.name)} names but '
+                           f'{len(msg.position)} values')
+    index = {n: i for i, n in enumerate(msg.name)}
+    missing = [n for n in CONTACT_POINT_NAMES if n not in index]
+    if missing:
+        raise MessageError(f'contacts message lacks {missing}')
+    p = np.array([msg.position[index[n]] for n in CONTACT_POINT_NAMES], dtype=np.float64)
+    if not np.all(np.isfinite(p)):
+        raise MessageError('contacts message has non-finite probabilities')
+    return np.clip(p, 0.0, 1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Wrench, odometry, path, URDF
+# ---------------------------------------------------------------------------------------------
+def wrench_to_msg(force: np.ndarray, torque: np.ndarray, header: Header) -> WrenchStamped:
+    """Force (3,) N and moment (3,) N m -> WrenchStamped."""
+    return WrenchStamped(header=header, wrench=Wrench(force=_vec_msg(np.asarray(force)),
+                                                      torque=_vec_msg(np.asarray(torque))))
+
+
+def msg_to_wrench(msg: WrenchStamped) -> Tuple[np.ndarray, np.ndarray]:
+    """WrenchStamped -> (force (3,), torque (3,))."""
+    f, t = msg.wrench.force, msg.wrench.torque
+    return np.array([f.x, f.y, f.z]), np.array([t.x, t.y, t.z])
+
+
+def root_to_odometry(position: np.ndarray, orientation: np.ndarray, header: Header,
+                     child_frame_id: str = 'pelvis',
+                     linear_velocity: Optional[np.ndarray] = None,
+                     angular_velocity: Optional[np.ndarray] = None) -> Odometry:
+    """Root pose (position (3,) m, quaternion x,y,z,w) and optional twist (m/s, rad/s, in the
+    child frame as REP-105 specifies) -> nav_msgs/Odometry."""
+    msg = Odometry()
+    msg.header = header
+    msg.child_frame_id = child_frame_id
+    msg.pose.pose = PoseMsg(position=Point(x=float(position[0]), y=float(position[1]),
+                                           z=float(position[2])),
+                            orientation=_quat_msg(np.asarray(orientation)))
+    if linear_velocity is not None:
+        msg.twist.twist.linear = _vec_msg(np.asarray(linear_velocity))
+    if angular_velocity is not None:
+        msg.twist.twist.angular = _vec_msg(np.asarray(angular_velocity))
+    return msg
+
+
+def odometry_to_root(msg: Odometry) -> Tuple[np.ndarray, np.ndarray]:
+    """nav_msgs/Odometry -> (position (3,), quaternion (4,) x,y,z,w)."""
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    return np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])
+
+
+def append_to_path(path: Path, odom: Odometry, max_length: int = 0) -> Path:
+    """Append an Odometry's pose to ``path`` (in place; keeps the last ``max_length`` poses
+    when > 0) and set its header to the odometry's."""
+    path.header = odom.header
+    path.poses.append(PoseStamped(header=odom.header, pose=odom.pose.pose))
+    if max_length > 0 and len(path.poses) > max_length:
+        del path.poses[:len(path.poses) - max_length]
+    return path
+
+
+def urdf_to_msg(urdf: str) -> String:
+    """URDF XML -> std_msgs/String (publish transient-local)."""
+    return String(data=urdf)
+
+
+# ---------------------------------------------------------------------------------------------
+# Markers
+# ---------------------------------------------------------------------------------------------
+def _color(rgba: Sequence[float]) -> ColorRGBA:
+    return ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
+
+
+def _points(xyz: Iterable[np.ndarray]) -> list:
+    return [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in xyz]
+
+
+def pose_to_markers(pose: Pose, header: Header, ns: str = 'mocap',
+                    color: Sequence[float] = (0.2, 0.6, 1.0, 1.0),
+                    contacts: Optional[Sequence[float]] = None,
+                    forces: Optional[Dict[str, np.ndarray]] = None,
+                    newtons_per_metre: float = 1000.0) -> MarkerArray:
+    """Stick figure for RViz/Foxglove.
+
+    Markers (namespace ``ns``): id 0 LINE_LIST bones, id 1 SPHERE_LIST joints, id 2 SPHERE_LIST
+    contact points coloured from green (free) to red (contact) when ``contacts`` (4,) is
+    given, ids 10+ ARROW per foot force when ``forces`` maps a contact point name to a force
+    (3,) N (arrow length = force / ``newtons_per_metre``).
+    """
+    positions = pose.joint_positions()
+    line = Marker(header=header, ns=ns, id=0, type=Marker.LINE_LIST, action=Marker.ADD)
+    line.pose.orientation.w = 1.0
+    line.scale.x = 0.02
+    line.color = _color(color)
+    line.points = _points(p for j in range(1, len(positions))
+                          for p in (positions[pose.skeleton.parents[j]], positions[j]))
+    joints = Marker(header=header, ns=ns, id=1, type=Marker.SPHERE_LIST, action=Marker.ADD)
+    joints.pose.orientation.w = 1.0
+    joints.scale.x = joints.scale.y = joints.scale.z = 0.04
+    joints.color = _color(color)
+    joints.points = _points(positions)
+    markers = [line, joints]
+    contact_pos = pose.contact_positions()
+    if contacts is not None:
+        probs = np.clip(np.asarray(contacts, dtype=np.float64).reshape(-1), 0.0, 1.0)
+        m = Marker(header=header, ns=ns, id=2, type=Marker.SPHERE_LIST, action=Marker.ADD)
+        m.pose.orientation.w = 1.0
+        m.scale.x = m.scale.y = m.scale.z = 0.05
+        m.points = _points(contact_pos[n] for n in CONTACT_POINT_NAMES)
+        m.colors = [_color((float(p), 1.0 - float(p), 0.0, 1.0)) for p in probs]
+        markers.append(m)
+    for k, (name, force) in enumerate(sorted((forces or {}).items())):
+        start = contact_pos[name]
+        arrow = Marker(header=header, ns=ns, id=10 + k, type=Marker.ARROW, action=Marker.ADD)
+        arrow.pose.orientation.w = 1.0
+        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.02, 0.04, 0.06
+        arrow.color = _color((1.0, 0.3, 0.0, 1.0))
+        arrow.points = _points([start, start + np.asarray(force) / newtons_per_metre])
+        markers.append(arrow)
+    return MarkerArray(markers=markers)
+
+
+# ---------------------------------------------------------------------------------------------
+# Camera info
+# ---------------------------------------------------------------------------------------------
+def intrinsics_to_camera_info(intr: CameraIntrinsics, header: Header) -> CameraInfo:
+    """CameraIntrinsics -> sensor_msgs/CameraInfo (plumb_bob, zero distortion)."""
+    msg = CameraInfo(header=header, width=int(intr.width), height=int(intr.height))
+    msg.distortion_model = 'plumb_bob'
+    msg.d = [0.0] * 5
+    msg.k = [float(v) for v in intr.K.reshape(-1)]
+    msg.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    msg.p = [float(intr.fx), 0.0, float(intr.cx), 0.0, 0.0, float(intr.fy), float(intr.cy),
+             0.0, 0.0, 0.0, 1.0, 0.0]
+    return msg
+
+
+def camera_info_to_intrinsics(msg: CameraInfo) -> CameraIntrinsics:
+    """sensor_msgs/CameraInfo -> CameraIntrinsics (from K). Raises MessageError if invalid."""
+    k = list(msg.k)
+    try:
+        return CameraIntrinsics(int(msg.width), int(msg.height), float(k[0]), float(k[4]),
+                                float(k[2]), float(k[5]))
+    except (ValueError, IndexError) as exc:
+        raise MessageError(f'invalid CameraInfo: {exc}') from None

@@ -1,0 +1,1 @@
+"""GMR: world-frame global motion from the local pose sequence with a bidirectional GRU."""

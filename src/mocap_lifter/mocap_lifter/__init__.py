@@ -1,0 +1,1 @@
+"""MotioNet (and VTM) lifter: one symmetric skeleton, joint rotations, root position and foot contacts from 2D keypoints."""

@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = 'mocap_lifter'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='Mocap pipeline maintainers',
+    maintainer_email='maintainers@mocap-pipeline.dev',
+    description='MotioNet (and VTM) lifter: one symmetric skeleton, joint rotations, root position and foot contacts from 2D keypoints.',
+    license='Apache-2.0',
+    extras_require={'test': ['pytest']},
+    entry_points={
+        'console_scripts': [
+
+        ],
+    },
+)
