@@ -45,16 +45,17 @@ def parse_people(data: dict, source: str = '<json>') -> np.ndarray:
     for p, person in enumerate(people):
         flat = person.get('pose_keypoints_2d') if isinstance(person, dict) else None
         try:
-            arr = np.asarray(flat, dtype=np.float64).reshape(-1, 3)
+            values = np.asarray(flat, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError):
             raise OpenPoseError(f'{source}: person {p} has no numeric pose_keypoints_2d') from None
-        if arr.shape[0] == 25:
+        if values.size == 25 * 3:
             mapping = BODY25_TO_LAYOUT
-        elif arr.shape[0] == 18:
+        elif values.size == 18 * 3:
             mapping = _COCO18_TO_LAYOUT
         else:
-            raise OpenPoseError(f'{source}: person {p} has {arr.shape[0]} keypoints, '
-                                'expected 25 (BODY_25) or 18 (COCO)')
+            raise OpenPoseError(f'{source}: person {p} has {values.size} values in '
+                                'pose_keypoints_2d, expected 25 x 3 (BODY_25) or 18 x 3 (COCO)')
+        arr = values.reshape(-1, 3)
         for k, src in enumerate(mapping):
             if src >= 0:
                 out[p, k] = arr[src]

@@ -4,6 +4,7 @@ export and bench sub-commands).
     mocap --help
     mocap doctor                      # versions and what this machine can run
     mocap bag check <bag>             # per-topic counts, rates and message validation
+    mocap plot keypoints <bag> -o F   # 2D skeletons and confidences of a keypoint topic
     mocap skeleton [--urdf FILE]      # the default skeleton, its bone lengths and URDF
 """
 
@@ -128,6 +129,37 @@ def cmd_skeleton(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_plot_keypoints(args: argparse.Namespace) -> int:
+    """Plot the first person's keypoints of a bag's keypoint topic."""
+    from ..bag_io import BagError, BagReader, deserialize
+    from ..plots import plot_keypoint_frames
+    from ..ros_conversions import MessageError, cloud_to_keypoints, stamp_to_ns
+
+    times, frames = [], []
+    try:
+        with BagReader(args.bag) as reader:
+            for m in reader.messages(topics=[args.topic]):
+                try:
+                    msg = deserialize(m.data, m.msgtype)
+                    kp = cloud_to_keypoints(msg)
+                except MessageError as exc:
+                    print(f'skipping a message: {exc}', file=sys.stderr)
+                    continue
+                if len(kp):
+                    times.append(stamp_to_ns(msg.header.stamp) * 1e-9)
+                    frames.append(kp[0])
+    except BagError as exc:
+        print(f'mocap plot keypoints: error: {exc}', file=sys.stderr)
+        return 1
+    if not frames:
+        print(f'mocap plot keypoints: error: no keypoints on {args.topic}', file=sys.stderr)
+        return 1
+    out = plot_keypoint_frames(times, np.stack(frames), args.output,
+                               title=f'{args.topic} ({len(frames)} frames)')
+    print(f'wrote {out}')
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='mocap', description='Monocular motion capture pipeline: tools.')
@@ -142,6 +174,15 @@ def build_parser() -> argparse.ArgumentParser:
                             'message of the pipeline topics')
     pc.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
     pc.set_defaults(func=cmd_bag_check)
+
+    p = sub.add_parser('plot', help='figures from bags')
+    plot_sub = p.add_subparsers(dest='plot_command', metavar='PLOT_COMMAND')
+    pk = plot_sub.add_parser('keypoints', help='2D skeletons at a few frames and the '
+                             'confidence over time')
+    pk.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
+    pk.add_argument('-o', '--output', default='keypoints.png', help='output PNG')
+    pk.add_argument('--topic', default='/mocap/keypoints2d', help='keypoint topic')
+    pk.set_defaults(func=cmd_plot_keypoints)
 
     p = sub.add_parser('skeleton', help='the default skeleton and its URDF')
     p.add_argument('--urdf', metavar='FILE', help="write the URDF to FILE ('-' = stdout)")
