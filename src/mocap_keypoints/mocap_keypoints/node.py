@@ -19,7 +19,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from mocap_core.camera import CameraIntrinsics
-from mocap_core.parameters import ParamSpec, declare_parameters
+from mocap_core.parameters import ParamSpec, declare_parameters, describe_parameters
 from mocap_core.skeleton import NUM_KEYPOINTS
 
 from .openpose import OpenPoseError, keypoint_extent, list_openpose_files, read_openpose_file
@@ -77,6 +77,13 @@ def infer_image_size(frames: List[Tuple[int, Path]], sample: int = 60) -> Tuple[
 
 
 def main(args: Optional[List[str]] = None) -> int:
+    argv = sys.argv[1:] if args is None else list(args)
+    if '-h' in argv or '--help' in argv:
+        print(__doc__)
+        print('Parameters (--ros-args -p name:=value):')
+        print(describe_parameters(PARAMETERS))
+        return 0
+
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
