@@ -10,6 +10,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
     ],
+    package_data={'mocap_core.data': ['*.json']},
     install_requires=['setuptools'],
     zip_safe=False,
     maintainer='Mocap pipeline maintainers',
