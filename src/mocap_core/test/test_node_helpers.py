@@ -1,0 +1,89 @@
+"""Metrics, diagnostics publishing and parameter declaration helpers."""
+
+import math
+import os
+
+import pytest
+
+from mocap_core.metrics import LatencyStats, RateMeter
+
+
+def test_rate_meter_sliding_window():
+    m = RateMeter(window_s=2.0, clock=lambda: 0.0)
+    assert m.rate(0.0) == 0.0
+    for i in range(21):
+        m.tick(i * 0.1)           # 10 Hz for 2 s
+    assert m.rate(2.0) == pytest.approx(10.0)
+    assert m.total == 21
+    assert m.rate(10.0) == 0.0    # all events left the window
+    with pytest.raises(ValueError):
+        RateMeter(window_s=0)
+
+
+def test_latency_stats():
+    s = LatencyStats(size=3)
+    assert math.isnan(s.summary()['median'])
+    for v in (5.0, 1.0, 2.0, 3.0):   # the oldest (5.0) falls out
+        s.add(v)
+    assert s.summary()['median'] == 2.0 and s.summary()['max'] == 3.0 and len(s) == 3
+
+
+@pytest.fixture
+def node():
+    import rclpy
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '0')) % 200 + 30)
+    n = rclpy.create_node('helpers_test', context=ctx)
+    yield n
+    n.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+def test_diagnostics_status_fields_and_levels(node):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from mocap_core.diagnostics import NodeDiagnostics
+
+    d = NodeDiagnostics(node, 'stage', hardware_id='cam0')
+    for _ in range(3):
+        d.input.tick()
+        with d.processing():
+            sum(range(1000))
+        d.output.tick()
+    d.dropped = 2
+    d.set_value('model', 'motionet')
+    st = d.status()
+    values = {kv.key: kv.value for kv in st.values}
+    assert st.level == DiagnosticStatus.OK and st.hardware_id == 'cam0'
+    assert st.name == 'helpers_test: stage'
+    assert values['frames_in'] == '3' and values['frames_dropped'] == '2'
+    assert values['model'] == 'motionet' and float(values['processing_ms_median']) >= 0
+    d.warn('no camera_info yet')
+    assert d.status().level == DiagnosticStatus.WARN and d.status().message == 'no camera_info yet'
+    d.error('solver failed')
+    assert d.status().level == DiagnosticStatus.ERROR
+    d.error(None)
+    d.warn(None)
+    assert d.status().level == DiagnosticStatus.OK
+    d.publish()  # builds and publishes a DiagnosticArray without error
+
+
+def test_declare_parameters_with_descriptions_and_ranges(node):
+    from rclpy.parameter import Parameter
+
+    from mocap_core.parameters import ParamSpec, declare_parameters, describe_parameters
+
+    specs = (ParamSpec('fps', 30.0, 'frames per second', min_value=1.0, max_value=120.0),
+             ParamSpec('persons', 1, 'persons', min_value=1, max_value=4),
+             ParamSpec('source', 'video', 'input kind', read_only=True))
+    values = declare_parameters(node, specs)
+    assert values == {'fps': 30.0, 'persons': 1, 'source': 'video'}
+    desc = node.describe_parameter('fps')
+    assert desc.description == 'frames per second'
+    assert desc.floating_point_range[0].to_value == 120.0
+    result = node.set_parameters([Parameter('fps', value=500.0)])[0]
+    assert not result.successful
+    assert node.describe_parameter('source').read_only
+    table = describe_parameters(specs)
+    assert '| `fps` | `30.0` | frames per second |' in table
