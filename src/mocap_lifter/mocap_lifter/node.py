@@ -1,0 +1,213 @@
+"""``ros2 run mocap_lifter lifter``: MotioNet lifting of 2D keypoints to a 3D skeleton.
+
+Subscribes ``/mocap/keypoints2d`` (PointCloud2) and ``/mocap/camera_info``; per keypoint
+frame publishes, stamped with that frame's stamp and in its camera optical frame:
+``/mocap/lifter/motion`` (MultiDOFJointTrajectory), ``/mocap/lifter/joints3d`` (PointCloud2),
+``/mocap/lifter/joint_states`` (JointState), ``/mocap/lifter/contacts`` (JointState:
+left_heel, left_toe, right_heel, right_toe probabilities), ``/mocap/lifter/markers``
+(MarkerArray), ``/mocap/skeleton/urdf`` (String, transient local; re-published when the
+skeleton estimate changes by more than ``skeleton_tolerance``) and ``/diagnostics``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+
+from mocap_core.parameters import ParamSpec, declare_parameters, describe_parameters
+
+PARAMETERS = (
+    ParamSpec('mode', 'causal', "'causal' (only past frames, for live use) or 'windowed' "
+              '(centred window: better accuracy, delay of `latency` frames)', read_only=True),
+    ParamSpec('weights', '', 'Weights file; empty = the shipped weights of the mode '
+              '(share/mocap_lifter/weights/motionet_<mode>.pt)', read_only=True),
+    ParamSpec('latency', -1, 'Look-ahead frames in windowed mode (-1 = half the receptive '
+              'field)', read_only=True),
+    ParamSpec('skeleton_frames', 90, 'Frames used to estimate the skeleton before it is '
+              'held for the person', min_value=1),
+    ParamSpec('skeleton_tolerance', 0.01, 'Re-publish the URDF when a bone changes by more '
+              'than this (m)', min_value=0.0),
+    ParamSpec('max_gap_s', 1.0, 'A larger gap between keypoint stamps resets the buffer and '
+              'the skeleton', min_value=0.0),
+    ParamSpec('person', 0, 'Row of the keypoint cloud (person) to track', min_value=0),
+    ParamSpec('body_mass', 70.0, 'Body mass for the URDF inertias (kg)', min_value=1.0),
+    ParamSpec('horizontal_fov_deg', 60.0, 'Field of view used when no camera_info arrived '
+              '(approximate intrinsics from the keypoint extent)', min_value=1.0,
+              max_value=179.0),
+    ParamSpec('device', 'cpu', "Torch device ('cpu' or 'cuda')", read_only=True),
+)
+
+
+def default_weights(mode: str) -> Path:
+    """The shipped weights of a mode, from the package share directory (or the source tree)."""
+    name = f'motionet_{mode}.pt'
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = Path(get_package_share_directory('mocap_lifter')) / 'weights' / name
+        if path.exists():
+            return path
+    except Exception:  # noqa: BLE001 - not installed through ament: use the source tree
+        pass
+    return Path(__file__).resolve().parents[1] / 'weights' / name
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    argv = sys.argv[1:] if args is None else list(args)
+    if '-h' in argv or '--help' in argv:
+        print(__doc__)
+        print('Parameters (--ros-args -p name:=value):')
+        print(describe_parameters(PARAMETERS))
+        return 0
+
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+    from sensor_msgs.msg import CameraInfo, JointState, PointCloud2
+    from std_msgs.msg import String
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+    from visualization_msgs.msg import MarkerArray
+
+    from mocap_core import ros_conversions as rc
+    from mocap_core.camera import CameraIntrinsics
+    from mocap_core.diagnostics import NodeDiagnostics
+    from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS
+    from mocap_core.urdf import skeleton_to_urdf
+
+    from .online import OnlineLifter
+    from .train import load_weights
+
+    class LifterNode(Node):
+        def __init__(self) -> None:
+            super().__init__('lifter')
+            self.p = declare_parameters(self, PARAMETERS)
+            mode = self.p['mode']
+            if mode not in ('causal', 'windowed'):
+                raise ValueError(f"mode must be 'causal' or 'windowed', got {mode!r}")
+            path = Path(self.p['weights']) if self.p['weights'] else default_weights(mode)
+            if not path.exists():
+                raise FileNotFoundError(f'weights not found: {path}')
+            model = load_weights(path, self.p['device'], causal=(mode == 'causal'))
+            self.lifter = OnlineLifter(
+                model, mode, None if self.p['latency'] < 0 else self.p['latency'],
+                self.p['skeleton_frames'], self.p['max_gap_s'], self.p['device'])
+            self.intrinsics: Optional[CameraIntrinsics] = None
+            self.published_lengths: Optional[np.ndarray] = None
+            self.last_stamp = -1
+            self.pub = {
+                'motion': self.create_publisher(MultiDOFJointTrajectory, '/mocap/lifter/motion',
+                                                STREAM_QOS),
+                'joints3d': self.create_publisher(PointCloud2, '/mocap/lifter/joints3d',
+                                                  STREAM_QOS),
+                'joint_states': self.create_publisher(JointState, '/mocap/lifter/joint_states',
+                                                      STREAM_QOS),
+                'contacts': self.create_publisher(JointState, '/mocap/lifter/contacts',
+                                                  STREAM_QOS),
+                'markers': self.create_publisher(MarkerArray, '/mocap/lifter/markers',
+                                                 STREAM_QOS),
+                'urdf': self.create_publisher(String, '/mocap/skeleton/urdf', LATCHED_QOS),
+            }
+            self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
+            self.diag.set_value('model', f'motionet ({mode})')
+            self.diag.set_value('latency_frames', self.lifter.latency)
+            self.create_subscription(CameraInfo, '/mocap/camera_info', self.on_info, STREAM_QOS)
+            self.create_subscription(PointCloud2, '/mocap/keypoints2d', self.on_keypoints,
+                                     SENSOR_QOS)
+            self.get_logger().info(f'lifter ready: {path} ({mode}, receptive field '
+                                   f'{model.cfg.receptive_field()} frames, latency '
+                                   f'{self.lifter.latency} frames)')
+
+        def on_info(self, msg: CameraInfo) -> None:
+            try:
+                self.intrinsics = rc.camera_info_to_intrinsics(msg)
+            except rc.MessageError as exc:
+                self.get_logger().warn(f'ignoring camera_info: {exc}',
+                                       throttle_duration_sec=5.0)
+
+        def on_keypoints(self, msg: PointCloud2) -> None:
+            self.diag.input.tick()
+            try:
+                people = rc.cloud_to_keypoints(msg)
+            except rc.MessageError as exc:
+                self.diag.errors += 1
+                self.get_logger().warn(f'dropping keypoints: {exc}', throttle_duration_sec=2.0)
+                return
+            stamp = rc.stamp_to_ns(msg.header.stamp)
+            if stamp <= self.last_stamp:
+                self.diag.dropped += 1
+                self.get_logger().warn('keypoint stamp did not advance; frame dropped',
+                                       throttle_duration_sec=2.0)
+                return
+            self.last_stamp = stamp
+            person = self.p['person']
+            if person >= len(people) or not np.any(people[person, :, 2] > 0):
+                self.diag.dropped += 1
+                self.get_logger().info('nobody seen in this frame', throttle_duration_sec=2.0)
+                return
+            intr = self.intrinsics
+            if intr is None:
+                intr = self._approximate_intrinsics(people[person])
+            with self.diag.processing():
+                frame, event = self.lifter.push(stamp, people[person], intr)
+            if event:
+                self.get_logger().info(f'buffer and skeleton reset ({event})')
+            if frame is None:
+                return
+            if not (np.all(np.isfinite(frame.pose.rotations))
+                    and np.all(np.isfinite(frame.pose.root_position))):
+                self.diag.errors += 1
+                self.get_logger().error('network output not finite; frame dropped')
+                return
+            self.publish(frame, msg.header.frame_id)
+
+        def _approximate_intrinsics(self, kp: np.ndarray) -> CameraIntrinsics:
+            seen = kp[:, 2] > 0
+            w = int(max(640, np.ceil(kp[seen, 0].max() * 1.1)))
+            h = int(max(480, np.ceil(kp[seen, 1].max() * 1.1)))
+            self.diag.warn('no camera_info: approximate intrinsics')
+            self.get_logger().warn(f'no camera_info yet: approximating a {w}x{h} camera with '
+                                   f"{self.p['horizontal_fov_deg']:.0f} deg field of view",
+                                   throttle_duration_sec=10.0)
+            return CameraIntrinsics.from_fov(w, h, self.p['horizontal_fov_deg'])
+
+        def publish(self, frame, frame_id: str) -> None:
+            header = rc.make_header(frame.stamp_ns, frame_id)
+            pose = frame.pose
+            lengths = pose.skeleton.group_lengths()
+            if (self.published_lengths is None or np.max(np.abs(
+                    lengths - self.published_lengths)) > self.p['skeleton_tolerance']):
+                self.pub['urdf'].publish(rc.urdf_to_msg(
+                    skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
+                self.published_lengths = lengths
+            self.pub['motion'].publish(rc.pose_to_motion(pose, header))
+            self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(), header))
+            self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
+            self.pub['contacts'].publish(rc.contacts_to_msg(frame.contacts, header))
+            self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='lifter',
+                                                           contacts=frame.contacts))
+            self.diag.output.tick()
+            self.diag.set_value('skeleton', 'held' if frame.skeleton_fixed else 'estimating')
+            self.diag.set_value('root_depth_m', f'{frame.depth:.2f}')
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = LifterNode()
+        rclpy.spin(node)
+        return 0
+    except (FileNotFoundError, ValueError) as exc:
+        print(f'lifter: error: {exc}', file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,119 @@
+"""Training and evaluation samples for the lifter from processed motion capture (no ROS).
+
+A sample is a window of one clip seen by a random virtual camera (MotioNet §4): the motion
+is optionally mirrored (left-right flip) and given a randomly scaled symmetric skeleton (bone
+length augmentation), the 23 keypoints are projected by a random camera that keeps the
+subject in view (camera augmentation: distance, height, azimuth, field of view, image size),
+and corrupted with the confidence model fitted on real detections. Targets are expressed in
+that camera's optical frame (x right, y down, z forward), metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from mocap_core.data.motion import Motion
+from mocap_core.data.synth2d import (CameraSampling, ConfidenceModel, Corruption,
+                                     corrupt_keypoints, keypoints_3d, mirror_motion,
+                                     motion_to_camera, project, sample_camera)
+from mocap_core.rotations import quat_rotate
+from mocap_core.kinematics import forward_kinematics
+from mocap_core.skeleton import JOINT_INDEX, NUM_BONE_GROUPS, Skeleton
+
+from .features import lifter_features
+
+_LEG = [JOINT_INDEX['left_knee'], JOINT_INDEX['left_ankle']]
+
+
+@dataclass
+class Augmentation:
+    """Random variations applied to each training window."""
+
+    flip_prob: float = 0.5
+    bone_scale: float = 0.08       # per bone group, uniform +-
+    global_scale: float = 0.10     # whole body, uniform +-
+    camera: CameraSampling = field(default_factory=CameraSampling)
+    corruption: Optional[Corruption] = field(default_factory=Corruption)  # None = clean
+
+
+def scaled_skeleton(skeleton: Skeleton, rng: np.random.Generator, aug: Augmentation,
+                    ) -> Skeleton:
+    """A symmetric skeleton with randomly scaled bone groups."""
+    scale = (1.0 + rng.uniform(-aug.global_scale, aug.global_scale)) * \
+        (1.0 + rng.uniform(-aug.bone_scale, aug.bone_scale, NUM_BONE_GROUPS))
+    return Skeleton.from_group_lengths(skeleton.group_lengths() * scale)
+
+
+def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generator,
+                aug: Augmentation) -> Dict[str, np.ndarray]:
+    """One window as arrays: ``features`` (T, 71), ``root_2d`` (T, 2), and targets in the
+    camera frame: ``positions`` (T, J, 3), ``rotations`` (T, J, 4), ``root`` (T, 3),
+    ``lengths`` (G,), ``contacts`` (T, 4) float; plus ``keypoints`` (T, 23, 3) pixels."""
+    rot = motion.rotations[start:start + length]
+    root = motion.root_positions[start:start + length]
+    contacts = motion.contacts[start:start + length].astype(np.float32)
+    skeleton = motion.skeleton
+    if rng.random() < aug.flip_prob:
+        rot, root = mirror_motion(rot, root)
+        contacts = contacts[:, [2, 3, 0, 1]]  # left <-> right heel/toe
+    if aug.bone_scale > 0 or aug.global_scale > 0:
+        new = scaled_skeleton(skeleton, rng, aug)
+        leg = new.bone_lengths()[_LEG].sum() / skeleton.bone_lengths()[_LEG].sum()
+        root = root * leg  # the stride and the pelvis height follow the legs
+        skeleton = new
+    pts = keypoints_3d(skeleton, rot, root)
+    forward = _facing(rot[:, 0])
+    camera = sample_camera(pts, rng, aug.camera, facing=forward)
+    kp = project(camera, pts)
+    if aug.corruption is not None:
+        kp = corrupt_keypoints(kp, rng, _confidence_model(), aug.corruption)
+    features, root_2d, _ = lifter_features(kp, camera.intrinsics)
+    crot, croot = motion_to_camera(rot, root, camera)
+    positions = forward_kinematics(skeleton.parents, skeleton.offsets, crot, croot).positions
+    return {'features': features, 'root_2d': root_2d.astype(np.float32),
+            'positions': positions.astype(np.float32), 'rotations': crot.astype(np.float32),
+            'root': croot.astype(np.float32),
+            'lengths': skeleton.group_lengths().astype(np.float32), 'contacts': contacts,
+            'keypoints': kp.astype(np.float32)}
+
+
+def _facing(root_quats: np.ndarray) -> np.ndarray:
+    """Mean forward (body +x) direction of the root over a window, world xy."""
+    return quat_rotate(root_quats, np.array([1.0, 0.0, 0.0])).mean(axis=0)
+
+
+_MODEL: Optional[ConfidenceModel] = None
+
+
+def _confidence_model() -> ConfidenceModel:
+    global _MODEL
+    if _MODEL is None:
+        _MODEL = ConfidenceModel.default()
+    return _MODEL
+
+
+class WindowSampler:
+    """Draws batches of fixed-length windows, clips weighted by their number of windows."""
+
+    def __init__(self, motions: Sequence[Motion], window: int, seed: int = 0,
+                 aug: Optional[Augmentation] = None) -> None:
+        self.motions: List[Motion] = [m for m in motions if m.num_frames >= window]
+        if not self.motions:
+            raise ValueError(f'no clip has {window} frames')
+        self.window = window
+        self.rng = np.random.default_rng(seed)
+        self.aug = aug or Augmentation()
+        counts = np.array([m.num_frames - window + 1 for m in self.motions], dtype=np.float64)
+        self.weights = counts / counts.sum()
+
+    def batch(self, size: int) -> Dict[str, np.ndarray]:
+        """``size`` samples stacked along a new first axis."""
+        items = []
+        for _ in range(size):
+            m = self.motions[self.rng.choice(len(self.motions), p=self.weights)]
+            start = int(self.rng.integers(0, m.num_frames - self.window + 1))
+            items.append(make_sample(m, start, self.window, self.rng, self.aug))
+        return {k: np.stack([it[k] for it in items]) for k in items[0]}

@@ -1,0 +1,124 @@
+import numpy as np
+import pytest
+import torch
+
+from mocap_core.camera import CameraIntrinsics
+from mocap_core.skeleton import JOINT_MIRROR, NUM_BONE_GROUPS, NUM_JOINTS, Skeleton
+from mocap_lifter.features import NUM_FEATURES, lifter_features, root_keypoint
+from mocap_lifter.metrics import (bone_length_spread_mm, mpjpe_mm, n_mpjpe_mm, pa_mpjpe_mm)
+from mocap_lifter.model import LifterConfig, MotioNet, fk_layer, offsets_from_lengths
+from mocap_lifter.online import OnlineLifter
+
+SMALL = dict(channels=32, fusion_blocks=2, skeleton_channels=16, dropout=0.0)
+
+
+def _inputs(b=2, t=40, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return torch.randn(b, t, NUM_FEATURES, generator=g), 0.1 * torch.randn(b, t, 2, generator=g)
+
+
+def test_output_shapes_units_and_one_symmetric_skeleton():
+    model = MotioNet(LifterConfig(**SMALL)).eval()
+    x, r = _inputs()
+    out = model(x, r)
+    assert out['rotations'].shape == (2, 40, NUM_JOINTS, 4)
+    assert torch.allclose(out['rotations'].norm(dim=-1), torch.ones(2, 40, NUM_JOINTS))
+    assert out['lengths'].shape == (2, NUM_BONE_GROUPS) and torch.all(out['lengths'] > 0)
+    assert out['contacts'].shape == (2, 40, 4) and torch.all(out['depth'] > 0)
+    # root = depth * (root_x, root_y, 1)
+    torch.testing.assert_close(out['root'][..., :2], r * out['depth'][..., None])
+    pos = out['positions'].detach().numpy()
+    assert bone_length_spread_mm(pos[0]) < 1e-3        # one skeleton over time
+    sk = Skeleton.from_group_lengths(out['lengths'][0].detach().double().numpy())
+    assert sk.is_symmetric()
+    off = offsets_from_lengths(out['lengths'])[0].detach().numpy()
+    np.testing.assert_allclose(off[list(JOINT_MIRROR)] * [1, -1, 1], off, atol=1e-6)
+
+
+def test_fk_layer_gradients():
+    lengths = torch.full((1, NUM_BONE_GROUPS), 0.3, dtype=torch.float64, requires_grad=True)
+    q = torch.randn(1, 3, NUM_JOINTS, 4, dtype=torch.float64)
+    q = (q / q.norm(dim=-1, keepdim=True)).requires_grad_(True)
+    root = torch.randn(1, 3, 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(fk_layer, (lengths, q, root), eps=1e-6, atol=1e-5)
+
+
+def test_causal_mode_ignores_future_frames():
+    model = MotioNet(LifterConfig(**SMALL, causal=True)).eval()
+    x, r = _inputs(t=50)
+    x2, r2 = x.clone(), r.clone()
+    x2[:, 30:] += 3.0
+    r2[:, 30:] += 0.5
+    with torch.no_grad():
+        lengths = model(x, r)['lengths']
+        a = model(x, r, lengths=lengths)
+        b = model(x2, r2, lengths=lengths)
+    for k in ('rotations', 'depth', 'contacts', 'positions'):
+        torch.testing.assert_close(a[k][:, :30], b[k][:, :30])
+        assert not torch.allclose(a[k][:, 30:], b[k][:, 30:])
+    # the centred model does look ahead
+    centred = MotioNet(LifterConfig(**SMALL, causal=False)).eval()
+    with torch.no_grad():
+        c1 = centred(x, r, lengths=lengths)['rotations']
+        c2 = centred(x2, r2, lengths=lengths)['rotations']
+    assert not torch.allclose(c1[:, 25:30], c2[:, 25:30])
+
+
+def test_features_are_intrinsics_invariant_and_root_is_mid_hip():
+    rng = np.random.default_rng(0)
+    canon = rng.uniform(-0.3, 0.3, (5, 23, 2))
+    kp_a, kp_b = np.ones((5, 23, 3)), np.ones((5, 23, 3))
+    a = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+    b = CameraIntrinsics(1920, 1080, 1400.0, 1400.0, 960.0, 540.0)
+    kp_a[..., 0] = canon[..., 0] * a.fx + a.cx
+    kp_a[..., 1] = canon[..., 1] * a.fy + a.cy
+    kp_b[..., 0] = canon[..., 0] * b.fx + b.cx
+    kp_b[..., 1] = canon[..., 1] * b.fy + b.cy
+    fa, ra, _ = lifter_features(kp_a, a)
+    fb, rb, _ = lifter_features(kp_b, b)
+    np.testing.assert_allclose(fa, fb, atol=1e-5)
+    np.testing.assert_allclose(ra, 0.5 * (canon[:, 11] + canon[:, 12]), atol=1e-9)
+    assert fa.shape == (5, NUM_FEATURES)
+
+
+def test_root_keypoint_holds_through_missing_hips():
+    kc = np.zeros((4, 23, 3))
+    kc[:, 11] = [0.1, 0.2, 1.0]
+    kc[:, 12] = [0.3, 0.2, 1.0]
+    kc[2, 11, 2] = 0.0                       # left hip lost in frame 2
+    kc[0, 12, 2] = 0.0                       # right hip lost in frame 0
+    root, valid = root_keypoint(kc)
+    assert list(valid) == [False, True, False, True]
+    np.testing.assert_allclose(root[0], [0.2, 0.2])   # back-filled
+    np.testing.assert_allclose(root[2], root[1])      # held
+
+
+def test_metrics_alignments():
+    g = np.random.default_rng(1).normal(size=(4, NUM_JOINTS, 3))
+    assert mpjpe_mm(g + 5.0, g) < 1e-9                  # root aligned
+    assert n_mpjpe_mm(1.5 * g, g) < 1e-6 < mpjpe_mm(1.5 * g, g)
+    from scipy.spatial.transform import Rotation
+    r = Rotation.random(4, random_state=2).as_matrix()
+    assert pa_mpjpe_mm(0.8 * np.einsum('nij,nkj->nki', r, g) - 2.0, g) < 1e-6
+
+
+def test_online_lifter_causal_matches_batch_and_resets():
+    model = MotioNet(LifterConfig(**SMALL, causal=True)).eval()
+    intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+    rng = np.random.default_rng(3)
+    kp = np.concatenate([rng.uniform(200, 400, (60, 23, 2)), np.ones((60, 23, 1))], -1)
+    online = OnlineLifter(model, 'causal', skeleton_frames=10)
+    frames = [online.push(1_000_000 * 33 * i + 1, kp[i], intr)[0] for i in range(60)]
+    assert all(f is not None for f in frames) and frames[-1].skeleton_fixed
+    feats, root, _ = lifter_features(kp, intr)
+    with torch.no_grad():
+        batch = model(torch.as_tensor(feats[None]), torch.as_tensor(root[None]).float(),
+                      lengths=online.lengths)
+    np.testing.assert_allclose(frames[-1].pose.rotations, batch['rotations'][0, -1].double(),
+                               atol=1e-5)
+    _, event = online.push(frames[-1].stamp_ns + 5_000_000_000, kp[0], intr)
+    assert event == 'gap' and online.lengths is None
+    _, event = online.push(1, kp[0], intr)
+    assert event == 'backwards'
+    with pytest.raises(ValueError):
+        OnlineLifter(model, 'windowed')
