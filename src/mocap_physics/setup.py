@@ -19,7 +19,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-
+            'physics = mocap_physics.node:main',
         ],
     },
 )

@@ -1,0 +1,85 @@
+"""Quick measurement of the physics time per frame (not a test).
+
+    python -m mocap_physics.bench [--frames 600] [--substeps 6] [--root-residual 1.0]
+
+Runs a synthetic standing motion with smooth random joint motion, root sway and frame jitter
+(feet on the floor, contact probabilities flickering) through :class:`PhysicsCycle` at 30 fps
+and prints the median and 95th percentile of the time per frame, with the time spent in the
+two QP solvers. Pin it to one core for the figure of the issue: ``taskset -c 0 python -m ...``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from mocap_core.pose import Pose
+from mocap_core.rotations import axis_angle_to_quat
+from mocap_core.skeleton import JOINT_INDEX, Skeleton
+
+from .cycle import PhysicsCycle, PhysicsParams
+
+
+def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0):
+    """Standing motion with smooth random joint rotations and jitter, feet near the floor."""
+    rng = np.random.default_rng(seed)
+    rest = Pose.rest(skeleton)
+    t = np.arange(n) / fps
+    freqs = rng.uniform(0.3, 2.0, size=(skeleton.num_joints, 3))
+    phases = rng.uniform(0, 2 * np.pi, size=(skeleton.num_joints, 3))
+    amp = np.full((skeleton.num_joints, 3), 0.25)
+    amp[0] = 0.05
+    for name in ('left_ankle', 'right_ankle', 'left_toe', 'right_toe'):
+        amp[JOINT_INDEX[name]] = 0.05
+    for k in range(n):
+        aa = amp * np.sin(2 * np.pi * freqs * t[k] + phases) + 0.02 * rng.normal(size=amp.shape)
+        root = (rest.root_position + 0.05 * np.sin(2 * np.pi * 0.7 * t[k] + np.arange(3))
+                + 0.01 * rng.normal(size=3))
+        probs = np.clip(0.9 + 0.2 * rng.normal(size=4), 0, 1)
+        yield t[k], Pose(skeleton, axis_angle_to_quat(aa), root), probs
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--frames', type=int, default=600)
+    ap.add_argument('--fps', type=float, default=30.0)
+    ap.add_argument('--substeps', type=int, default=6)
+    ap.add_argument('--root-residual', type=float, default=1.0)
+    ap.add_argument('--json', action='store_true', help='print the figures as JSON')
+    args = ap.parse_args(argv)
+    sk = Skeleton.default()
+    cyc = PhysicsCycle(sk, PhysicsParams(substeps=args.substeps, root_residual=args.root_residual))
+    total, grf, pen = [], [], []
+    for t, pose, probs in synthetic_motion(sk, args.frames, args.fps):
+        r = cyc.step(pose, t, probs)
+        total.append(r.time_total)
+        grf.append(r.time_grf_qp)
+        pen.append(r.time_penetration_qp)
+    total, grf, pen = (np.array(x[10:]) * 1e3 for x in (total, grf, pen))  # skip warm-up
+    out = {
+        'frames': int(total.size), 'substeps': args.substeps,
+        'root_residual': args.root_residual,
+        'ms_per_frame_median': float(np.median(total)),
+        'ms_per_frame_p95': float(np.percentile(total, 95)),
+        'ms_per_frame_max': float(total.max()),
+        'grf_qp_ms_median': float(np.median(grf)),
+        'penetration_qp_ms_median': float(np.median(pen)),
+        'fallbacks': cyc.stats.fallbacks, 'grf_failures': cyc.stats.grf_failures,
+        'penetration_solves': cyc.stats.penetration_solves,
+    }
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(f"physics per frame (k={args.substeps}, {out['frames']} frames): median "
+              f"{out['ms_per_frame_median']:.2f} ms, p95 {out['ms_per_frame_p95']:.2f} ms, "
+              f"max {out['ms_per_frame_max']:.2f} ms; GRF QP median {out['grf_qp_ms_median']:.2f}"
+              f" ms, penetration QP median {out['penetration_qp_ms_median']:.2f} ms; "
+              f"fallbacks {out['fallbacks']}, GRF failures {out['grf_failures']}")
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,100 @@
+"""``ros2 run mocap_physics physics`` in its own process, fed and observed from this process."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture
+def graph(ros_env):
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from sensor_msgs.msg import JointState
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+    from mocap_core.qos import STREAM_QOS
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
+    node = rclpy.create_node('test_physics_driver', context=context)
+    got = {'motion': [], 'left': [], 'right': [], 'states': []}
+    node.create_subscription(MultiDOFJointTrajectory, '/mocap/physics/motion',
+                             got['motion'].append, STREAM_QOS)
+    node.create_subscription(WrenchStamped, '/mocap/physics/grf/left', got['left'].append,
+                             STREAM_QOS)
+    node.create_subscription(WrenchStamped, '/mocap/physics/grf/right', got['right'].append,
+                             STREAM_QOS)
+    node.create_subscription(JointState, '/mocap/physics/joint_states', got['states'].append,
+                             STREAM_QOS)
+    pubs = {'motion': node.create_publisher(MultiDOFJointTrajectory, '/mocap/lifter/motion',
+                                            STREAM_QOS),
+            'contacts': node.create_publisher(JointState, '/mocap/lifter/contacts', STREAM_QOS)}
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    yield executor, pubs, got
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def _spin_until(executor, cond, timeout):
+    deadline = time.monotonic() + timeout
+    while not cond() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    return cond()
+
+
+def test_physics_node_standing(processes, ros2_cmd, graph):
+    from mocap_core.pose import Pose
+    from mocap_core.ros_conversions import (contacts_to_msg, make_header, motion_to_pose,
+                                            msg_to_wrench, pose_to_motion, stamp_to_ns)
+    from mocap_core.skeleton import Skeleton
+
+    executor, pubs, got = graph
+    proc, log = processes.start(ros2_cmd + ['run', 'mocap_physics', 'physics', '--ros-args',
+                                            '-p', 'body_mass:=80.0'], 'physics')
+    ready = _spin_until(executor, lambda: pubs['motion'].get_subscription_count() > 0
+                        and pubs['contacts'].get_subscription_count() > 0
+                        and executor.get_nodes()[0].count_publishers('/mocap/physics/motion') > 0,
+                        60)
+    assert ready, log.read_text()
+    time.sleep(0.5)
+    sk = Skeleton.default()
+    rest = Pose.rest(sk)
+    t0 = 1_000_000_000
+    n = 30
+    for i in range(n):
+        header = make_header(t0 + i * 33_333_333, 'world')
+        pubs['contacts'].publish(contacts_to_msg([1, 1, 1, 1], header))
+        if i == 10:  # a malformed frame is dropped, not a crash
+            bad = pose_to_motion(rest, header)
+            bad.points = []
+            pubs['motion'].publish(bad)
+            continue
+        pubs['motion'].publish(pose_to_motion(rest, header))
+        end = time.monotonic() + 1 / 30      # a live lifter publishes at the frame rate
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.005)
+    ok = _spin_until(executor, lambda: len(got["right"]) >= n - 1, 30)
+    assert ok, (len(got["motion"]), len(got["right"]), len(got["states"]), log.read_text())
+    assert len(got['motion']) == n - 1 and len(got['states']) == n - 1
+    stamps = [stamp_to_ns(m.header.stamp) for m in got['motion']]
+    assert stamps == [t0 + i * 33_333_333 for i in range(n) if i != 10]
+    assert got['motion'][-1].header.frame_id == 'world'
+    weight = 80.0 * 9.81
+    fz = [msg_to_wrench(l)[0][2] + msg_to_wrench(r)[0][2]
+          for l, r in zip(got['left'][1:], got['right'][1:])]
+    np.testing.assert_allclose(fz, weight, rtol=0.03)
+    out = motion_to_pose(got['motion'][-1])
+    np.testing.assert_allclose(out.joint_positions(), rest.joint_positions(), atol=5e-3)
+    assert len(got['states'][-1].effort) == 3 * (sk.num_joints - 1)
+    assert np.all(np.isfinite(got['states'][-1].effort))
+    proc.send_signal(2)
+    proc.wait(timeout=20)
+    assert proc.returncode == 0, log.read_text()
+    assert 'dropping a motion message' in log.read_text()
