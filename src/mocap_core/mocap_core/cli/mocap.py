@@ -6,6 +6,8 @@ export and bench sub-commands).
     mocap bag check <bag>             # per-topic counts, rates and message validation
     mocap plot keypoints <bag> -o F   # 2D skeletons and confidences of a keypoint topic
     mocap skeleton [--urdf FILE]      # the default skeleton, its bone lengths and URDF
+    mocap data build|report|split|to-bag|from-openpose|fit-confidence
+                                      # motion-capture data (see mocap_core.cli.mocap_data)
 """
 
 from __future__ import annotations
@@ -26,11 +28,14 @@ def validator_for(topic: str, msgtype: str) -> Optional[Callable]:
     from ..skeleton import NUM_JOINTS
 
     kind = msgtype.replace('/msg/', '/')
+    leaf = topic.rsplit('/', 1)[-1]
     if kind == 'sensor_msgs/PointCloud2' and topic.endswith('keypoints2d'):
         return rc.cloud_to_keypoints
     if kind == 'sensor_msgs/PointCloud2' and topic.endswith('joints3d'):
         return lambda m: rc.cloud_to_positions(m, NUM_JOINTS)
-    if kind == 'trajectory_msgs/MultiDOFJointTrajectory' and topic.endswith('/motion'):
+    # /mocap/<stage>/motion, and /mocap/groundtruth/world_motion of the ground-truth bags
+    if kind == 'trajectory_msgs/MultiDOFJointTrajectory' and \
+            (leaf == 'motion' or leaf.endswith('_motion')):
         return rc.motion_to_pose
     if kind == 'sensor_msgs/JointState' and topic.endswith('contacts'):
         return rc.msg_to_contacts
@@ -188,6 +193,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--urdf', metavar='FILE', help="write the URDF to FILE ('-' = stdout)")
     p.add_argument('--body-mass', type=float, default=70.0, help='body mass, kg (default 70)')
     p.set_defaults(func=cmd_skeleton)
+
+    from .mocap_data import add_data_parser
+    add_data_parser(sub)
     return parser
 
 
