@@ -3,7 +3,7 @@ import pytest
 
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.data.motion import (contact_labels, contact_point_positions, floor_height,
-                                    process_motion, resample)
+                                    floor_plane, process_motion, resample)
 from mocap_core.data.synth2d import (CameraSampling, ConfidenceModel, Corruption, VirtualCamera,
                                      canonicalize, corrupt_keypoints, in_view, keypoints_3d,
                                      look_at, mirror_keypoints, mirror_motion, motion_to_camera,
@@ -46,11 +46,26 @@ def test_process_motion_puts_floor_at_zero_and_labels_contacts():
     sk, rot, root = _walk()
     m = process_motion('walk', sk, rot, root, 30.0, 30.0)
     pts = contact_point_positions(sk, m.rotations, m.root_positions)
-    assert abs(floor_height(pts)) < 1e-9
+    np.testing.assert_allclose(floor_plane(pts, 30.0), 0.0, atol=1e-3)
+    assert abs(floor_height(pts)) < 1e-3
     assert m.contacts.shape == (120, 4) and m.contacts.dtype == bool
     # a point high above the floor or moving fast is never in contact
     high = pts[..., 2] > 0.05
     assert not np.any(m.contacts & high)
+
+
+def test_sloped_capture_floor_is_levelled():
+    """A walk on a floor rising 2 cm per metre ends up on the level floor z = 0."""
+    sk, rot, root = _walk(150)
+    root = root.copy()
+    root[:, 2] += 0.02 * root[:, 0]
+    pts = contact_point_positions(sk, rot, root)
+    plane = floor_plane(pts, 30.0)
+    assert plane[1] == pytest.approx(0.02, abs=2e-3) and abs(plane[2]) < 2e-3
+    m = process_motion('slope', sk, rot, root, 30.0, 30.0)
+    levelled = contact_point_positions(sk, m.rotations, m.root_positions)
+    low = levelled[..., 2].min(axis=1)
+    assert np.ptp(np.percentile(low.reshape(5, -1), 10, axis=1)) < 0.01  # no drift along x
 
 
 def test_contact_labels_thresholds():

@@ -21,11 +21,17 @@ from ..skeleton import CONTACT_POINT_NAMES, Skeleton
 #: CONTACT_HEIGHT_M above the clip's floor AND moves slower than CONTACT_SPEED_M_S (3D speed,
 #: central differences).
 CONTACT_HEIGHT_M = 0.05
-CONTACT_SPEED_M_S = 0.30
+CONTACT_SPEED_M_S = 0.45
 
 #: The floor of a clip is this percentile of the per-frame lowest contact point height: robust
 #: to a few frames of marker glitches below the floor while following the feet otherwise.
 FLOOR_PERCENTILE = 5.0
+#: Capture floors are not always level (CMU walks rise 5-8 cm over 3-4 m): the floor is fitted
+#: as a plane z = a + b x + c y through the stance feet when the clip travels at least
+#: FLOOR_PLANE_MIN_EXTENT_M and the fitted slope stays below FLOOR_PLANE_MAX_SLOPE; otherwise
+#: it is flat at the percentile height.
+FLOOR_PLANE_MIN_EXTENT_M = 1.0
+FLOOR_PLANE_MAX_SLOPE = 0.05
 
 
 def make_continuous(q: np.ndarray) -> np.ndarray:
@@ -90,6 +96,41 @@ def floor_height(contact_positions: np.ndarray) -> float:
     return float(np.percentile(lowest, FLOOR_PERCENTILE))
 
 
+def floor_plane(contact_positions: np.ndarray, fps: float) -> np.ndarray:
+    """Floor plane (a, b, c) with z = a + b x + c y (m, world frame) of a clip.
+
+    Fitted by least squares through the lowest contact point of every frame in which that
+    point is slow (stance), refitted once without residuals above 2 cm; flat at
+    :func:`floor_height` when the clip covers less than FLOOR_PLANE_MIN_EXTENT_M, has fewer
+    than 10 stance frames, or the slope exceeds FLOOR_PLANE_MAX_SLOPE.
+    """
+    p = np.asarray(contact_positions, dtype=np.float64)
+    flat = np.array([floor_height(p), 0.0, 0.0])
+    low = p[np.arange(len(p)), np.argmin(p[..., 2], axis=1)]  # (F, 3)
+    if len(p) < 10 or np.ptp(low[:, 0]) + np.ptp(low[:, 1]) < FLOOR_PLANE_MIN_EXTENT_M:
+        return flat
+    speed = np.linalg.norm(np.gradient(low, 1.0 / fps, axis=0), axis=-1)
+    stance = low[speed <= CONTACT_SPEED_M_S]
+    if len(stance) < 10:
+        return flat
+    design = np.column_stack([np.ones(len(stance)), stance[:, 0], stance[:, 1]])
+    coef = np.linalg.lstsq(design, stance[:, 2], rcond=None)[0]
+    keep = np.abs(design @ coef - stance[:, 2]) <= 0.02
+    if keep.sum() >= 10:
+        coef = np.linalg.lstsq(design[keep], stance[keep, 2], rcond=None)[0]
+    if np.hypot(coef[1], coef[2]) > FLOOR_PLANE_MAX_SLOPE:
+        return flat
+    # keep the same robust offset as the flat floor, measured against the plane
+    resid = np.min(p[..., 2] - (coef[0] + coef[1] * p[..., 0] + coef[2] * p[..., 1]), axis=1)
+    coef[0] += np.percentile(resid, FLOOR_PERCENTILE)
+    return coef
+
+
+def height_above_floor(points: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """Height (m) of (..., 3) points above the floor plane (a, b, c)."""
+    return points[..., 2] - (plane[0] + plane[1] * points[..., 0] + plane[2] * points[..., 1])
+
+
 def contact_labels(contact_positions: np.ndarray, fps: float, floor_z: float,
                    height_m: float = CONTACT_HEIGHT_M,
                    speed_m_s: float = CONTACT_SPEED_M_S) -> np.ndarray:
@@ -136,11 +177,17 @@ class Motion:
 
 def process_motion(name: str, skeleton: Skeleton, rotations: np.ndarray,
                    root_positions: np.ndarray, fps_in: float, fps_out: float = 30.0) -> Motion:
-    """Resample to ``fps_out``, move the floor to z = 0 and label foot contacts."""
+    """Resample to ``fps_out``, level the floor to z = 0 and label foot contacts.
+
+    The floor plane (:func:`floor_plane`) is removed under the subject: each frame is shifted
+    vertically by the plane height at the root's xy, so a sloping capture floor becomes the
+    level floor z = 0 of the world frame (DESIGN §3).
+    """
     rot, root = resample(rotations, root_positions, fps_in, fps_out)
     pts = contact_point_positions(skeleton, rot, root)
-    floor = floor_height(pts)
-    root = root - np.array([0.0, 0.0, floor])
-    pts = pts - np.array([0.0, 0.0, floor])
+    plane = floor_plane(pts, fps_out)
+    shift = plane[0] + plane[1] * root[:, 0] + plane[2] * root[:, 1]
+    root = root - np.stack([np.zeros_like(shift), np.zeros_like(shift), shift], axis=1)
+    pts = pts - shift[:, None, None] * np.array([0.0, 0.0, 1.0])
     return Motion(name, float(fps_out), skeleton, rot, root,
                   contact_labels(pts, fps_out, 0.0))
