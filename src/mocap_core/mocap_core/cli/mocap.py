@@ -8,6 +8,7 @@ export and bench sub-commands).
     mocap skeleton [--urdf FILE]      # the default skeleton, its bone lengths and URDF
     mocap data build|report|split|to-bag|from-openpose|fit-confidence
                                       # motion-capture data (see mocap_core.cli.mocap_data)
+    mocap train lifter | mocap eval lifter   # models (see mocap_lifter.cli)
 """
 
 from __future__ import annotations
@@ -165,6 +166,10 @@ def cmd_plot_keypoints(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
+MODEL_COMMANDS = ('mocap_lifter.cli',)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='mocap', description='Monocular motion capture pipeline: tools.')
@@ -196,6 +201,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .mocap_data import add_data_parser
     add_data_parser(sub)
+
+    # Training and evaluation commands live with their models, in the node packages.
+    train_sub = sub.add_parser('train', help='train a model').add_subparsers(
+        dest='model', metavar='MODEL')
+    eval_sub = sub.add_parser('eval', help='evaluate a model').add_subparsers(
+        dest='model', metavar='MODEL')
+    for module in MODEL_COMMANDS:
+        try:
+            commands = importlib.import_module(module)
+        except ImportError:
+            continue
+        commands.add_train_parser(train_sub)
+        commands.add_eval_parser(eval_sub)
     return parser
 
 

@@ -1,0 +1,125 @@
+"""``mocap train lifter`` and ``mocap eval lifter`` (also ``python -m mocap_lifter.cli``).
+
+    mocap train lifter [--config cfg.json] [--mode windowed|causal] [--steps N]
+                       [--run-dir runs/lifter_windowed] [--device cpu|cuda] [--no-resume]
+    mocap eval lifter [--weights FILE] [--noise none|motionet|both] [--out DIR]
+
+Training reads the train split of the processed dataset (``mocap data build``; built on
+first use), evaluation the validation split.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import List, Optional
+
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / 'weights'
+
+
+def add_train_parser(sub) -> None:
+    p = sub.add_parser('lifter', help='train the MotioNet lifter')
+    p.add_argument('--config', help='JSON file with TrainConfig fields (model: LifterConfig)')
+    p.add_argument('--mode', choices=('windowed', 'causal'), default='windowed',
+                   help='centred window (default) or causal convolutions')
+    p.add_argument('--steps', type=int, help='override the number of steps')
+    p.add_argument('--run-dir', help='checkpoints, log.csv, loss.png (default runs/lifter_<mode>)')
+    p.add_argument('--device', default='cpu', help="'cpu' or 'cuda'")
+    p.add_argument('--no-resume', action='store_true', help='start over even if a checkpoint '
+                   'exists')
+    p.add_argument('--install', action='store_true', help='copy the final weights to the '
+                   'package (weights/motionet_<mode>.pt)')
+    p.set_defaults(func=cmd_train)
+
+
+def add_eval_parser(sub) -> None:
+    p = sub.add_parser('lifter', help='evaluate the lifter on the validation split')
+    p.add_argument('--weights', help='weights file (default: the shipped ones of --mode)')
+    p.add_argument('--mode', choices=('windowed', 'causal'), default='windowed')
+    p.add_argument('--noise', choices=('none', 'motionet', 'both'), default='both')
+    p.add_argument('--out', help='report directory (default: next to the weights)')
+    p.add_argument('--device', default='cpu')
+    p.set_defaults(func=cmd_eval)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    import shutil
+
+    from mocap_core.data.dataset import load_dataset
+
+    from .train import TrainConfig, train
+
+    cfg = TrainConfig()
+    if args.config:
+        cfg = TrainConfig.from_dict(json.loads(Path(args.config).read_text()))
+    cfg.model.causal = args.mode == 'causal'
+    if args.steps:
+        cfg.steps = args.steps
+    run_dir = Path(args.run_dir or f'runs/lifter_{args.mode}')
+    print(f'loading the dataset (train and validation splits) ...', flush=True)
+    t0 = time.time()
+    train_motions = load_dataset('train')
+    val_motions = load_dataset('validation')
+    print(f'{len(train_motions)} training clips, {len(val_motions)} validation clips '
+          f'({time.time() - t0:.0f} s)', flush=True)
+    weights = train(train_motions, val_motions, run_dir, cfg, device=args.device,
+                    resume=not args.no_resume)
+    print(f'weights: {weights}')
+    if args.install:
+        WEIGHTS_DIR.mkdir(exist_ok=True)
+        dest = WEIGHTS_DIR / f'motionet_{args.mode}.pt'
+        shutil.copy(weights, dest)
+        shutil.copy(run_dir / 'loss.png', WEIGHTS_DIR / f'motionet_{args.mode}_loss.png')
+        (WEIGHTS_DIR / f'motionet_{args.mode}_train.json').write_text(json.dumps(
+            {'config': asdict(cfg), 'command': ' '.join(['mocap', 'train', 'lifter'] +
+                                                       sys.argv[3:])}, indent=1))
+        print(f'installed {dest}')
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from mocap_core.data.dataset import load_dataset
+
+    from .evaluate import baseline_mean_pose, evaluate, write_report
+    from .train import load_weights
+
+    weights = Path(args.weights) if args.weights else WEIGHTS_DIR / f'motionet_{args.mode}.pt'
+    if not weights.exists():
+        print(f'mocap eval lifter: error: weights not found: {weights}', file=sys.stderr)
+        return 1
+    model = load_weights(weights, args.device)
+    val = load_dataset('validation')
+    noises = ('none', 'motionet') if args.noise == 'both' else (args.noise,)
+    t0 = time.time()
+    results = [evaluate(model, val, n, args.device) for n in noises]
+    seconds = time.time() - t0
+    baseline = {n: baseline_mean_pose(load_dataset('train'), val, n) for n in noises}
+    out = Path(args.out) if args.out else weights.parent / f'{weights.stem}_eval'
+    path = write_report(results, out, f'MotioNet lifter ({weights.name}) on the validation '
+                        'split', {'baseline_mean_pose': baseline, 'weights': str(weights),
+                                  'eval_seconds': round(seconds, 1)})
+    for r in results:
+        s = r['summary']
+        print(f"{r['noise']:9s} MPJPE {s['mpjpe_mm']:.1f} mm  PA-MPJPE {s['pa_mpjpe_mm']:.1f} mm"
+              f"  MRPE {s['mrpe_mm']:.1f} mm  MBLE {s['mble_mm']:.1f} mm  contacts "
+              f"{s['contact_accuracy']:.3f}")
+    print(f'baseline (mean pose): {baseline}')
+    print(f'report: {path}')
+    return 0
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    parser = argparse.ArgumentParser(prog='python -m mocap_lifter.cli')
+    sub = parser.add_subparsers(dest='command', required=True)
+    add_train_parser(sub.add_parser('train').add_subparsers(dest='what', required=True))
+    add_eval_parser(sub.add_parser('eval').add_subparsers(dest='what', required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
