@@ -122,3 +122,364 @@ def test_every_node_executable_starts_with_ros2_run(processes, ros2_cmd, ros_env
         text = log.read_text()
         assert rc == 0 and 'Traceback' not in text, text
         assert '| parameter |' in text, f'{pkg}/{exe} --help does not list its parameters'
+
+
+# --- camera, video, image and topic sources with MediaPipe BlazePose ---------------------------
+CLIP = ROOT / 'data' / 'video_example' / 'taiji_640x360.mp4'
+CLIP_INFO = json.loads(CLIP.with_suffix('.json').read_text())
+BODY = ('left_shoulder', 'right_shoulder', 'left_hip', 'right_hip', 'left_knee', 'right_knee',
+        'left_ankle', 'right_ankle')
+
+
+class Peer:
+    """An rclpy node in this process on the test's domain: subscribes, publishes, spins."""
+
+    def __init__(self, domain_id: int) -> None:
+        import rclpy
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node('test_peer', context=self.context)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def collect(self, msg_type, topic: str, sensor: bool = True) -> list:
+        """Subscribe (best effort for sensor topics) with a deep reader queue, so that this
+        process, sharing two cores with the node, cannot lose messages while it is busy."""
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        got: list = []
+        qos = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT if sensor
+                         else ReliabilityPolicy.RELIABLE)
+        self.node.create_subscription(msg_type, topic, got.append, qos)
+        return got
+
+    def spin_until(self, condition, timeout: float, proc=None) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if condition():
+                return True
+            if proc is not None and proc.poll() is not None:
+                break
+            self.executor.spin_once(timeout_sec=0.02)
+        return condition()
+
+    def spin_until_exit(self, proc, timeout: float) -> None:
+        self.spin_until(lambda: proc.poll() is not None, timeout)
+        for _ in range(20):  # drain what is still in flight
+            self.executor.spin_once(timeout_sec=0.02)
+        assert proc.poll() is not None, 'node did not exit in time'
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.shutdown(context=self.context)
+
+
+@pytest.fixture
+def peer(ros_env):
+    p = Peer(int(ros_env['ROS_DOMAIN_ID']))
+    yield p
+    p.close()
+
+
+def _keypoints_node(processes, ros2_cmd, name: str, *params: str, remap: tuple = ()):
+    args = []
+    for p in params:
+        args += ['-p', p]
+    for r in remap:
+        args += ['-r', r]
+    return processes.start(ros2_cmd + ['run', 'mocap_keypoints', 'keypoints', '--ros-args',
+                                       *args], name)
+
+
+def _confident_body(kp: np.ndarray) -> np.ndarray:
+    from mocap_core.skeleton import KEYPOINT_INDEX
+    return np.all(kp[:, 0, [KEYPOINT_INDEX[n] for n in BODY], 2] > 0.5, axis=1)
+
+
+def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cmd, peer,
+                                                              tmp_path):
+    """The issue's acceptance test: the committed clip through ``ros2 run``."""
+    from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+    from mocap_core.camera import CameraCalibration, CameraIntrinsics, write_camera_info_yaml
+    from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
+                                            image_to_bgr, stamp_to_ns)
+
+    calib = tmp_path / 'camera.yaml'  # calibrated at 1280x720: scaled to the 640x360 clip
+    write_camera_info_yaml(CameraCalibration(
+        CameraIntrinsics(1280, 720, 1100.0, 1100.0, 639.5, 359.5)), calib)
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    info_msgs = peer.collect(CameraInfo, '/mocap/camera_info', sensor=False)
+    annotated = peer.collect(Image, '/mocap/keypoints2d/annotated', sensor=False)
+    diagnostics = peer.collect(DiagnosticArray, '/diagnostics', sensor=False)
+    proc, log = _keypoints_node(
+        processes, ros2_cmd, 'keypoints_video', 'source:=video', f'path:={CLIP}',
+        'realtime:=false', 'publish_annotated:=true', f'calibration_file:={calib}',
+        'wait_for_subscribers:=1', 'wait_timeout_s:=30.0', 'frame_id:=taiji_camera')
+    # The node starts when it sees the keypoint subscriber; subscribe to the keypoints only
+    # once the debug-image publisher (its own participant) has been discovered too.
+    assert peer.spin_until(
+        lambda: peer.node.count_publishers('/mocap/keypoints2d/annotated') > 0, 60, proc), \
+        log.read_text()
+    peer.spin_until(lambda: False, 0.5)
+    kp_msgs = peer.collect(PointCloud2, '/mocap/keypoints2d')
+    peer.spin_until_exit(proc, timeout=90)
+    text = log.read_text()
+    assert proc.returncode == 0, text
+    n = CLIP_INFO['frames']
+    assert len(kp_msgs) == n and len(info_msgs) == n, text
+    stamps = np.array([stamp_to_ns(m.header.stamp) for m in kp_msgs])
+    expected = stamps[0] + np.round(np.arange(n) * 1e9 / CLIP_INFO['fps'])
+    np.testing.assert_allclose(stamps, expected, atol=1)  # start + index / video fps
+    assert [stamp_to_ns(m.header.stamp) for m in info_msgs] == list(stamps)
+    assert all(m.header.frame_id == 'taiji_camera' for m in kp_msgs)
+    # Debug images: reliable, keep-last 2, so this busy process may miss a few.
+    assert len(annotated) >= n * 3 // 4, len(annotated)
+    assert {stamp_to_ns(m.header.stamp) for m in annotated} <= set(stamps.tolist())
+    assert image_to_bgr(annotated[0]).shape == (360, 640, 3)
+    intr = camera_info_to_intrinsics(info_msgs[0])
+    assert (intr.width, intr.height) == (640, 360)
+    assert (intr.fx, intr.cx, intr.cy) == pytest.approx((550.0, 319.5, 179.5))
+    kp = np.stack([cloud_to_keypoints(m) for m in kp_msgs])
+    visible = np.zeros(n, bool)
+    for a, b in CLIP_INFO['person_fully_visible']:
+        visible[a:b + 1] = True
+    assert _confident_body(kp)[visible].mean() >= 0.9
+    assert 'video ended after 96 frames' in text and 'scaled to the 640x360 image' in text
+    assert 'Traceback' not in text
+    # /diagnostics: detector time, input and output rates, drops, source, detector.
+    values = {kv.key: kv.value for kv in diagnostics[-1].status[0].values}
+    assert 'keypoints' in diagnostics[-1].status[0].name
+    assert float(values['detector_ms_median']) > 0 and float(values['output_rate_hz']) > 0
+    assert float(values['input_rate_hz']) > 0 and values['frames_dropped'] == '0'
+    assert 'taiji_640x360.mp4' in values['source']
+    assert values['detector'] == 'mediapipe_blazepose_full'
+    assert 'calibration file' in values['intrinsics']
+
+
+def _image_msg(img, stamp_ns, encoding='bgr8', frame_id='cam_optical'):
+    from mocap_core.ros_conversions import bgr_to_image, make_header
+    return bgr_to_image(img, make_header(stamp_ns, frame_id), encoding)
+
+
+def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
+    """Image and CompressedImage topics: one cloud per good image with its stamp; unsupported
+    encodings, wrong sizes, empty and corrupt images, stamps going back and bad CameraInfo are
+    logged and skipped while the node keeps running."""
+    import signal
+
+    from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+
+    from mocap_core.camera import CameraIntrinsics
+    from mocap_core.ros_conversions import (bgr_to_compressed_image, camera_info_to_intrinsics,
+                                            cloud_to_keypoints, intrinsics_to_camera_info,
+                                            make_header, stamp_to_ns)
+    from mocap_keypoints.sources import VideoSource
+
+    with VideoSource(CLIP) as src:
+        frames = [f.image for f, _ in zip(src, range(14))]
+    raw, raw_log = _keypoints_node(processes, ros2_cmd, 'keypoints_raw', 'source:=topic')
+    comp, comp_log = _keypoints_node(
+        processes, ros2_cmd, 'keypoints_compressed', 'source:=topic',
+        'image_topic:=/camera/image_raw/compressed',
+        remap=('__node:=keypoints_compressed', '/mocap/keypoints2d:=/c/keypoints2d',
+               '/mocap/camera_info:=/c/camera_info'))
+    kp_raw = peer.collect(PointCloud2, '/mocap/keypoints2d')
+    info_raw = peer.collect(CameraInfo, '/mocap/camera_info', sensor=False)
+    kp_comp = peer.collect(PointCloud2, '/c/keypoints2d')
+    pub_img = peer.node.create_publisher(Image, '/camera/image_raw', 10)
+    pub_comp = peer.node.create_publisher(CompressedImage, '/camera/image_raw/compressed', 10)
+    pub_info = peer.node.create_publisher(CameraInfo, '/camera/camera_info', 10)
+    n = peer.node
+    assert peer.spin_until(lambda: pub_img.get_subscription_count() > 0
+                           and pub_comp.get_subscription_count() > 0
+                           and pub_info.get_subscription_count() > 1
+                           and n.count_publishers('/mocap/keypoints2d') > 0
+                           and n.count_publishers('/c/keypoints2d') > 0, 60), \
+        raw_log.read_text() + comp_log.read_text()
+
+    t0 = 1_700_000_000_000_000_000
+
+    def warm_up(pub, got, make, proc):
+        """Publish until a cloud comes back (discovery has matched both ways), then forget it."""
+        for k in range(60):
+            pub.publish(make(t0 - 10**9 + k * 10**6))
+            if peer.spin_until(lambda: len(got) > 0, 0.5, proc):
+                break
+        assert got, 'no cloud came back'
+        peer.spin_until(lambda: False, 0.3)
+        got.clear()
+
+    warm_up(pub_img, kp_raw, lambda st: _image_msg(frames[0], st), raw)
+    warm_up(pub_comp, kp_comp,
+            lambda st: bgr_to_compressed_image(frames[0], make_header(st, 'c')), comp)
+    info_raw.clear()
+    info = intrinsics_to_camera_info(CameraIntrinsics(1280, 720, 1000.0, 1000.0, 639.5, 359.5),
+                                     make_header(t0, 'cam_optical'))
+    pub_info.publish(info)
+    processes.wait_for_text(raw_log, 'camera_info: 1280x720', 20, raw)
+
+    def send(pub, msg, got, expect_cloud=True, log=None, text=None):
+        count = len(got)
+        pub.publish(msg)
+        if expect_cloud:
+            assert peer.spin_until(lambda: len(got) > count, 20, raw), log.read_text()
+            assert stamp_to_ns(got[-1].header.stamp) == stamp_to_ns(msg.header.stamp)
+        else:
+            deadline = time.monotonic() + 20
+            while text not in log.read_text() and time.monotonic() < deadline:
+                peer.executor.spin_once(timeout_sec=0.02)
+            assert text in log.read_text(), log.read_text()
+
+    good_stamps = []
+    for i in range(10):
+        stamp = t0 + i * 40_000_000
+        enc = 'rgb8' if i % 3 == 2 else 'bgr8'
+        img = frames[i] if enc == 'bgr8' else frames[i][:, :, ::-1]
+        send(pub_img, _image_msg(img, stamp, enc), kp_raw, log=raw_log)
+        good_stamps.append(stamp)
+    stamp = t0 + 10 * 40_000_000  # nobody in the image: a cloud with all confidences 0
+    send(pub_img, _image_msg(np.full((360, 640, 3), 90, np.uint8), stamp), kp_raw, log=raw_log)
+    good_stamps.append(stamp)
+    assert not np.any(cloud_to_keypoints(kp_raw[-1])[..., 2])
+    processes.wait_for_text(raw_log, 'no person found', 10, raw)
+    bad = []
+    m = _image_msg(frames[10], t0 + 11 * 40_000_000)
+    m.encoding = '32FC1'
+    bad.append((m, 'unsupported image encoding'))
+    m = _image_msg(frames[10], t0 + 12 * 40_000_000)
+    m.data = m.data[:1000]
+    bad.append((m, 'image data has 1000 bytes'))
+    m = _image_msg(np.zeros((480, 640, 3), np.uint8), t0 + 13 * 40_000_000)
+    m.width = 1280  # header says a wider image than the rows hold
+    bad.append((m, 'image step 1920 is shorter than a row of 1280 x bgr8'))
+    m = _image_msg(frames[10], t0 + 14 * 40_000_000)
+    m.width = m.height = m.step = 0
+    m.data = []
+    bad.append((m, 'empty image'))
+    bad.append((_image_msg(np.zeros((8, 8, 3), np.uint8), t0 + 15 * 40_000_000),
+                'image too small'))
+    bad.append((_image_msg(frames[11], t0 + 5 * 40_000_000), 'is not after the previous'))
+    for msg, text in bad:
+        send(pub_img, msg, kp_raw, expect_cloud=False, log=raw_log, text=text)
+    broken = intrinsics_to_camera_info(CameraIntrinsics(64, 48, 1.0, 1.0, 1.0, 1.0),
+                                       make_header(t0, 'cam_optical'))
+    broken.k = [0.0] * 9  # an uncalibrated camera
+    send(pub_info, broken, kp_raw, expect_cloud=False, log=raw_log,
+         text='ignoring /camera/camera_info')
+    stamp = t0 + 20 * 40_000_000
+    send(pub_img, _image_msg(frames[12], stamp), kp_raw, log=raw_log)  # still running
+    good_stamps.append(stamp)
+    square = intrinsics_to_camera_info(CameraIntrinsics(640, 640, 500.0, 500.0, 319.5, 319.5),
+                                       make_header(t0, 'cam_optical'))
+    pub_info.publish(square)
+    processes.wait_for_text(raw_log, 'camera_info: 640x640', 20, raw)
+    stamp = t0 + 21 * 40_000_000
+    send(pub_img, _image_msg(frames[13], stamp), kp_raw, log=raw_log)
+    good_stamps.append(stamp)
+    processes.wait_for_text(raw_log, 'another aspect ratio', 10, raw)
+
+    got = [stamp_to_ns(m.header.stamp) for m in kp_raw]
+    assert got == good_stamps                    # one cloud per good image, with its stamp
+    peer.spin_until(lambda: len(info_raw) >= len(good_stamps), 10)
+    assert [stamp_to_ns(m.header.stamp) for m in info_raw] == good_stamps
+    assert all(m.header.frame_id == 'cam_optical' for m in kp_raw)
+    intr = camera_info_to_intrinsics(info_raw[0])  # 1280x720 calibration scaled to 640x360
+    assert (intr.width, intr.fx, intr.cx) == pytest.approx((640, 500.0, 319.5))
+    last = camera_info_to_intrinsics(info_raw[-1])  # 640x640 does not fit: approximated
+    assert last.fx == pytest.approx(CameraIntrinsics.from_fov(640, 360, 60.0).fx)
+    kp = np.stack([cloud_to_keypoints(m) for i, m in enumerate(kp_raw) if i != 10])
+    assert _confident_body(kp).mean() >= 0.9
+
+    # CompressedImage: JPEG frames, a corrupt JPEG and a depth format.
+    for i in range(3):
+        msg = bgr_to_compressed_image(frames[i], make_header(t0 + i * 40_000_000, 'c'))
+        send(pub_comp, msg, kp_comp, log=comp_log)
+    corrupt = bgr_to_compressed_image(frames[3], make_header(t0 + 4 * 40_000_000, 'c'))
+    corrupt.data = corrupt.data[:20]
+    send(pub_comp, corrupt, kp_comp, expect_cloud=False, log=comp_log,
+         text='cannot decode compressed image')
+    depth = bgr_to_compressed_image(frames[3], make_header(t0 + 5 * 40_000_000, 'c'))
+    depth.format = '16UC1; compressedDepth'
+    send(pub_comp, depth, kp_comp, expect_cloud=False, log=comp_log,
+         text='unsupported compressed format')
+    assert len(kp_comp) == 3
+    assert _confident_body(np.stack([cloud_to_keypoints(m) for m in kp_comp])).all()
+
+    for proc in (raw, comp):
+        proc.send_signal(signal.SIGINT)
+    for proc, log in ((raw, raw_log), (comp, comp_log)):
+        assert proc.wait(timeout=20) == 0, log.read_text()
+        assert 'Traceback' not in log.read_text()
+
+
+def test_image_directory_with_corrupt_empty_and_odd_sized_files(processes, ros2_cmd, peer,
+                                                                 tmp_path):
+    import cv2
+    from sensor_msgs.msg import CameraInfo, PointCloud2
+
+    from mocap_core.ros_conversions import camera_info_to_intrinsics, stamp_to_ns
+    from mocap_keypoints.sources import VideoSource
+
+    d = tmp_path / 'frames'
+    d.mkdir()
+    with VideoSource(CLIP) as src:
+        for f, _ in zip(src, range(6)):
+            cv2.imwrite(str(d / f'frame_{f.index:03d}.jpg'), f.image)
+            last = f.image
+    cv2.imwrite(str(d / 'frame_006.jpg'), cv2.resize(last, (320, 180)))  # another size
+    (d / 'frame_007.jpg').write_bytes(b'\xff\xd8\xff\xe0' + bytes(300))     # corrupt
+    (d / 'frame_008.png').write_bytes(b'')                                 # empty
+    cv2.imwrite(str(d / 'frame_009.png'), np.zeros((5, 5, 3), np.uint8))    # tiny
+    kp_msgs = peer.collect(PointCloud2, '/mocap/keypoints2d')
+    info_msgs = peer.collect(CameraInfo, '/mocap/camera_info', sensor=False)
+    proc, log = _keypoints_node(processes, ros2_cmd, 'keypoints_images', f'path:={d}',
+                                'realtime:=false', 'fps:=10.0', 'wait_for_subscribers:=1',
+                                'wait_timeout_s:=30.0')
+    peer.spin_until_exit(proc, timeout=60)
+    text = log.read_text()
+    assert proc.returncode == 0, text
+    assert len(kp_msgs) == 7, text
+    stamps = [stamp_to_ns(m.header.stamp) for m in kp_msgs]
+    np.testing.assert_allclose(np.diff(stamps), 1e8, atol=1)
+    for name, reason in (('frame_007.jpg', 'not a readable image'),
+                         ('frame_008.png', 'empty file'), ('frame_009.png', 'image too small')):
+        assert f'{name}: {reason}' in text and 'skipping frame' in text
+    assert 'image size changed from 640x360 to 320x180' in text
+    assert 'approximating intrinsics from image size 640x360' in text
+    assert camera_info_to_intrinsics(info_msgs[-1]).width == 320
+    assert '7 frames published, 0 dropped, 3 skipped' in text and 'Traceback' not in text
+
+
+def test_sources_that_cannot_be_opened_exit_with_clear_errors(processes, ros2_cmd, tmp_path):
+    text_file = tmp_path / 'notes.mp4'
+    text_file.write_text('not a video\n' * 100)
+    empty_dir = tmp_path / 'empty'
+    empty_dir.mkdir()
+    bad_yaml = tmp_path / 'bad.yaml'
+    bad_yaml.write_text('image_width: [')
+    cases = {
+        'camera_index': (['source:=camera', 'device:=57'],
+                         "camera not found or cannot be opened: device '57'"),
+        'camera_path': (['source:=camera', 'device:=/dev/video_missing'],
+                        'camera device not found: /dev/video_missing'),
+        'video_missing': (['source:=video', f'path:={tmp_path / "none.mp4"}'],
+                          'video file not found'),
+        'video_unreadable': ([f'path:={text_file}'], 'cannot open video file'),
+        'images_empty': (['source:=images', f'path:={empty_dir}'], 'no image files'),
+        'calibration_missing': ([f'path:={CLIP}', f'calibration_file:={tmp_path / "c.yaml"}'],
+                                'calibration file not found'),
+        'calibration_bad': ([f'path:={CLIP}', f'calibration_file:={bad_yaml}'],
+                            'cannot read calibration YAML'),
+    }
+    started = {name: _keypoints_node(processes, ros2_cmd, name, *params)
+               for name, (params, _) in cases.items()}
+    for name, (proc, log) in started.items():
+        rc = proc.wait(timeout=60)
+        text = log.read_text()
+        assert rc == 2, f'{name}: exit code {rc}\n{text}'
+        assert 'keypoints: error:' in text and cases[name][1] in text, f'{name}:\n{text}'
+        assert 'Traceback' not in text, f'{name}:\n{text}'

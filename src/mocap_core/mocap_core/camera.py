@@ -59,3 +59,106 @@ class CameraIntrinsics:
         p = np.asarray(points, dtype=np.float64)
         return np.stack([self.fx * p[..., 0] / p[..., 2] + self.cx,
                          self.fy * p[..., 1] / p[..., 2] + self.cy], axis=-1)
+
+
+def scale_intrinsics(intr: CameraIntrinsics, width: int, height: int) -> CameraIntrinsics:
+    """The same camera at another resolution (a resized image): focal lengths and principal
+    point scaled per axis (pixel-centre convention: c' = (c + 0.5) s - 0.5)."""
+    sx, sy = width / intr.width, height / intr.height
+    return CameraIntrinsics(int(width), int(height), intr.fx * sx, intr.fy * sy,
+                            (intr.cx + 0.5) * sx - 0.5, (intr.cy + 0.5) * sy - 0.5,
+                            approximate=intr.approximate)
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """A camera calibration as ROS stores it (camera_info YAML, sensor_msgs/CameraInfo):
+    intrinsics plus the lens distortion model and coefficients (``plumb_bob``:
+    k1, k2, p1, p2, k3; ``rational_polynomial``: 8 coefficients; ``equidistant``: 4)."""
+
+    intrinsics: CameraIntrinsics
+    distortion_model: str = 'plumb_bob'
+    distortion: tuple = ()
+    camera_name: str = ''
+
+    @property
+    def has_distortion(self) -> bool:
+        return any(abs(float(d)) > 0.0 for d in self.distortion)
+
+
+def _yaml_matrix(data: dict, key: str, rows: int, cols: int, path) -> np.ndarray:
+    block = data.get(key)
+    if not isinstance(block, dict) or 'data' not in block:
+        raise ValueError(f'{path}: missing "{key}: {{rows, cols, data}}"')
+    values = np.asarray(block['data'], dtype=np.float64).reshape(-1)
+    if rows and cols and values.size != rows * cols:
+        raise ValueError(f'{path}: "{key}" has {values.size} values, expected {rows * cols}')
+    return values
+
+
+def read_camera_info_yaml(path) -> CameraCalibration:
+    """Read the standard ROS camera_info YAML (written by camera_calibration /
+    camera_calibration_parsers)::
+
+        image_width: 640
+        image_height: 480
+        camera_name: webcam
+        camera_matrix: {rows: 3, cols: 3, data: [fx, 0, cx, 0, fy, cy, 0, 0, 1]}
+        distortion_model: plumb_bob
+        distortion_coefficients: {rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]}
+        rectification_matrix: ...   # ignored (monocular)
+        projection_matrix: ...      # ignored
+
+    Raises FileNotFoundError for a missing file and ValueError (naming the file) for a file
+    that is not such a YAML or holds invalid values.
+    """
+    import yaml
+    from pathlib import Path
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f'calibration file not found: {p}')
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ValueError(f'{p}: cannot read calibration YAML ({exc})') from None
+    if not isinstance(data, dict):
+        raise ValueError(f'{p}: not a camera_info YAML (expected a mapping)')
+    try:
+        width, height = int(data['image_width']), int(data['image_height'])
+        k = _yaml_matrix(data, 'camera_matrix', 3, 3, p)
+        d = data.get('distortion_coefficients') or {'data': []}
+        dist = tuple(float(v) for v in np.asarray(d.get('data') or [], dtype=np.float64))
+        intr = CameraIntrinsics(width, height, float(k[0]), float(k[4]), float(k[2]),
+                                float(k[5]))
+    except KeyError as exc:
+        raise ValueError(f'{p}: missing {exc.args[0]!r}') from None
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{p}: invalid calibration ({exc})') from None
+    if not all(math.isfinite(v) for v in dist):
+        raise ValueError(f'{p}: non-finite distortion coefficients')
+    return CameraCalibration(intr, str(data.get('distortion_model') or 'plumb_bob'), dist,
+                             str(data.get('camera_name') or ''))
+
+
+def write_camera_info_yaml(calib: CameraCalibration, path) -> None:
+    """Write ``calib`` in the standard camera_info YAML format (see read_camera_info_yaml)."""
+    import yaml
+    from pathlib import Path
+
+    intr = calib.intrinsics
+    k = [float(v) for v in intr.K.reshape(-1)]
+    dist = [float(v) for v in calib.distortion]
+    data = {
+        'image_width': int(intr.width), 'image_height': int(intr.height),
+        'camera_name': calib.camera_name or 'camera',
+        'camera_matrix': {'rows': 3, 'cols': 3, 'data': k},
+        'distortion_model': calib.distortion_model,
+        'distortion_coefficients': {'rows': 1, 'cols': len(dist), 'data': dist},
+        'rectification_matrix': {'rows': 3, 'cols': 3,
+                                 'data': [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]},
+        'projection_matrix': {'rows': 3, 'cols': 4,
+                              'data': [k[0], 0.0, k[2], 0.0, 0.0, k[4], k[5], 0.0,
+                                       0.0, 0.0, 1.0, 0.0]},
+    }
+    Path(path).write_text(yaml.safe_dump(data, sort_keys=False))

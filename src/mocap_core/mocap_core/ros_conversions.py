@@ -442,3 +442,138 @@ def camera_info_to_intrinsics(msg: CameraInfo) -> CameraIntrinsics:
                                 float(k[2]), float(k[5]))
     except (ValueError, IndexError) as exc:
         raise MessageError(f'invalid CameraInfo: {exc}') from None
+
+
+# ---------------------------------------------------------------------------------------------
+# Images: sensor_msgs/Image and CompressedImage <-> NumPy BGR (OpenCV's channel order)
+# ---------------------------------------------------------------------------------------------
+import array as _array  # noqa: E402  (kept with the image section it serves)
+
+from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
+
+#: Encodings :func:`image_to_bgr` reads: encoding -> (channels, bytes per channel, order).
+#: ``order`` names the channels (``'bgr'``, ``'rgb'``, ``'bgra'``, ``'rgba'``, ``'mono'``).
+IMAGE_ENCODINGS: Dict[str, Tuple[int, int, str]] = {
+    'bgr8': (3, 1, 'bgr'), 'rgb8': (3, 1, 'rgb'), 'bgra8': (4, 1, 'bgra'),
+    'rgba8': (4, 1, 'rgba'), 'mono8': (1, 1, 'mono'), 'mono16': (1, 2, 'mono'),
+    '8UC1': (1, 1, 'mono'), '8UC3': (3, 1, 'bgr'), '8UC4': (4, 1, 'bgra'),
+    '16UC1': (1, 2, 'mono'), 'bgr16': (3, 2, 'bgr'), 'rgb16': (3, 2, 'rgb'),
+}
+#: Formats :func:`compressed_image_to_bgr` decodes (the codec part of ``format``).
+COMPRESSED_FORMATS: Tuple[str, ...] = ('jpeg', 'jpg', 'png')
+
+
+def image_to_bgr(msg: Image) -> np.ndarray:
+    """sensor_msgs/Image -> (H, W, 3) uint8 BGR array (a copy, C-contiguous).
+
+    Reads the 8-bit encodings of :data:`IMAGE_ENCODINGS` as they are and the 16-bit ones
+    scaled to 8 bits (value / 257). Raises MessageError for an empty image, an unsupported
+    encoding, a ``step`` shorter than a row, or ``data`` whose size is not ``step x height``.
+    """
+    enc = str(msg.encoding)
+    if enc not in IMAGE_ENCODINGS:
+        raise MessageError(f'unsupported image encoding {enc!r}; supported: '
+                           f'{", ".join(IMAGE_ENCODINGS)}')
+    channels, depth, order = IMAGE_ENCODINGS[enc]
+    height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    if height <= 0 or width <= 0:
+        raise MessageError(f'empty image ({width}x{height})')
+    row = width * channels * depth
+    if step < row:
+        raise MessageError(f'image step {step} is shorter than a row of {width} x {enc} '
+                           f'({row} bytes)')
+    data = msg.data
+    size = len(data)
+    if size != step * height:
+        raise MessageError(f'image data has {size} bytes, expected step {step} x height '
+                           f'{height} = {step * height} for {width}x{height} {enc}')
+    buf = np.frombuffer(data, dtype=np.uint8).reshape(height, step)[:, :row]
+    if depth == 2:
+        dt = np.dtype('>u2' if msg.is_bigendian else '<u2')
+        img16 = np.ascontiguousarray(buf).view(dt).reshape(height, width, channels)
+        img = (img16.astype(np.uint32) * 255 // 65535).astype(np.uint8)
+    else:
+        img = buf.reshape(height, width, channels)
+    if order == 'mono':
+        return np.ascontiguousarray(np.repeat(img, 3, axis=2))
+    if order == 'bgr':
+        return np.array(img, copy=True, order='C')
+    if order == 'rgb':
+        return np.ascontiguousarray(img[:, :, ::-1])
+    if order == 'bgra':
+        return np.ascontiguousarray(img[:, :, :3])
+    return np.ascontiguousarray(img[:, :, 2::-1])  # rgba
+
+
+def bgr_to_image(image: np.ndarray, header: Header, encoding: str = 'bgr8') -> Image:
+    """(H, W, 3) uint8 BGR (or (H, W) gray with ``mono8``) -> sensor_msgs/Image.
+
+    ``encoding`` is ``bgr8``, ``rgb8`` or ``mono8`` (a BGR input is converted to gray with the
+    ITU-R BT.601 weights)."""
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        raise MessageError(f'image must be uint8, got {img.dtype}')
+    if encoding == 'mono8':
+        if img.ndim == 3:
+            img = np.round(img[..., 0] * 0.114 + img[..., 1] * 0.587
+                           + img[..., 2] * 0.299).astype(np.uint8)
+        if img.ndim != 2:
+            raise MessageError(f'mono8 image must have shape (H, W), got {img.shape}')
+        channels = 1
+    elif encoding in ('bgr8', 'rgb8'):
+        if img.ndim != 3 or img.shape[2] != 3:
+            raise MessageError(f'{encoding} image must have shape (H, W, 3), got {img.shape}')
+        if encoding == 'rgb8':
+            img = img[:, :, ::-1]
+        channels = 3
+    else:
+        raise MessageError(f'cannot write encoding {encoding!r}; use bgr8, rgb8 or mono8')
+    img = np.ascontiguousarray(img)
+    msg = Image(header=header, height=int(img.shape[0]), width=int(img.shape[1]),
+                encoding=encoding, is_bigendian=0, step=int(img.shape[1] * channels))
+    msg.data = _array.array('B', img.tobytes())  # array.array: fast, unlike bytes
+    return msg
+
+
+def compressed_image_to_bgr(msg: CompressedImage) -> np.ndarray:
+    """sensor_msgs/CompressedImage (JPEG or PNG) -> (H, W, 3) uint8 BGR.
+
+    ``format`` may be the bare codec (``jpeg``) or image_transport's ``"<encoding>; <codec>
+    compressed <encoding>"``. Raises MessageError for an empty message, an unsupported format
+    (e.g. ``compressedDepth``) or data the codec cannot decode."""
+    import cv2
+
+    fmt = str(msg.format).strip().lower()
+    if 'compresseddepth' in fmt.replace(' ', ''):
+        raise MessageError(f'unsupported compressed format {msg.format!r} (depth images)')
+    codec = fmt.split(';')[-1].strip().split(' ')[0] if fmt else ''
+    if codec and codec not in COMPRESSED_FORMATS:
+        raise MessageError(f'unsupported compressed format {msg.format!r}; supported: '
+                           f'{", ".join(COMPRESSED_FORMATS)}')
+    if len(msg.data) == 0:
+        raise MessageError('empty compressed image')
+    img = cv2.imdecode(np.frombuffer(msg.data, dtype=np.uint8), cv2.IMREAD_COLOR)
+    if img is None or img.size == 0:
+        raise MessageError(f'cannot decode compressed image ({len(msg.data)} bytes, '
+                           f'format {msg.format!r})')
+    return img
+
+
+def bgr_to_compressed_image(image: np.ndarray, header: Header, fmt: str = 'jpeg',
+                            quality: int = 90) -> CompressedImage:
+    """(H, W, 3) uint8 BGR -> sensor_msgs/CompressedImage (``fmt`` ``jpeg`` or ``png``;
+    ``quality`` 0-100 for JPEG)."""
+    import cv2
+
+    if fmt not in ('jpeg', 'png'):
+        raise MessageError(f'cannot write compressed format {fmt!r}; use jpeg or png')
+    img = np.asarray(image)
+    if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
+        raise MessageError(f'expected a (H, W, 3) uint8 image, got {img.shape} {img.dtype}')
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)] if fmt == 'jpeg' else []
+    ok, buf = cv2.imencode('.jpg' if fmt == 'jpeg' else '.png', img, params)
+    if not ok:
+        raise MessageError(f'OpenCV could not encode the image as {fmt}')
+    msg = CompressedImage(header=header, format=fmt)
+    msg.data = _array.array('B', buf.tobytes())
+    return msg

@@ -189,3 +189,90 @@ def test_urdf_msg(pose):
     from mocap_core.urdf import skeleton_to_urdf
     msg = _wire(rc.urdf_to_msg(skeleton_to_urdf(pose.skeleton)))
     assert msg.data.startswith('<?xml') and 'left_knee_rz' in msg.data
+
+
+# --- images ------------------------------------------------------------------------------------
+def _test_image(h=48, w=64):
+    rng = np.random.default_rng(11)
+    img = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    img[: h // 2, : w // 2] = (10, 120, 240)  # a flat patch: survives JPEG almost unchanged
+    return img
+
+
+@pytest.mark.parametrize('encoding', ['bgr8', 'rgb8'])
+def test_image_roundtrip_colour(header, encoding):
+    img = _test_image()
+    msg = _wire(rc.bgr_to_image(img, header, encoding))
+    assert (msg.height, msg.width, msg.encoding, msg.step) == (48, 64, encoding, 64 * 3)
+    assert msg.header.stamp == header.stamp
+    np.testing.assert_array_equal(rc.image_to_bgr(msg), img)
+
+
+def test_image_roundtrip_mono(header):
+    gray = _test_image()[..., 1]
+    msg = _wire(rc.bgr_to_image(gray, header, 'mono8'))
+    out = rc.image_to_bgr(msg)
+    assert out.shape == (48, 64, 3)
+    for c in range(3):
+        np.testing.assert_array_equal(out[..., c], gray)
+
+
+def test_image_reads_alpha_16bit_and_padded_rows(header):
+    img = _test_image(6, 5)
+    rgba = np.concatenate([img[..., ::-1], np.full((6, 5, 1), 255, np.uint8)], axis=2)
+    msg = rc.Image(header=header, height=6, width=5, encoding='rgba8', step=5 * 4 + 3)
+    padded = np.zeros((6, 23), np.uint8)
+    padded[:, :20] = rgba.reshape(6, 20)
+    msg.data = padded.tobytes()
+    np.testing.assert_array_equal(rc.image_to_bgr(_wire(msg)), img)
+
+    mono16 = np.arange(30, dtype=np.uint16).reshape(6, 5) * 2000
+    for big in (0, 1):
+        m16 = rc.Image(header=header, height=6, width=5, encoding='mono16', step=10,
+                       is_bigendian=big)
+        m16.data = mono16.astype('>u2' if big else '<u2').tobytes()
+        out = rc.image_to_bgr(m16)
+        np.testing.assert_array_equal(out[..., 0], (mono16.astype(np.uint32) * 255 // 65535))
+
+
+@pytest.mark.parametrize('change, reason', [
+    (dict(encoding='32FC1'), 'unsupported image encoding'),
+    (dict(encoding='yuv422'), 'unsupported image encoding'),
+    (dict(width=0, height=0, step=0, data=b''), 'empty image'),
+    (dict(step=10), 'shorter than a row'),
+    (dict(height=49), 'expected step'),           # data of a smaller image: wrong size
+    (dict(data=b'\x00' * 100), 'expected step'),  # truncated data
+])
+def test_image_bad_messages_raise_with_reason(header, change, reason):
+    msg = rc.bgr_to_image(_test_image(), header)
+    for k, v in change.items():
+        setattr(msg, k, v)
+    with pytest.raises(rc.MessageError, match=reason):
+        rc.image_to_bgr(msg)
+
+
+def test_compressed_image_roundtrip(header):
+    img = _test_image()
+    png = _wire(rc.bgr_to_compressed_image(img, header, 'png'))
+    assert png.format == 'png' and png.header.stamp == header.stamp
+    np.testing.assert_array_equal(rc.compressed_image_to_bgr(png), img)
+    jpg = _wire(rc.bgr_to_compressed_image(img, header, 'jpeg', quality=95))
+    out = rc.compressed_image_to_bgr(jpg)
+    assert out.shape == img.shape
+    patch = out[4:18, 4:26].astype(int) - np.array([10, 120, 240])
+    assert np.abs(patch).mean() < 3 and np.abs(patch).max() <= 12  # lossy; colour kept
+    jpg.format = 'bgr8; jpeg compressed bgr8'  # image_transport's form
+    assert rc.compressed_image_to_bgr(jpg).shape == img.shape
+
+
+@pytest.mark.parametrize('fmt, data, reason', [
+    ('16UC1; compressedDepth', b'\x01\x02', 'unsupported compressed format'),
+    ('tiff', b'\x01\x02', 'unsupported compressed format'),
+    ('jpeg', b'', 'empty compressed image'),
+    ('jpeg', b'\xff\xd8\xff\xe0 this is not a jpeg', 'cannot decode'),
+])
+def test_compressed_image_bad_messages_raise(header, fmt, data, reason):
+    msg = rc.CompressedImage(header=header, format=fmt)
+    msg.data = data
+    with pytest.raises(rc.MessageError, match=reason):
+        rc.compressed_image_to_bgr(msg)

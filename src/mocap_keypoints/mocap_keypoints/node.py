@@ -1,79 +1,135 @@
-"""``ros2 run mocap_keypoints keypoints``: publishes 2D keypoints and camera info per frame.
+"""``ros2 run mocap_keypoints keypoints``: 2D body keypoints with confidences, live.
 
-Topics (DESIGN §2):
-  * ``/mocap/keypoints2d`` (sensor_msgs/PointCloud2, sensor-data QoS): height = persons,
-    width = 23 keypoints, float32 ``u, v, confidence``; all confidences 0 when nobody was found.
-  * ``/mocap/camera_info`` (sensor_msgs/CameraInfo): the intrinsics the keypoints belong to.
-  * ``/diagnostics``.
+Publishes for every processed frame, stamped with the image's stamp (DESIGN §2):
+  * ``/mocap/keypoints2d`` (sensor_msgs/PointCloud2, sensor-data QoS): height = persons
+    (``max_persons``), width = 23 keypoints, float32 ``u, v, confidence``; when nobody is found
+    the cloud is still published, with all confidences 0;
+  * ``/mocap/camera_info`` (sensor_msgs/CameraInfo): the intrinsics of the keypoints;
+  * ``/mocap/keypoints2d/annotated`` (sensor_msgs/Image, bgr8) with ``publish_annotated``:
+    the skeleton drawn over the frame, for debugging (reliable, keep-last 2, published by a
+    second node ``<name>_annotated`` with its own DDS participant);
+  * ``/diagnostics``: detector time, input and output rates, frames dropped, errors, source,
+    detector, intrinsics.
 
-Sources (parameter ``source``): ``openpose_json`` — a directory of OpenPose JSON files played
-at ``fps``. (Camera, video, image directory and image-topic sources come with the detector.)
+Sources (parameter ``source``; ``auto`` picks from ``path``):
+  * ``camera``: an OpenCV camera (``device`` index or /dev/videoN); stamps = grab time;
+  * ``video``: a video file; stamps = start time + frame index / the video's fps; played at
+    its own rate (``realtime``, dropping frames the detector cannot keep up with) or as fast
+    as possible without drops; optionally looping;
+  * ``images``: a directory of images in natural name order, stamped at ``fps``;
+  * ``topic``: sensor_msgs/Image or CompressedImage on ``image_topic`` (CompressedImage when
+    the name ends in ``/compressed``), with ``camera_info_topic``; stamps = the image's (an
+    image whose stamp is not after the previous one is dropped with a warning);
+  * ``openpose_json``: a directory of OpenPose JSON files (BODY_25 / COCO-18), no detector.
+
+Detector: MediaPipe BlazePose full (mediapipe 0.10.14, bundled weights), in its own thread
+behind a one-frame slot: the newest frame is processed, older waiting frames are dropped and
+counted. Intrinsics: ``calibration_file`` (camera_info YAML) if given, else the CameraInfo
+topic (topic source), else approximated from the image size and ``horizontal_fov_deg``
+(logged as an approximation). Keypoints are undistorted when the calibration has distortion.
+
+Exit status: 0 at the end of a file source or on Ctrl-C; 2 when the source cannot be opened
+(camera not found, file unreadable, bad parameter); 1 when a camera stops delivering frames.
 """
 
 from __future__ import annotations
 
+import collections
+import re
 import sys
-from pathlib import Path
-from typing import List, Optional, Tuple
+import threading
+import time
+from typing import Deque, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from mocap_core.camera import CameraIntrinsics
+from mocap_core.metrics import LatencyStats, RateMeter
 from mocap_core.parameters import ParamSpec, declare_parameters, describe_parameters
-from mocap_core.skeleton import NUM_KEYPOINTS
 
-from .openpose import OpenPoseError, keypoint_extent, list_openpose_files, read_openpose_file
-
-SOURCES = ('openpose_json',)
+from .openpose import infer_image_size
+from .pipeline import FrameResult, select_persons  # noqa: F401  (re-exported for users)
+from .sources import SOURCE_KINDS, SourceError
 
 PARAMETERS = (
-    ParamSpec('source', 'openpose_json', f'Input kind, one of: {", ".join(SOURCES)}',
+    ParamSpec('source', 'auto', 'Input kind: auto, ' + ', '.join(SOURCE_KINDS) + '. auto: '
+              'camera when path is empty, video for a file, openpose_json for a directory '
+              'with *.json files, images for another directory', read_only=True),
+    ParamSpec('path', '', 'Video file, image directory or OpenPose JSON directory',
               read_only=True),
-    ParamSpec('path', '', 'Directory of OpenPose JSON files (source openpose_json)',
+    ParamSpec('device', '0', 'Camera (source camera): OpenCV index, /dev/videoN or a stream '
+              'URL', read_only=True),
+    ParamSpec('image_topic', '/camera/image_raw', 'Image topic (source topic); '
+              'sensor_msgs/CompressedImage when it ends in /compressed, else sensor_msgs/Image',
               read_only=True),
-    ParamSpec('fps', 30.0, 'Frame rate for file sources (frames per second); stamps advance '
-              'by 1/fps', min_value=0.1, max_value=1000.0),
-    ParamSpec('realtime', True, 'Play file sources at fps (true) or as fast as possible'),
-    ParamSpec('loop', False, 'Restart file sources at the end instead of exiting'),
-    ParamSpec('max_persons', 1, 'Persons per cloud (most confident first); the cloud height',
-              min_value=1, max_value=16),
+    ParamSpec('image_qos', 'auto', 'Reliability of the image subscription: auto (reliable '
+              'when every publisher of the topic is reliable, else best effort; re-checked '
+              'every second), reliable or best_effort. Keep-last 2 either way. '
+              'Raw images are large: best effort loses many of them over Fast DDS\'s UDP '
+              'transport here, reliable does not', read_only=True,
+              additional_constraints='auto, reliable or best_effort'),
+    ParamSpec('camera_info_topic', '/camera/camera_info', 'CameraInfo topic (source topic)',
+              read_only=True),
+    ParamSpec('fps', 0.0, 'Frame rate: stamps of video/image/JSON sources advance by 1/fps '
+              '(0 = the video file\'s own rate, 30 for directories); camera: rate requested '
+              'from the driver (0 = its default)', min_value=0.0, max_value=1000.0,
+              read_only=True),
+    ParamSpec('realtime', True, 'File sources: play at their frame rate and drop frames the '
+              'detector cannot keep up with (true), or as fast as possible without drops'),
+    ParamSpec('loop', False, 'Restart file sources at the end instead of exiting',
+              read_only=True),
+    ParamSpec('detector', 'blazepose', 'Keypoint detector (blazepose = MediaPipe BlazePose '
+              'full, bundled with mediapipe 0.10.14)', read_only=True),
+    ParamSpec('tracking', True, 'BlazePose video mode (track the person from frame to frame); '
+              'false runs the person detector on every image (unrelated images, slower)',
+              read_only=True),
+    ParamSpec('min_detection_confidence', 0.5, 'BlazePose person detection threshold',
+              min_value=0.0, max_value=1.0, read_only=True),
+    ParamSpec('min_tracking_confidence', 0.5, 'BlazePose tracking threshold (below it the '
+              'person is detected again)', min_value=0.0, max_value=1.0, read_only=True),
+    ParamSpec('max_persons', 1, 'Persons per cloud (most confident first); the cloud height '
+              '(BlazePose finds one person)', min_value=1, max_value=16, read_only=True),
+    ParamSpec('calibration_file', '', 'Camera calibration (standard camera_info YAML); takes '
+              'precedence over the CameraInfo topic', read_only=True),
+    ParamSpec('horizontal_fov_deg', 60.0, 'Horizontal field of view for approximate '
+              'intrinsics when no calibration is known', min_value=1.0, max_value=179.0,
+              read_only=True),
+    ParamSpec('undistort', True, 'Undistort keypoints when the calibration has lens '
+              'distortion (published CameraInfo then has zero distortion)', read_only=True),
+    ParamSpec('image_width', 0, 'OpenPose source: image width for the intrinsics (0 = infer '
+              'from the keypoints); camera: width requested from the driver (0 = default)',
+              min_value=0, read_only=True),
+    ParamSpec('image_height', 0, 'Image height, as image_width', min_value=0, read_only=True),
+    ParamSpec('publish_annotated', False, 'Also publish the frame with the skeleton drawn on '
+              '/mocap/keypoints2d/annotated (debugging; costs a copy per frame)',
+              read_only=True),
+    ParamSpec('annotated_max_fps', 0.0, 'Highest rate of the annotated images (wall '
+              'clock; 0 = every frame)', min_value=0.0, read_only=True),
     ParamSpec('wait_for_subscribers', 0, 'Before the first frame, wait until this many '
               'subscribers listen on /mocap/keypoints2d (e.g. 1 for a recorder); 0 = start at once',
               min_value=0),
     ParamSpec('wait_timeout_s', 10.0, 'Longest wait for those subscribers, seconds',
               min_value=0.0),
-    ParamSpec('frame_id', 'camera_optical_frame', 'frame_id of the keypoints and camera info'),
-    ParamSpec('image_width', 0, 'Image width in pixels for approximate intrinsics; 0 = '
-              'infer from the keypoints of the first frames', min_value=0),
-    ParamSpec('image_height', 0, 'Image height in pixels; 0 = infer', min_value=0),
-    ParamSpec('horizontal_fov_deg', 60.0, 'Horizontal field of view for approximate '
-              'intrinsics when no calibration is known', min_value=1.0, max_value=179.0),
+    ParamSpec('frame_id', 'camera_optical_frame', 'frame_id of the keypoints and camera info '
+              '(source topic: the image\'s own frame_id when it has one)'),
 )
 
-
-def select_persons(people: np.ndarray, max_persons: int) -> np.ndarray:
-    """(P, 23, 3) -> (max_persons, 23, 3): the most confident persons first, padded with
-    all-zero (not seen) persons."""
-    out = np.zeros((max_persons, NUM_KEYPOINTS, 3))
-    if len(people):
-        order = np.argsort(-people[..., 2].sum(axis=-1), kind='stable')[:max_persons]
-        out[:len(order)] = people[order]
-    return out
+ANNOTATED_TOPIC = '/mocap/keypoints2d/annotated'
 
 
-def infer_image_size(frames: List[Tuple[int, Path]], sample: int = 60) -> Tuple[int, int]:
-    """Smallest 'standard' image size containing the keypoints of the first frames."""
-    umax = vmax = 0.0
-    for _, f in frames[:sample]:
-        try:
-            u, v = keypoint_extent(read_openpose_file(f))
-        except OpenPoseError:
-            continue
-        umax, vmax = max(umax, u), max(vmax, v)
-    for w, h in ((640, 480), (1280, 720), (1920, 1080), (1080, 1920), (3840, 2160)):
-        if umax < w and vmax < h:
-            return w, h
-    return int(np.ceil(umax + 1)), int(np.ceil(vmax + 1))
+class _LockedRateMeter(RateMeter):
+    """RateMeter ticked from a source thread and read from the executor."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._lock = threading.Lock()
+
+    def tick(self, now: Optional[float] = None) -> None:
+        with self._lock:
+            super().tick(now)
+
+    def rate(self, now: Optional[float] = None) -> float:
+        with self._lock:
+            return super().rate(now)
 
 
 def main(args: Optional[List[str]] = None) -> int:
@@ -85,111 +141,388 @@ def main(args: Optional[List[str]] = None) -> int:
         return 0
 
     import rclpy
+    from rclpy.event_handler import SubscriptionEventCallbacks
+    from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
-    from sensor_msgs.msg import CameraInfo, PointCloud2
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
+    from mocap_core.camera import CameraCalibration, read_camera_info_yaml
     from mocap_core.diagnostics import NodeDiagnostics
     from mocap_core.qos import SENSOR_QOS, STREAM_QOS
-    from mocap_core.ros_conversions import (intrinsics_to_camera_info, keypoints_to_cloud,
-                                            make_header)
+    from mocap_core.ros_conversions import (MessageError, bgr_to_image,
+                                            camera_info_to_intrinsics,
+                                            compressed_image_to_bgr, image_to_bgr,
+                                            intrinsics_to_camera_info, keypoints_to_cloud,
+                                            make_header, stamp_to_ns)
+
+    from .detector import create_detector
+    from .intrinsics import IntrinsicsProvider
+    from .pipeline import FrameProcessor
+    from .sources import Frame, open_source, resolve_kind
+    from .worker import LatestWorker, SourceFeeder
+
+    def _side_node(name: str, cli_args: Optional[List[str]]) -> Node:
+        """A publisher-only node in its own context (its own DDS participant). Large debug
+        images sent by the keypoint node's own participant were seen to make Fast DDS lose
+        best-effort keypoint messages at 40 fps on a loaded 2-core machine; from a second
+        participant they do not. Topic remaps apply; node-name remaps do not."""
+        from rclpy.context import Context
+
+        raw = list(sys.argv if cli_args is None else cli_args)
+        keep: List[str] = []
+        i = 0
+        while i < len(raw):
+            if raw[i] in ('-r', '--remap') and i + 1 < len(raw) and \
+                    raw[i + 1].split(':=')[0].split(':')[-1] in ('__node', '__name'):
+                i += 2
+                continue
+            keep.append(raw[i])
+            i += 1
+        context = Context()
+        rclpy.init(args=keep, context=context)
+        return rclpy.create_node(name, context=context)
 
     class KeypointsNode(Node):
         def __init__(self) -> None:
             super().__init__('keypoints')
-            self.p = declare_parameters(self, PARAMETERS)
-            if self.p['source'] not in SOURCES:
-                raise ValueError(f"unknown source {self.p['source']!r}; use one of {SOURCES}")
-            self.frames = list_openpose_files(self.p['path'])
-            w, h = self.p['image_width'], self.p['image_height']
-            if w <= 0 or h <= 0:
-                w, h = infer_image_size(self.frames)
-            self.intrinsics = CameraIntrinsics.from_fov(w, h, self.p['horizontal_fov_deg'])
-            self.get_logger().warn(
-                f'no calibration given: approximating intrinsics from image size {w}x{h} and '
-                f"horizontal FOV {self.p['horizontal_fov_deg']:.0f} deg "
-                f'(fx = fy = {self.intrinsics.fx:.1f} px)')
+            # 'device' accepts an index (an integer to ROS: device:=1) or a path/URL string.
+            self.p = p = declare_parameters(self, [s for s in PARAMETERS if s.name != 'device'])
+            spec = next(s for s in PARAMETERS if s.name == 'device')
+            desc = spec.descriptor()
+            desc.dynamic_typing = True
+            p['device'] = str(self.declare_parameter('device', spec.default, desc).value)
+            self.kind = resolve_kind(p['source'], p['path'])
+            if p['image_qos'] not in ('auto', 'reliable', 'best_effort'):
+                raise ValueError(f"image_qos must be auto, reliable or best_effort, got "
+                                 f"{p['image_qos']!r}")
+            log = self.get_logger()
+            calibration = None
+            if p['calibration_file']:
+                calibration = read_camera_info_yaml(p['calibration_file'])
+                log.info(f"calibration from {p['calibration_file']}: "
+                         f'{calibration.intrinsics.width}x{calibration.intrinsics.height}, '
+                         f'fx={calibration.intrinsics.fx:.1f} fy={calibration.intrinsics.fy:.1f}'
+                         f', {calibration.distortion_model}')
+            self.provider = IntrinsicsProvider(calibration, p['horizontal_fov_deg'],
+                                               p['calibration_file'])
+            self.source = None
+            fixed_size = None
+            if self.kind != 'topic':
+                self.source = open_source(
+                    self.kind, p['path'], p['device'], fps=p['fps'], loop=p['loop'],
+                    width=p['image_width'], height=p['image_height'], clock_ns=self._now_ns)
+            if self.kind == 'openpose_json':
+                detector = None
+                w, h = p['image_width'], p['image_height']
+                if w <= 0 or h <= 0:
+                    w, h = infer_image_size(self.source.files)
+                fixed_size = (w, h)
+                self.detector_name = 'openpose_json (recorded detections)'
+            else:
+                detector = create_detector(
+                    p['detector'], tracking=p['tracking'],
+                    min_detection_confidence=p['min_detection_confidence'],
+                    min_tracking_confidence=p['min_tracking_confidence'])
+                self.detector_name = detector.name
+            self.detector = detector
+            self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
+                                            undistort=p['undistort'],
+                                            annotate=p['publish_annotated'],
+                                            fixed_size=fixed_size)
             self.pub_kp = self.create_publisher(PointCloud2, '/mocap/keypoints2d', SENSOR_QOS)
             self.pub_info = self.create_publisher(CameraInfo, '/mocap/camera_info', STREAM_QOS)
-            self.diag = NodeDiagnostics(self, 'keypoints', hardware_id=str(self.p['path']))
-            self.diag.set_value('source', self.p['source'])
-            self.diag.set_value('intrinsics', 'approximate')
-            self.index = 0
-            self.frame_ns = int(round(1e9 / self.p['fps']))
-            self.t0_ns = self.get_clock().now().nanoseconds
+            self.pub_annotated = None
+            self._annotated_node = None
+            if p['publish_annotated']:
+                self._annotated_node = _side_node(self.get_name() + '_annotated', args)
+                # Reliable (serves reliable and best-effort subscribers): large best-effort
+                # samples are often lost over UDP; keep-last 2 never queues stale images.
+                self.pub_annotated = self._annotated_node.create_publisher(
+                    Image, ANNOTATED_TOPIC,
+                    QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
+                               reliability=ReliabilityPolicy.RELIABLE))
+            description = (self.source.description if self.source is not None
+                           else f"topic {p['image_topic']}")
+            self.diag = NodeDiagnostics(self, 'keypoints', hardware_id=description)
+            self.diag.input = _LockedRateMeter()
+            self.diag.set_value('source', description)
+            self.diag.set_value('detector', self.detector_name)
+            self.diag.set_value('intrinsics', 'none yet')
+            self.detector_stats = LatencyStats()
+            self.results: Deque[tuple] = collections.deque()
+            self.guard = self.create_guard_condition(self._drain)
+            self.worker = LatestWorker(self.processor.process, self._on_result).start()
+            self.feeder: Optional[SourceFeeder] = None
+            self.source_end: Optional[Tuple[str, Optional[BaseException]]] = None
             self.published = 0
             self.no_person = 0
-            self.done = False
-            period = 1.0 / self.p['fps'] if self.p['realtime'] else 0.0
-            self.timer = self.create_timer(period, self.step)
-            self.get_logger().info(
-                f"playing {len(self.frames)} OpenPose frames from {self.p['path']} at "
-                f"{self.p['fps']:g} fps{' (as fast as possible)' if not self.p['realtime'] else ''}")
+            self.stale = 0
+            self.last_stamp = -1
+            self.last_input_stamp = -1
+            self.topic_index = 0
+            self.intrinsics_detail = ''
+            self.intrinsics_approx = False
+            self._last_error_t = -1e9
+            self._last_error = ''
+            self._limited: Dict[str, float] = {}
+            self._next_annotated = 0.0
+            self.t0_ns = self._now_ns()
+            self.create_timer(1.0, self._refresh_diagnostics)
+            if self.kind == 'topic':
+                topic = p['image_topic']
+                self.compressed = topic.rstrip('/').endswith('/compressed')
+                self.image_type = CompressedImage if self.compressed else Image
+                self.image_sub = None
+                self.image_reliability = ''
+                self._subscribe_images()
+                if p['image_qos'] == 'auto':  # follow the publishers as they come and go
+                    self.create_timer(1.0, self._subscribe_images)
+                self.create_subscription(CameraInfo, p['camera_info_topic'],
+                                         self._on_camera_info, qos_profile_sensor_data)
+                if calibration is not None:
+                    log.info(f"{p['camera_info_topic']} is ignored: the calibration file "
+                             'takes precedence')
+                log.info(f"listening on {topic} ({self.image_type.__name__}) and "
+                         f"{p['camera_info_topic']}; detector {self.detector_name}")
+            else:
+                self.start_timer = self.create_timer(0.02, self._maybe_start)
+                mode = ('live' if self.source.live else 'at its frame rate, dropping frames '
+                        'the detector cannot keep up with' if p['realtime']
+                        else 'as fast as possible, no drops')
+                log.info(f'{description}: {mode}; detector {self.detector_name}')
 
-        def ready(self) -> bool:
+        # --- time -------------------------------------------------------------------------
+        def _now_ns(self) -> int:
+            return self.get_clock().now().nanoseconds
+
+        # --- logging helpers --------------------------------------------------------------
+        def _warn_limited(self, key: str, text: str, period_s: float = 5.0) -> None:
+            """Warn, at most once per ``period_s`` for the same ``key``."""
+            now = time.monotonic()
+            if now - self._limited.get(key, -1e9) >= period_s:
+                self._limited[key] = now
+                self.get_logger().warn(text)
+
+        def _problem(self, key: str, text: str) -> None:
+            self.diag.errors += 1
+            self._last_error, self._last_error_t = text, time.monotonic()
+            self._warn_limited(key, text)
+
+        # --- file and camera sources --------------------------------------------------------
+        def _ready(self) -> bool:
             need = self.p['wait_for_subscribers']
             if need <= 0 or self.pub_kp.get_subscription_count() >= need:
                 return True
-            waited = (self.get_clock().now().nanoseconds - self.t0_ns) * 1e-9
+            waited = (self._now_ns() - self.t0_ns) * 1e-9
             if waited > self.p['wait_timeout_s']:
                 self.get_logger().warn(f'only {self.pub_kp.get_subscription_count()} of {need} '
                                        f'subscribers after {waited:.1f} s; starting anyway')
-                self.p['wait_for_subscribers'] = 0
                 return True
             return False
 
-        def step(self) -> None:
-            if self.published == 0 and not self.ready():
+        def _maybe_start(self) -> None:
+            if self.feeder is not None or not self._ready():
                 return
-            if self.published == 0 and self.index == 0:
-                self.t0_ns = self.get_clock().now().nanoseconds
-            if self.index >= len(self.frames):
-                if self.p['loop']:
-                    self.index = 0
-                else:
-                    self.done = True
-                    return
-            _, path = self.frames[self.index]
-            stamp_ns = self.t0_ns + self.published * self.frame_ns
-            self.index += 1
+            self.start_timer.cancel()
+            self.feeder = SourceFeeder(self.source, self.worker, realtime=self.p['realtime'],
+                                       on_frame=lambda f: self.diag.input.tick(),
+                                       on_end=self._on_source_end).start()
+
+        def _on_source_end(self, reason: str, error: Optional[BaseException]) -> None:
+            self.source_end = (reason, error)  # feeder thread
+            self.guard.trigger()
+
+        # --- topic source ------------------------------------------------------------------
+        def _on_image(self, msg) -> None:
             self.diag.input.tick()
-            with self.diag.processing():
-                try:
-                    people = read_openpose_file(path)
-                except OpenPoseError as exc:
-                    self.diag.errors += 1
-                    self.get_logger().warn(f'skipping frame: {exc}')
-                    return
-                kp = select_persons(people, self.p['max_persons'])
-                header = make_header(stamp_ns, self.p['frame_id'])
-                cloud = keypoints_to_cloud(kp, header)
-            if not np.any(kp[..., 2] > 0):
-                self.no_person += 1
-                self.get_logger().info('no person in frame', throttle_duration_sec=2.0)
-            self.pub_info.publish(intrinsics_to_camera_info(self.intrinsics, header))
-            self.pub_kp.publish(cloud)
+            stamp = stamp_to_ns(msg.header.stamp)
+            if stamp <= self.last_input_stamp:
+                self.stale += 1
+                self._problem('stamp', f'image stamp {stamp} ns is not after the previous '
+                              f'{self.last_input_stamp} ns (time went backwards or a '
+                              'duplicate): dropping the image')
+                return
+            self.last_input_stamp = stamp
+            convert = compressed_image_to_bgr if self.compressed else image_to_bgr
+            self.worker.submit(Frame(stamp, None, self.topic_index,
+                                     f"{self.p['image_topic']} image {self.topic_index}",
+                                     decode=lambda m=msg: convert(m),
+                                     frame_id=msg.header.frame_id))
+            self.topic_index += 1
+
+        def _subscribe_images(self) -> None:
+            """(Re)create the image subscription with the reliability ``image_qos`` asks for
+            (``auto``: what the current publishers offer; kept once images arrive)."""
+            mode = self.p['image_qos']
+            topic = self.p['image_topic']
+            if mode == 'auto':
+                infos = self.get_publishers_info_by_topic(topic)
+                if not infos and self.image_sub is not None:
+                    return  # no publisher now: keep the subscription as it is
+                mode = ('reliable' if infos and all(
+                    i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+                    else 'best_effort')
+            if mode == self.image_reliability:
+                return
+            if self.image_sub is not None:
+                self.destroy_subscription(self.image_sub)
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
+                             reliability=(ReliabilityPolicy.RELIABLE if mode == 'reliable'
+                                          else ReliabilityPolicy.BEST_EFFORT))
+            self.image_sub = self.create_subscription(
+                self.image_type, topic, self._on_image, qos,
+                event_callbacks=SubscriptionEventCallbacks(
+                    incompatible_qos=self._on_incompatible_qos))
+            self.image_reliability = mode
+            self.diag.set_value('image_qos', mode)
+            self.get_logger().info(f'subscribed to {topic} ({self.image_type.__name__}, '
+                                   f'{mode.replace("_", " ")})')
+
+        def _on_incompatible_qos(self, event) -> None:
+            self._warn_limited('qos', f"a publisher of {self.p['image_topic']} offers "
+                               'incompatible QoS (a best-effort publisher cannot serve a '
+                               'reliable subscription): set image_qos:=best_effort or auto')
+
+        def _on_camera_info(self, msg: CameraInfo) -> None:
+            try:
+                intr = camera_info_to_intrinsics(msg)
+            except MessageError as exc:
+                self._problem('camera_info', f"ignoring {self.p['camera_info_topic']}: {exc} "
+                              '(an uncalibrated camera has K = 0)')
+                return
+            calib = CameraCalibration(intr, str(msg.distortion_model),
+                                      tuple(float(d) for d in msg.d))
+            if self.provider.update_camera_info(calib):
+                self.get_logger().info(
+                    f"camera_info: {intr.width}x{intr.height}, fx={intr.fx:.1f} "
+                    f"fy={intr.fy:.1f} cx={intr.cx:.1f} cy={intr.cy:.1f}, "
+                    f"{msg.distortion_model or 'no'} distortion")
+
+        # --- results -----------------------------------------------------------------------
+        def _on_result(self, frame, result, error, seconds) -> None:
+            self.results.append((frame, result, error, seconds))  # worker thread
+            self.guard.trigger()
+
+        def _drain(self) -> None:
+            while self.results:
+                frame, result, error, seconds = self.results.popleft()
+                self._handle(frame, result, error, seconds)
+            self.diag.dropped = self.worker.dropped + self.stale
+
+        def _handle(self, frame, res: Optional[FrameResult], error, seconds: float) -> None:
+            log = self.get_logger()
+            if error is not None:
+                self._problem(f'detector:{type(error).__name__}',
+                              f'{frame.name}: detector failed ({type(error).__name__}: '
+                              f'{error}); skipping the frame')
+                return
+            for note in res.notes:
+                if 'approximating' in note or 'ignoring' in note or 'not supported' in note:
+                    log.warn(note)
+                else:
+                    log.info(note)
+            if res.error is not None:
+                # Files: one warning per file. Streams: one per kind of error and 5 s.
+                key = res.error if self.kind in ('images', 'openpose_json') else \
+                    re.sub(r'\d+', '#', res.error)
+                self._problem(key, f'skipping frame: {res.error}')
+                return
+            if res.stamp_ns <= self.last_stamp:
+                self.stale += 1
+                self._problem('order', f'{res.name}: stamp {res.stamp_ns} not after the last '
+                              'published one; dropping it')
+                return
+            self.last_stamp = res.stamp_ns
+            header = make_header(res.stamp_ns, res.frame_id or self.p['frame_id'])
+            fi = res.intrinsics
+            if fi.detail != self.intrinsics_detail:
+                self.intrinsics_detail = fi.detail
+                self.intrinsics_approx = fi.approximate
+                self.diag.set_value('intrinsics', fi.detail)
+            self.pub_info.publish(intrinsics_to_camera_info(fi.intrinsics, header))
+            self.pub_kp.publish(keypoints_to_cloud(res.keypoints, header))
+            if self.pub_annotated is not None and res.annotated is not None:
+                now = time.monotonic()
+                if now >= self._next_annotated:
+                    rate = self.p['annotated_max_fps']
+                    self._next_annotated = now + (1.0 / rate if rate > 0 else 0.0)
+                    self.pub_annotated.publish(bgr_to_image(res.annotated, header))
             self.published += 1
+            self.diag.latency.add(seconds)
+            if res.detector_s > 0:
+                self.detector_stats.add(res.detector_s)
             self.diag.output.tick()
+            if not res.person_found:
+                self.no_person += 1
+                log.info(f'no person found ({res.name}); publishing all confidences 0',
+                         throttle_duration_sec=2.0)
+
+        def _refresh_diagnostics(self) -> None:
+            s = self.detector_stats.summary()
+            for key, v in (('detector_ms_median', s['median']), ('detector_ms_p95', s['p95'])):
+                self.diag.set_value(key, 'nan' if np.isnan(v) else f'{v * 1e3:.2f}')
+            self.diag.set_value('frames_without_person', self.no_person)
+            self.diag.dropped = self.worker.dropped + self.stale
+            if time.monotonic() - self._last_error_t < 5.0:
+                self.diag.warn(self._last_error)
+            elif self.intrinsics_approx:
+                self.diag.warn('intrinsics approximated from the image size and field of view '
+                               '(no calibration)')
+            else:
+                self.diag.warn(None)
+
+        @property
+        def done(self) -> bool:
+            return (self.source_end is not None and self.worker.idle and not self.results)
+
+        def summary(self) -> str:
+            return (f'{self.published} frames published, {self.worker.dropped + self.stale} '
+                    f'dropped, {self.diag.errors} skipped, {self.no_person} without a person')
+
+        def shutdown(self) -> None:
+            if self.feeder is not None:
+                self.feeder.stop(2.0)
+            self.worker.stop(5.0)
+            if self.source is not None:
+                self.source.close()
+            if self.detector is not None:
+                self.detector.close()
+            if self._annotated_node is not None:
+                context = self._annotated_node.context
+                self._annotated_node.destroy_node()
+                context.try_shutdown()
 
     rclpy.init(args=args)
     node = None
     try:
-        node = KeypointsNode()
+        try:
+            node = KeypointsNode()
+        except (SourceError, FileNotFoundError, ValueError, ParameterException) as exc:
+            print(f'keypoints: error: {exc}', file=sys.stderr)
+            return 2
         while rclpy.ok() and not node.done:
             rclpy.spin_once(node, timeout_sec=0.1)
+        node._drain()
+        reason, error = node.source_end or ('stopped', None)
         # Let the last messages leave before the publishers go away.
         for _ in range(5):
+            if not rclpy.ok():
+                break
             rclpy.spin_once(node, timeout_sec=0.1)
-        node.get_logger().info(f'finished: {node.published} frames published, '
-                               f'{node.no_person} without a person, {node.diag.errors} skipped')
+        if error is not None:
+            node.get_logger().error(f'source failed: {reason} ({node.summary()})')
+            return 1
+        node.get_logger().info(f'finished ({reason}): {node.summary()}')
         return 0
-    except (FileNotFoundError, ValueError) as exc:
-        print(f'keypoints: error: {exc}', file=sys.stderr)
-        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
+        if node is not None:  # the context is gone: no /rosout, plain stderr
+            print(f'[keypoints] stopped: {node.summary()}', file=sys.stderr)
         return 0
     finally:
         if node is not None:
+            node.shutdown()
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()

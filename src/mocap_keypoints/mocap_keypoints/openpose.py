@@ -103,3 +103,19 @@ def keypoint_extent(keypoints: np.ndarray) -> Tuple[float, float]:
     if not np.any(seen):
         return 0.0, 0.0
     return float(keypoints[..., 0][seen].max()), float(keypoints[..., 1][seen].max())
+
+
+def infer_image_size(frames: List[Tuple[int, Path]], sample: int = 60) -> Tuple[int, int]:
+    """Smallest 'standard' image size containing the keypoints of the first ``sample`` frames
+    (OpenPose JSON does not record the image size)."""
+    umax = vmax = 0.0
+    for _, f in frames[:sample]:
+        try:
+            u, v = keypoint_extent(read_openpose_file(f))
+        except OpenPoseError:
+            continue
+        umax, vmax = max(umax, u), max(vmax, v)
+    for w, h in ((640, 480), (1280, 720), (1920, 1080), (1080, 1920), (3840, 2160)):
+        if umax < w and vmax < h:
+            return w, h
+    return int(np.ceil(umax + 1)), int(np.ceil(vmax + 1))

@@ -1,0 +1,167 @@
+"""One frame in, keypoints and intrinsics out (no ROS imports): the work the node's detector
+thread does for every frame.
+
+:class:`FrameProcessor` turns a :class:`~mocap_keypoints.sources.Frame` into a
+:class:`FrameResult`: decode the image if needed, run the detector (or take the OpenPose
+detections), keep the ``max_persons`` most confident persons (padding with all-zero persons,
+so a frame without anybody still gives a cloud whose confidences are all 0), pick the
+intrinsics for the image size, undistort the keypoints when the calibration has lens
+distortion, and draw the annotated debug image if asked.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from mocap_core.skeleton import KEYPOINT_EDGES, KEYPOINT_NAMES, NUM_KEYPOINTS
+
+from .detector import Detector
+from .intrinsics import FrameIntrinsics, IntrinsicsProvider, distortion_supported, \
+    undistort_keypoints
+from .sources import Frame, check_image
+
+
+def select_persons(people: np.ndarray, max_persons: int) -> np.ndarray:
+    """(P, 23, 3) -> (max_persons, 23, 3): the most confident persons first, padded with
+    all-zero (not seen) persons."""
+    out = np.zeros((max_persons, NUM_KEYPOINTS, 3))
+    if len(people):
+        order = np.argsort(-people[..., 2].sum(axis=-1), kind='stable')[:max_persons]
+        out[:len(order)] = people[order]
+    return out
+
+
+_LEFT = (255, 160, 0)    # BGR: left side blue-ish
+_RIGHT = (0, 140, 255)   # right side orange
+_CENTRE = (0, 220, 0)
+
+
+def _side_colour(a: int, b: int) -> Tuple[int, int, int]:
+    na, nb = KEYPOINT_NAMES[a], KEYPOINT_NAMES[b]
+    if na.startswith('left_') and nb.startswith('left_'):
+        return _LEFT
+    if na.startswith('right_') and nb.startswith('right_'):
+        return _RIGHT
+    return _CENTRE
+
+
+def draw_keypoints(image: np.ndarray, keypoints: np.ndarray, threshold: float = 0.5,
+                   text: str = '') -> np.ndarray:
+    """A copy of ``image`` with the skeletons of (P, 23, 3) ``keypoints`` drawn over it: bones
+    between points with confidence >= ``threshold`` (left blue, right orange), points as
+    dots whose size grows with confidence, and ``text`` in the top-left corner."""
+    import cv2
+
+    out = np.array(image, copy=True)
+    scale = max(1.0, max(out.shape[:2]) / 640.0)
+    thick = max(1, int(round(2 * scale)))
+    for person in np.asarray(keypoints).reshape(-1, NUM_KEYPOINTS, 3):
+        ok = person[:, 2] >= threshold
+        for a, b in KEYPOINT_EDGES:
+            if ok[a] and ok[b]:
+                cv2.line(out, (int(round(person[a, 0])), int(round(person[a, 1]))),
+                         (int(round(person[b, 0])), int(round(person[b, 1]))),
+                         _side_colour(a, b), thick, cv2.LINE_AA)
+        for k in np.flatnonzero(ok):
+            cv2.circle(out, (int(round(person[k, 0])), int(round(person[k, 1]))),
+                       int(round((2 + 2 * person[k, 2]) * scale)), (255, 255, 255), -1,
+                       cv2.LINE_AA)
+    if text:
+        cv2.putText(out, text, (int(8 * scale), int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.5 * scale, (255, 255, 255), thick, cv2.LINE_AA)
+    return out
+
+
+@dataclass
+class FrameResult:
+    """What the node publishes for one frame (``error`` set: nothing to publish)."""
+
+    stamp_ns: int
+    index: int
+    name: str
+    frame_id: str = ''
+    keypoints: Optional[np.ndarray] = None          # (max_persons, 23, 3)
+    intrinsics: Optional[FrameIntrinsics] = None
+    image_size: Tuple[int, int] = (0, 0)            # width, height
+    detector_s: float = 0.0
+    annotated: Optional[np.ndarray] = None
+    error: Optional[str] = None
+    notes: List[str] = field(default_factory=list)  # to log (intrinsics changes, ...)
+
+    @property
+    def person_found(self) -> bool:
+        return self.keypoints is not None and bool(np.any(self.keypoints[..., 2] > 0))
+
+
+class FrameProcessor:
+    """See the module docstring. ``detector`` may be None for sources that bring their own
+    keypoints (OpenPose); ``fixed_size`` is then the image size for the intrinsics."""
+
+    def __init__(self, detector: Optional[Detector], intrinsics: IntrinsicsProvider,
+                 max_persons: int = 1, undistort: bool = True, annotate: bool = False,
+                 fixed_size: Optional[Tuple[int, int]] = None) -> None:
+        self.detector = detector
+        self.intrinsics = intrinsics
+        self.max_persons = int(max_persons)
+        self.undistort = undistort
+        self.annotate = annotate
+        self.fixed_size = fixed_size
+        self._warned_models: set = set()
+        self._last_size: Optional[Tuple[int, int]] = None
+
+    def process(self, frame: Frame) -> FrameResult:
+        res = FrameResult(frame.stamp_ns, frame.index, frame.name, frame.frame_id)
+        if frame.error is not None:
+            res.error = frame.error
+            return res
+        image = None
+        if frame.keypoints is not None:
+            people = np.asarray(frame.keypoints, dtype=np.float64).reshape(-1, NUM_KEYPOINTS, 3)
+            if self.fixed_size is None:
+                res.error = f'{frame.name}: no image size known for OpenPose keypoints'
+                return res
+            width, height = self.fixed_size
+        else:
+            try:
+                image = frame.decode() if frame.image is None and frame.decode else frame.image
+                image = check_image(image, frame.name or f'frame {frame.index}')
+            except ValueError as exc:
+                res.error = str(exc)
+                return res
+            height, width = image.shape[:2]
+            if self.detector is None:
+                res.error = 'no detector configured for image frames'
+                return res
+            t0 = time.perf_counter()
+            people = self.detector.detect(image)
+            res.detector_s = time.perf_counter() - t0
+        size = (int(width), int(height))
+        if self._last_size is not None and size != self._last_size:
+            res.notes.append(f'{frame.name}: image size changed from '
+                             f'{self._last_size[0]}x{self._last_size[1]} to {width}x{height}')
+        self._last_size = size
+        res.image_size = size
+        fi, note = self.intrinsics.for_image(*size)
+        if note:
+            res.notes.append(f'intrinsics: {note}')
+        res.intrinsics = fi
+        raw = select_persons(people, self.max_persons)
+        kp = raw
+        if self.undistort and fi.distortion and any(d != 0 for d in fi.distortion):
+            if distortion_supported(fi.distortion_model):
+                kp = undistort_keypoints(raw, fi)
+            elif fi.distortion_model not in self._warned_models:
+                self._warned_models.add(fi.distortion_model)
+                res.notes.append(f'distortion model {fi.distortion_model!r} is not supported: '
+                                 'keypoints are published without undistortion')
+        res.keypoints = kp
+        if self.annotate and image is not None:
+            seen = int(np.sum(raw[0, :, 2] > 0.5)) if len(raw) else 0
+            res.annotated = draw_keypoints(
+                image, raw, text=f'{frame.name}  {seen}/{NUM_KEYPOINTS} points > 0.5  '
+                                 f'{res.detector_s * 1e3:.0f} ms')
+        return res

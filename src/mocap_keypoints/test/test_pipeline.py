@@ -1,0 +1,175 @@
+import cv2
+import numpy as np
+import pytest
+
+from mocap_core.camera import CameraCalibration, CameraIntrinsics
+from mocap_core.skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
+from mocap_keypoints.intrinsics import (FrameIntrinsics, IntrinsicsProvider,
+                                        undistort_keypoints)
+from mocap_keypoints.pipeline import FrameProcessor, draw_keypoints, select_persons
+from mocap_keypoints.sources import Frame
+
+K720 = CameraIntrinsics(1280, 720, 1000.0, 1010.0, 639.5, 359.5)
+
+
+def _calib(intr=K720, model='plumb_bob', dist=()):
+    return CameraCalibration(intr, model, tuple(dist), 'cam')
+
+
+# --- intrinsics --------------------------------------------------------------------------------
+def test_provider_prefers_file_then_camera_info_then_approximation():
+    prov = IntrinsicsProvider(None, horizontal_fov_deg=90.0)
+    fi, note = prov.for_image(640, 360)
+    assert fi.approximate and fi.intrinsics.fx == pytest.approx(320.0)
+    assert 'approximating intrinsics from image size 640x360' in note
+    assert prov.for_image(640, 360)[1] is None          # no repeated note
+    assert prov.update_camera_info(_calib()) and not prov.update_camera_info(_calib())
+    fi, note = prov.for_image(640, 360)                  # half size: scaled
+    assert fi.source == 'camera_info' and 'scaled' in note
+    assert (fi.intrinsics.fx, fi.intrinsics.fy) == pytest.approx((500.0, 505.0))
+    assert (fi.intrinsics.cx, fi.intrinsics.cy) == pytest.approx((319.5, 179.5))
+    fi, _ = prov.for_image(1280, 720)
+    assert fi.intrinsics == K720
+    filed = IntrinsicsProvider(_calib(CameraIntrinsics(640, 360, 400.0, 400.0, 320.0, 180.0)),
+                               calibration_label='cam.yaml')
+    filed.update_camera_info(_calib())
+    fi, note = filed.for_image(640, 360)
+    assert fi.source == 'calibration_file' and fi.intrinsics.fx == 400.0 and 'cam.yaml' in note
+
+
+def test_provider_rejects_a_calibration_of_another_aspect_ratio():
+    prov = IntrinsicsProvider(_calib(), horizontal_fov_deg=60.0, calibration_label='c.yaml')
+    fi, note = prov.for_image(640, 480)
+    assert fi.approximate and 'another aspect ratio' in note and '1280x720' in note
+
+
+def test_undistort_keypoints_matches_the_pinhole_projection():
+    rng = np.random.default_rng(2)
+    pts = np.column_stack([rng.uniform(-0.6, 0.6, 23), rng.uniform(-0.4, 0.4, 23),
+                           np.full(23, 1.0)])
+    K = K720.K
+    ideal = (pts[:, :2] / pts[:, 2:]) * [K720.fx, K720.fy] + [K720.cx, K720.cy]
+    for model, dist in (('plumb_bob', [-0.25, 0.08, 0.001, -0.0005, -0.01]),
+                        ('equidistant', [0.05, -0.01, 0.002, -0.001])):
+        if model == 'plumb_bob':
+            raw, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, np.array(dist))
+        else:
+            raw, _ = cv2.fisheye.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
+                                               K, np.array(dist))
+        kp = np.concatenate([raw.reshape(-1, 2), np.full((23, 1), 0.9)], axis=1)[None]
+        kp[0, 5] = 0.0  # unseen stays unseen
+        fi = FrameIntrinsics(K720, 'calibration_file', '', model, tuple(dist))
+        und = undistort_keypoints(kp, fi)
+        assert np.abs(raw.reshape(-1, 2) - ideal).max() > 5   # the distortion is real
+        seen = np.arange(23) != 5
+        np.testing.assert_allclose(und[0, seen, :2], ideal[seen], atol=0.05)
+        assert np.all(und[0, 5] == 0) and np.all(und[..., 2][0, seen] == 0.9)
+
+
+# --- frame processing --------------------------------------------------------------------------
+class FakeDetector:
+    name = 'fake'
+
+    def __init__(self, people):
+        self.people = people
+        self.calls = 0
+
+    def detect(self, image):
+        self.calls += 1
+        return self.people
+
+    def reset(self):
+        pass
+
+    def close(self):
+        pass
+
+
+def _person(u=100.0, v=50.0, conf=0.9):
+    p = np.zeros((1, NUM_KEYPOINTS, 3))
+    p[0, :, 0] = u + np.arange(NUM_KEYPOINTS) * 5
+    p[0, :, 1] = v + np.arange(NUM_KEYPOINTS) * 8
+    p[0, :, 2] = conf
+    return p
+
+
+def test_processor_detects_and_fills_the_result():
+    img = np.zeros((360, 640, 3), np.uint8)
+    proc = FrameProcessor(FakeDetector(_person()), IntrinsicsProvider(), max_persons=2,
+                          annotate=True)
+    res = proc.process(Frame(123, img, 4, 'frame 4'))
+    assert res.error is None and res.stamp_ns == 123 and res.person_found
+    assert res.keypoints.shape == (2, NUM_KEYPOINTS, 3)
+    np.testing.assert_array_equal(res.keypoints[0], _person()[0])
+    assert np.all(res.keypoints[1] == 0)               # padding person: not seen
+    assert res.image_size == (640, 360) and res.intrinsics.approximate
+    assert any('approximating' in n for n in res.notes)
+    assert res.annotated.shape == img.shape and res.annotated.any() and not img.any()
+
+
+def test_processor_no_person_gives_zero_confidences():
+    proc = FrameProcessor(FakeDetector(np.zeros((0, NUM_KEYPOINTS, 3))), IntrinsicsProvider())
+    res = proc.process(Frame(1, np.zeros((100, 100, 3), np.uint8)))
+    assert res.error is None and not res.person_found
+    assert res.keypoints.shape == (1, NUM_KEYPOINTS, 3) and not res.keypoints.any()
+
+
+def test_processor_reports_bad_frames_without_raising():
+    det = FakeDetector(_person())
+    proc = FrameProcessor(det, IntrinsicsProvider())
+
+    def broken():
+        raise ValueError("unsupported image encoding '32FC1'")
+
+    cases = [Frame(1, None, 0, 'a.png', error='a.png: empty file'),
+             Frame(2, None, 1, 'topic image 1', decode=broken),
+             Frame(3, np.zeros((5, 5, 3), np.uint8), 2, 'tiny'),
+             Frame(4, None, 3, 'nothing')]
+    reasons = [proc.process(f).error for f in cases]
+    assert reasons[0] == 'a.png: empty file'
+    assert '32FC1' in reasons[1] and 'too small' in reasons[2] and 'empty frame' in reasons[3]
+    assert det.calls == 0
+
+
+def test_processor_decodes_lazily_and_notes_size_changes():
+    proc = FrameProcessor(FakeDetector(_person()), IntrinsicsProvider())
+    r1 = proc.process(Frame(1, None, 0, 'm0', decode=lambda: np.zeros((360, 640, 3), np.uint8)))
+    r2 = proc.process(Frame(2, np.zeros((480, 640, 3), np.uint8), 1, 'm1'))
+    assert r1.image_size == (640, 360) and r2.image_size == (640, 480)
+    assert any('size changed from 640x360 to 640x480' in n for n in r2.notes)
+
+
+def test_processor_openpose_frames_and_undistortion():
+    dist = (-0.2, 0.05, 0.0, 0.0, 0.0)
+    prov = IntrinsicsProvider(_calib(dist=dist))
+    proc = FrameProcessor(None, prov, fixed_size=(1280, 720))
+    people = _person(100, 50)  # far from the centre: a visible correction
+    res = proc.process(Frame(7, None, 0, 'x.json', keypoints=people))
+    assert res.intrinsics.source == 'calibration_file'
+    # Undistortion moves points away from the centre for barrel distortion (k1 < 0).
+    r_in = np.hypot(people[0, :, 0] - 639.5, people[0, :, 1] - 359.5)
+    r_out = np.hypot(res.keypoints[0, :, 0] - 639.5, res.keypoints[0, :, 1] - 359.5)
+    assert np.all(r_out >= r_in - 1e-6) and np.any(r_out > r_in + 1)
+    raw = FrameProcessor(None, prov, fixed_size=(1280, 720), undistort=False)
+    np.testing.assert_array_equal(raw.process(Frame(8, None, 0, 'x', keypoints=people))
+                                  .keypoints, people)
+    unsized = FrameProcessor(None, prov)
+    assert 'no image size' in unsized.process(Frame(9, None, 0, 'x', keypoints=people)).error
+
+
+def test_select_persons_orders_by_confidence():
+    a, b = _person(conf=0.3), _person(conf=0.8)
+    out = select_persons(np.concatenate([a, b]), 1)
+    np.testing.assert_array_equal(out[0], b[0])
+
+
+def test_draw_keypoints_draws_bones_and_points():
+    img = np.zeros((200, 200, 3), np.uint8)
+    kp = np.zeros((1, NUM_KEYPOINTS, 3))
+    i = KEYPOINT_INDEX
+    kp[0, i['left_shoulder']] = (150, 50, 1.0)
+    kp[0, i['left_elbow']] = (150, 150, 1.0)
+    kp[0, i['right_shoulder']] = (50, 50, 0.2)    # below the threshold: not drawn
+    out = draw_keypoints(img, kp, threshold=0.5, text='hi')
+    assert out[100, 150].any()                      # the bone between shoulder and elbow
+    assert not out[50, 50].any() and not img.any()
