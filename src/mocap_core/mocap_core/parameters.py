@@ -60,3 +60,14 @@ def describe_parameters(specs: Iterable[ParamSpec]) -> str:
     rows = ['| parameter | default | description |', '|---|---|---|']
     rows += [f'| `{s.name}` | `{s.default!r}` | {s.description} |' for s in specs]
     return '\n'.join(rows)
+
+
+def help_requested(argv, doc: str, specs: Iterable[ParamSpec]) -> bool:
+    """If ``argv`` asks for ``-h``/``--help``, print the node's ``doc`` and its parameter
+    table and return True (the node's ``main`` then exits 0 without starting ROS)."""
+    if '-h' not in argv and '--help' not in argv:
+        return False
+    print(doc)
+    print('Parameters (--ros-args -p name:=value):')
+    print(describe_parameters(specs))
+    return True

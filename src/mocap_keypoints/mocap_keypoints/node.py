@@ -44,7 +44,7 @@ from typing import Deque, Dict, List, Optional, Tuple
 import numpy as np
 
 from mocap_core.metrics import LatencyStats, RateMeter
-from mocap_core.parameters import ParamSpec, declare_parameters, describe_parameters
+from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
 
 from .openpose import infer_image_size
 from .pipeline import FrameResult, select_persons  # noqa: F401  (re-exported for users)
@@ -133,11 +133,7 @@ class _LockedRateMeter(RateMeter):
 
 
 def main(args: Optional[List[str]] = None) -> int:
-    argv = sys.argv[1:] if args is None else list(args)
-    if '-h' in argv or '--help' in argv:
-        print(__doc__)
-        print('Parameters (--ros-args -p name:=value):')
-        print(describe_parameters(PARAMETERS))
+    if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
 
     import rclpy

@@ -17,7 +17,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from mocap_core.parameters import ParamSpec, declare_parameters, describe_parameters
+from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
 
 PARAMETERS = (
     ParamSpec('mode', 'causal', "'causal' (only past frames, for live use) or 'windowed' "
@@ -55,11 +55,7 @@ def default_weights(mode: str) -> Path:
 
 
 def main(args: Optional[List[str]] = None) -> int:
-    argv = sys.argv[1:] if args is None else list(args)
-    if '-h' in argv or '--help' in argv:
-        print(__doc__)
-        print('Parameters (--ros-args -p name:=value):')
-        print(describe_parameters(PARAMETERS))
+    if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
 
     import rclpy

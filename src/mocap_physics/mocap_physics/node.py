@@ -48,7 +48,7 @@ from typing import Deque, List, Optional, Tuple
 
 import numpy as np
 
-from mocap_core.parameters import ParamSpec, declare_parameters, describe_parameters
+from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
 
 from .cycle import PhysicsParams
 
@@ -113,11 +113,7 @@ OUT = '/mocap/physics'
 
 
 def main(args: Optional[List[str]] = None) -> int:
-    argv = sys.argv[1:] if args is None else list(args)
-    if '-h' in argv or '--help' in argv:
-        print(__doc__)
-        print('Parameters (--ros-args -p name:=value):')
-        print(describe_parameters(PARAMETERS))
+    if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
 
     import rclpy
@@ -333,7 +329,7 @@ def main(args: Optional[List[str]] = None) -> int:
             if r is not None and r.status == 'ok' and not self.pending:
                 d.warn(None)
 
-    rclpy.init(args=argv)
+    rclpy.init(args=args)
     node = None
     try:
         node = PhysicsNode()
