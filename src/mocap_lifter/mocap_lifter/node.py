@@ -12,6 +12,7 @@ skeleton estimate changes by more than ``skeleton_tolerance``) and ``/diagnostic
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 from typing import List, Optional
 
@@ -32,6 +33,8 @@ PARAMETERS = (
               'than this (m)', min_value=0.0),
     ParamSpec('max_gap_s', 1.0, 'A larger gap between keypoint stamps resets the buffer and '
               'the skeleton', min_value=0.0),
+    ParamSpec('flush_after_s', 0.3, 'Windowed mode: when no keypoints arrive for this long, '
+              'emit the frames still waiting for look-ahead', min_value=0.0),
     ParamSpec('person', 0, 'Row of the keypoint cloud (person) to track', min_value=0),
     ParamSpec('body_mass', 70.0, 'Body mass for the URDF inertias (kg)', min_value=1.0),
     ParamSpec('horizontal_fov_deg', 60.0, 'Field of view used when no camera_info arrived '
@@ -108,6 +111,9 @@ def main(args: Optional[List[str]] = None) -> int:
             self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
             self.diag.set_value('model', f'motionet ({mode})')
             self.diag.set_value('latency_frames', self.lifter.latency)
+            self.frame_id = 'camera_optical_frame'
+            self.last_input = time.monotonic()
+            self.create_timer(0.1, self.on_idle)
             self.create_subscription(CameraInfo, '/mocap/camera_info', self.on_info, STREAM_QOS)
             self.create_subscription(PointCloud2, '/mocap/keypoints2d', self.on_keypoints,
                                      SENSOR_QOS)
@@ -145,18 +151,27 @@ def main(args: Optional[List[str]] = None) -> int:
             intr = self.intrinsics
             if intr is None:
                 intr = self._approximate_intrinsics(people[person])
-            with self.diag.processing():
-                frame, event = self.lifter.push(stamp, people[person], intr)
+            try:
+                with self.diag.processing():
+                    frames, event = self.lifter.push(stamp, people[person], intr)
+            except ValueError as exc:  # e.g. a non-finite network output
+                self.diag.errors += 1
+                self.get_logger().error(f'frame dropped: {exc}', throttle_duration_sec=2.0)
+                return
             if event:
                 self.get_logger().info(f'buffer and skeleton reset ({event})')
-            if frame is None:
-                return
-            if not (np.all(np.isfinite(frame.pose.rotations))
-                    and np.all(np.isfinite(frame.pose.root_position))):
-                self.diag.errors += 1
-                self.get_logger().error('network output not finite; frame dropped')
-                return
-            self.publish(frame, msg.header.frame_id)
+            self.frame_id = msg.header.frame_id
+            self.last_input = time.monotonic()
+            for frame in frames:
+                self.publish(frame)
+
+        def on_idle(self) -> None:
+            """In windowed mode, frames wait for look-ahead: when the input pauses, emit them
+            with the future frames that exist (end of a bag, a stalled camera)."""
+            idle = time.monotonic() - self.last_input
+            if self.lifter.pending() and idle > self.p['flush_after_s']:
+                for frame in self.lifter.flush():
+                    self.publish(frame)
 
         def _approximate_intrinsics(self, kp: np.ndarray) -> CameraIntrinsics:
             seen = kp[:, 2] > 0
@@ -168,9 +183,14 @@ def main(args: Optional[List[str]] = None) -> int:
                                    throttle_duration_sec=10.0)
             return CameraIntrinsics.from_fov(w, h, self.p['horizontal_fov_deg'])
 
-        def publish(self, frame, frame_id: str) -> None:
-            header = rc.make_header(frame.stamp_ns, frame_id)
+        def publish(self, frame) -> None:
             pose = frame.pose
+            if not (np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(
+                    pose.root_position)) and np.all(np.isfinite(frame.contacts))):
+                self.diag.errors += 1
+                self.get_logger().error('network output not finite; frame dropped')
+                return
+            header = rc.make_header(frame.stamp_ns, self.frame_id)
             lengths = pose.skeleton.group_lengths()
             if (self.published_lengths is None or np.max(np.abs(
                     lengths - self.published_lengths)) > self.p['skeleton_tolerance']):

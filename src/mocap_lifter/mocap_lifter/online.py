@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import collections
 from dataclasses import dataclass
-from typing import Deque, Optional, Tuple
+from typing import Deque, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -79,11 +79,16 @@ class OnlineLifter:
         self._intr: Optional[CameraIntrinsics] = None
         self.lengths: Optional[torch.Tensor] = None
         self.frames_seen = 0
+        self._last_emitted = -1
 
     def push(self, stamp_ns: int, keypoints: np.ndarray, intrinsics: CameraIntrinsics,
-             ) -> Tuple[Optional[LiftedFrame], str]:
-        """Add one frame ((23, 3) pixels + confidence); returns (frame or None, event) where
-        event is '' or a reason for a reset ('gap', 'backwards', 'intrinsics')."""
+             ) -> Tuple[List[LiftedFrame], str]:
+        """Add one frame ((23, 3) pixels + confidence).
+
+        Returns (frames, event): the lifted frames that became ready (none while the
+        windowed mode waits for look-ahead, one normally; on a reset, also the frames of the
+        previous segment still waiting, so nothing received is lost), and '' or the reason
+        of a reset ('gap', 'backwards', 'intrinsics')."""
         kp = np.asarray(keypoints, dtype=np.float64)
         if kp.shape != (NUM_KEYPOINTS, 3):
             raise ValueError(f'keypoints must have shape ({NUM_KEYPOINTS}, 3), got {kp.shape}')
@@ -96,18 +101,33 @@ class OnlineLifter:
                 event = 'gap'
         if self._intr is not None and intrinsics != self._intr:
             event = event or 'intrinsics'
+        frames: List[LiftedFrame] = []
         if event:
+            frames = self.flush()
             self.reset()
         self._intr = intrinsics
         self._kp.append(kp)
         self._stamps.append(int(stamp_ns))
         self.frames_seen += 1
-        if len(self._kp) <= self.latency:
-            return None, event
-        return self._infer(), event
+        if len(self._kp) > self.latency:
+            frames.append(self._infer())
+        return frames, event
+
+    def pending(self) -> int:
+        """Frames received but not yet returned (windowed mode waits for look-ahead)."""
+        return sum(1 for s in self._stamps if s > self._last_emitted)
+
+    def flush(self) -> List[LiftedFrame]:
+        """Return the frames still waiting for look-ahead, computed with the future frames
+        that exist (the end of a stream, or before a long pause)."""
+        frames = []
+        while self.pending() > 0:
+            offset = self.pending() - 1  # frames after the one to emit
+            frames.append(self._infer(index=-1 - offset))
+        return frames
 
     @torch.no_grad()
-    def _infer(self) -> LiftedFrame:
+    def _infer(self, index: Optional[int] = None) -> LiftedFrame:
         kp = np.stack(self._kp)
         feats, root_2d, _ = lifter_features(kp, self._intr)
         x = torch.as_tensor(feats[None], device=self.device)
@@ -122,11 +142,12 @@ class OnlineLifter:
             lengths = self.lengths
         ctx = slice(-self.context, None)
         out = self.model(x[:, ctx], r[:, ctx], lengths=lengths)
-        i = -1 - self.latency
+        i = -1 - self.latency if index is None else index
         rot = out['rotations'][0, i].cpu().numpy().astype(np.float64)
         root = out['root'][0, i].cpu().numpy().astype(np.float64)
         contacts = torch.sigmoid(out['contacts'][0, i]).cpu().numpy().astype(np.float64)
         skeleton = Skeleton.from_group_lengths(lengths[0].cpu().numpy().astype(np.float64))
         stamp = list(self._stamps)[i]
+        self._last_emitted = stamp
         return LiftedFrame(stamp, Pose(skeleton, rot, root), contacts, fixed,
                            float(out['depth'][0, i]))

@@ -108,17 +108,34 @@ def test_online_lifter_causal_matches_batch_and_resets():
     rng = np.random.default_rng(3)
     kp = np.concatenate([rng.uniform(200, 400, (60, 23, 2)), np.ones((60, 23, 1))], -1)
     online = OnlineLifter(model, 'causal', skeleton_frames=10)
-    frames = [online.push(1_000_000 * 33 * i + 1, kp[i], intr)[0] for i in range(60)]
-    assert all(f is not None for f in frames) and frames[-1].skeleton_fixed
+    frames = [f for i in range(60) for f in online.push(1_000_000 * 33 * i + 1, kp[i], intr)[0]]
+    assert len(frames) == 60 and frames[-1].skeleton_fixed
     feats, root, _ = lifter_features(kp, intr)
     with torch.no_grad():
         batch = model(torch.as_tensor(feats[None]), torch.as_tensor(root[None]).float(),
                       lengths=online.lengths)
     np.testing.assert_allclose(frames[-1].pose.rotations, batch['rotations'][0, -1].double(),
                                atol=1e-5)
-    _, event = online.push(frames[-1].stamp_ns + 5_000_000_000, kp[0], intr)
-    assert event == 'gap' and online.lengths is None
+    out, event = online.push(frames[-1].stamp_ns + 5_000_000_000, kp[0], intr)
+    assert event == 'gap' and online.lengths is None and len(out) == 1
     _, event = online.push(1, kp[0], intr)
     assert event == 'backwards'
     with pytest.raises(ValueError):
         OnlineLifter(model, 'windowed')
+
+
+def test_online_lifter_windowed_emits_every_frame_once_in_order():
+    model = MotioNet(LifterConfig(**SMALL, causal=False)).eval()
+    intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+    rng = np.random.default_rng(4)
+    kp = np.concatenate([rng.uniform(200, 400, (40, 23, 2)), np.ones((40, 23, 1))], -1)
+    online = OnlineLifter(model, 'windowed', latency=5)
+    stamps = [33_000_000 * i + 7 for i in range(40)]
+    got = []
+    for i in range(40):
+        frames, _ = online.push(stamps[i], kp[i], intr)
+        got += frames
+        assert len(got) == max(0, i + 1 - 5)          # five frames of look-ahead
+    assert online.pending() == 5
+    got += online.flush()
+    assert [f.stamp_ns for f in got] == stamps and online.pending() == 0
