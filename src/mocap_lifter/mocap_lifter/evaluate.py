@@ -33,12 +33,13 @@ def _clip_seed(name: str) -> int:
 
 
 @torch.no_grad()
-def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray,
+def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.ndarray,
          device: str = 'cpu') -> Dict[str, np.ndarray]:
-    """Run the model on one (T, 71) feature sequence -> numpy outputs without the batch axis
+    """Run the model on one (T, C) feature sequence -> numpy outputs without the batch axis
     (contacts as probabilities)."""
     out = model(torch.as_tensor(features[None], device=device),
-                torch.as_tensor(root_2d[None], device=device))
+                torch.as_tensor(root_2d[None], device=device),
+                torch.as_tensor(scale[None], device=device))
     res = {k: v[0].cpu().numpy() for k, v in out.items()}
     res['contacts'] = 1.0 / (1.0 + np.exp(-res['contacts']))
     return res
@@ -56,7 +57,7 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
         n = min(m.num_frames, max_frames)
         rng = np.random.default_rng(_clip_seed(m.name))
         s = make_sample(m, 0, n, rng, aug)
-        out = lift(model, s['features'], s['root_2d'], device)
+        out = lift(model, s['features'], s['root_2d'], s['scale'], device)
         p, g = out['positions'], s['positions']
         rows.append({
             'clip': m.name, 'frames': n,

@@ -7,12 +7,16 @@ Per frame (MotioNet §3.3 and §4 with neural PhysCap's canonicalisation, §3.2)
 * the root keypoint is the midpoint of the two hips (the pelvis of the pipeline skeleton is
   the midpoint of the hip joints); every keypoint is expressed relative to it;
 * unseen keypoints (confidence 0) are zeros; the confidences themselves are input channels;
-* the global 2D velocity of the root keypoint (canonical units per frame) is appended.
+* the root-relative keypoints are divided by the person's 2D scale ``s`` (the RMS distance of
+  the seen keypoints from the root, canonical units), so the pose features do not depend on
+  the distance to the camera; ``log s`` is a channel of its own;
+* the global 2D velocity of the root keypoint, also divided by ``s``, is appended.
 
-Layout of the (T, C) feature matrix, C = 23*2 + 23 + 2 = 71: root-relative x, y of each
-keypoint (interleaved), the 23 confidences, root velocity x, y. The root keypoint itself
-(canonical, (T, 2)) is returned separately: the root position is
-``Z * (root_x, root_y, 1)`` in the camera frame once the network predicts the depth ``Z``.
+Layout of the (T, C) feature matrix, C = 23*2 + 23 + 2 + 1 = 72: scaled root-relative x, y of
+each keypoint (interleaved), the 23 confidences, root velocity x, y, log s. The root keypoint
+(canonical, (T, 2)) and the scale (T,) are returned separately: the network predicts the
+depth as ``Z = exp(d) / s`` (a body of a given size looks 1/Z as large), and the root
+position is ``Z * (root_x, root_y, 1)`` in the camera frame.
 
 A frame where a hip is unseen takes the root of the nearest frame where both are seen (the
 root keypoint is held, then back-filled), so the root stays defined through short gaps.
@@ -28,7 +32,7 @@ from mocap_core.camera import CameraIntrinsics
 from mocap_core.data.synth2d import canonicalize
 from mocap_core.skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
 
-NUM_FEATURES = NUM_KEYPOINTS * 3 + 2
+NUM_FEATURES = NUM_KEYPOINTS * 3 + 3
 _LHIP, _RHIP = KEYPOINT_INDEX['left_hip'], KEYPOINT_INDEX['right_hip']
 
 
@@ -50,24 +54,44 @@ def root_keypoint(canonical: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     return root[idx], valid
 
 
+def person_scale(relative: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """(T,) RMS distance of the seen keypoints from the root ((T, 23, 2) root-relative,
+    (T, 23) bool); frames with fewer than 3 seen points hold the previous value (back-filled
+    at the start; 0.1 when no frame has enough)."""
+    n = seen.sum(axis=-1)
+    sq = np.where(seen[..., None], relative ** 2, 0.0).sum(axis=(-1, -2))
+    ok = n >= 3
+    scale = np.sqrt(sq / np.maximum(n, 1))
+    ok &= scale > 1e-6
+    if not ok.any():
+        return np.full(len(relative), 0.1)
+    idx = np.where(ok, np.arange(len(relative)), -1)
+    idx = np.maximum.accumulate(idx)
+    idx[idx < 0] = int(np.argmax(ok))
+    return scale[idx]
+
+
 def lifter_features(keypoints: np.ndarray, intr: CameraIntrinsics,
-                    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Features of a keypoint window.
 
     Args:
         keypoints: (T, 23, 3) pixel u, v and confidence of one person.
         intr: the camera intrinsics of those pixels.
     Returns:
-        features (T, 71) float32, root keypoint (T, 2) canonical, root validity (T,) bool.
+        features (T, 72) float32, root keypoint (T, 2) canonical, person scale (T,)
+        canonical, root validity (T,) bool.
     """
     kp = np.asarray(keypoints, dtype=np.float64)
     if kp.ndim != 3 or kp.shape[1:] != (NUM_KEYPOINTS, 3):
         raise ValueError(f'keypoints must have shape (T, {NUM_KEYPOINTS}, 3), got {kp.shape}')
     kc = canonicalize(kp, intr)
     root, valid = root_keypoint(kc)
-    seen = kc[..., 2:3] > 0
-    rel = np.where(seen, kc[..., :2] - root[:, None, :], 0.0)
+    seen = kc[..., 2] > 0
+    rel = np.where(seen[..., None], kc[..., :2] - root[:, None, :], 0.0)
+    scale = person_scale(rel, seen)
     vel = np.zeros_like(root)
     vel[1:] = root[1:] - root[:-1]
-    feats = np.concatenate([rel.reshape(len(kp), -1), kc[..., 2], vel], axis=1)
-    return feats.astype(np.float32), root, valid
+    feats = np.concatenate([(rel / scale[:, None, None]).reshape(len(kp), -1), kc[..., 2],
+                            vel / scale[:, None], np.log(scale)[:, None]], axis=1)
+    return feats.astype(np.float32), root, scale, valid

@@ -51,8 +51,8 @@ class LifterConfig:
     skeleton_channels: int = 128
     dropout: float = 0.1
     causal: bool = False
-    depth_min: float = 0.5      # metres; predicted depth = depth_min + softplus(.) * scale
-    depth_scale: float = 4.0
+    depth_prior: float = 0.5    # metres: typical RMS keypoint distance from the pelvis;
+    #                             depth = exp(d) / s with d starting at log(depth_prior)
     bone_range: float = 0.35    # bone length = default * (1 + bone_range * tanh(.))
 
     def receptive_field(self) -> int:
@@ -91,8 +91,8 @@ class _FusionBlock(nn.Module):
 
 
 class RotationEncoder(nn.Module):
-    """E_Q: (B, 71, T) features -> quaternions (B, T, J, 4), depth (B, T), contact logits
-    (B, T, 4)."""
+    """E_Q: (B, C, T) features -> quaternions (B, T, J, 4), log depth-times-scale (B, T),
+    contact logits (B, T, 4)."""
 
     def __init__(self, cfg: LifterConfig) -> None:
         super().__init__()
@@ -106,6 +106,7 @@ class RotationEncoder(nn.Module):
             self.shrink.weight.mul_(0.1)
             bias = torch.zeros(NUM_JOINTS * 4 + 1 + NUM_CONTACTS)
             bias[3:NUM_JOINTS * 4:4] = 1.0
+            bias[NUM_JOINTS * 4] = float(np.log(cfg.depth_prior))
             self.shrink.bias.copy_(bias)
 
     def forward(self, x: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -113,14 +114,13 @@ class RotationEncoder(nn.Module):
         b, t, _ = y.shape
         q = y[..., :NUM_JOINTS * 4].reshape(b, t, NUM_JOINTS, 4)
         q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-6)
-        depth = self.cfg.depth_min + nn.functional.softplus(y[..., NUM_JOINTS * 4]) \
-            * self.cfg.depth_scale
+        log_depth_scale = y[..., NUM_JOINTS * 4]
         contacts = y[..., NUM_JOINTS * 4 + 1:]
-        return q, depth, contacts
+        return q, log_depth_scale, contacts
 
 
 class SkeletonEncoder(nn.Module):
-    """E_S: (B, 71, T) features -> (B, G) bone-group lengths in metres."""
+    """E_S: (B, C, T) features -> (B, G) bone-group lengths in metres."""
 
     def __init__(self, cfg: LifterConfig) -> None:
         super().__init__()
@@ -163,8 +163,8 @@ def fk_layer(lengths: torch.Tensor, rotations: torch.Tensor,
 
 
 class MotioNet(nn.Module):
-    """E_Q + E_S + FK. ``forward`` takes (B, T, 71) features and (B, T, 2) canonical root
-    keypoints and returns a dict of tensors (see :meth:`forward`)."""
+    """E_Q + E_S + FK. ``forward`` takes (B, T, C) features, (B, T, 2) canonical root
+    keypoints and (B, T) person scales (:mod:`.features`) and returns a dict of tensors."""
 
     def __init__(self, cfg: LifterConfig) -> None:
         super().__init__()
@@ -179,13 +179,14 @@ class MotioNet(nn.Module):
         self.feature_mean.copy_(torch.as_tensor(mean, dtype=torch.float32))
         self.feature_std.copy_(torch.as_tensor(np.maximum(std, 1e-4), dtype=torch.float32))
 
-    def forward(self, features: torch.Tensor, root_2d: torch.Tensor,
+    def forward(self, features: torch.Tensor, root_2d: torch.Tensor, scale: torch.Tensor,
                 lengths: torch.Tensor | None = None) -> Dict[str, torch.Tensor]:
         """Returns ``rotations`` (B, T, J, 4), ``depth`` (B, T) m, ``root`` (B, T, 3) camera
         frame m, ``contacts`` (B, T, 4) logits, ``lengths`` (B, G) m, ``positions``
         (B, T, J, 3) camera frame m. ``lengths`` overrides E_S (a held skeleton)."""
         x = ((features - self.feature_mean) / self.feature_std).transpose(1, 2)
-        q, depth, contacts = self.e_q(x)
+        q, log_depth_scale, contacts = self.e_q(x)
+        depth = torch.exp(log_depth_scale.clamp(-5.0, 5.0)) / scale.clamp_min(1e-4)
         if lengths is None:
             lengths = self.e_s(x)
         root = torch.cat([root_2d * depth[..., None], depth[..., None]], dim=-1)

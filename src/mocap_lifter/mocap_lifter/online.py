@@ -129,9 +129,10 @@ class OnlineLifter:
     @torch.no_grad()
     def _infer(self, index: Optional[int] = None) -> LiftedFrame:
         kp = np.stack(self._kp)
-        feats, root_2d, _ = lifter_features(kp, self._intr)
+        feats, root_2d, scale, _ = lifter_features(kp, self._intr)
         x = torch.as_tensor(feats[None], device=self.device)
         r = torch.as_tensor(root_2d[None].astype(np.float32), device=self.device)
+        sc = torch.as_tensor(scale[None].astype(np.float32), device=self.device)
         fixed = self.lengths is not None
         if not fixed:
             lengths = self.model.e_s(((x - self.model.feature_mean) / self.model.feature_std)
@@ -141,7 +142,7 @@ class OnlineLifter:
         else:
             lengths = self.lengths
         ctx = slice(-self.context, None)
-        out = self.model(x[:, ctx], r[:, ctx], lengths=lengths)
+        out = self.model(x[:, ctx], r[:, ctx], sc[:, ctx], lengths=lengths)
         i = -1 - self.latency if index is None else index
         rot = out['rotations'][0, i].cpu().numpy().astype(np.float64)
         root = out['root'][0, i].cpu().numpy().astype(np.float64)

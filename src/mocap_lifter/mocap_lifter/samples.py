@@ -49,7 +49,8 @@ def scaled_skeleton(skeleton: Skeleton, rng: np.random.Generator, aug: Augmentat
 
 def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generator,
                 aug: Augmentation) -> Dict[str, np.ndarray]:
-    """One window as arrays: ``features`` (T, 71), ``root_2d`` (T, 2), and targets in the
+    """One window as arrays: ``features`` (T, 72), ``root_2d`` (T, 2), ``scale`` (T,), and
+    targets in the
     camera frame: ``positions`` (T, J, 3), ``rotations`` (T, J, 4), ``root`` (T, 3),
     ``lengths`` (G,), ``contacts`` (T, 4) float; plus ``keypoints`` (T, 23, 3) pixels."""
     rot = motion.rotations[start:start + length]
@@ -70,10 +71,11 @@ def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generato
     kp = project(camera, pts)
     if aug.corruption is not None:
         kp = corrupt_keypoints(kp, rng, _confidence_model(), aug.corruption)
-    features, root_2d, _ = lifter_features(kp, camera.intrinsics)
+    features, root_2d, scale, _ = lifter_features(kp, camera.intrinsics)
     crot, croot = motion_to_camera(rot, root, camera)
     positions = forward_kinematics(skeleton.parents, skeleton.offsets, crot, croot).positions
     return {'features': features, 'root_2d': root_2d.astype(np.float32),
+            'scale': scale.astype(np.float32),
             'positions': positions.astype(np.float32), 'rotations': crot.astype(np.float32),
             'root': croot.astype(np.float32),
             'lengths': skeleton.group_lengths().astype(np.float32), 'contacts': contacts,

@@ -83,7 +83,8 @@ def losses(out: Dict[str, torch.Tensor], gt: Dict[str, torch.Tensor], cfg: Train
     p = out['positions'] - out['positions'][:, :, :1]
     g = gt['positions'] - gt['positions'][:, :, :1]
     joints = ((p - g).norm(dim=-1) * weights).mean() / weights.mean()
-    root = (out['depth'] - gt['root'][..., 2]).abs().mean() + \
+    # depth error relative to the depth (the 2D scale fixes depth only up to the body size)
+    root = ((out['depth'] - gt['root'][..., 2]).abs() / gt['root'][..., 2]).mean() + \
         (out['root'] - gt['root']).norm(dim=-1).mean()
     skeleton = (out['lengths'] - gt['lengths']).abs().mean()
     contact = nn.functional.binary_cross_entropy_with_logits(out['contacts'], gt['contacts'])
@@ -167,7 +168,7 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
             g['lr'] = lr
         model.train()
         gt = to_torch(sampler.batch(cfg.batch), device)
-        out = model(gt['features'], gt['root_2d'])
+        out = model(gt['features'], gt['root_2d'], gt['scale'])
         terms = losses(out, gt, cfg, disc)
         loss = total_loss(terms, cfg)
         opt.zero_grad()
@@ -214,7 +215,7 @@ def validate(model: MotioNet, batches, cfg: TrainConfig, device: str) -> Dict[st
     acc: Dict[str, float] = {}
     for b in batches:
         gt = to_torch(b, device)
-        terms = losses(model(gt['features'], gt['root_2d']), gt, cfg)
+        terms = losses(model(gt['features'], gt['root_2d'], gt['scale']), gt, cfg)
         terms['loss'] = total_loss(terms, cfg)
         for k, v in terms.items():
             acc[k] = acc.get(k, 0.0) + float(v) / len(batches)

@@ -14,19 +14,23 @@ SMALL = dict(channels=32, fusion_blocks=2, skeleton_channels=16, dropout=0.0)
 
 def _inputs(b=2, t=40, seed=0):
     g = torch.Generator().manual_seed(seed)
-    return torch.randn(b, t, NUM_FEATURES, generator=g), 0.1 * torch.randn(b, t, 2, generator=g)
+    return (torch.randn(b, t, NUM_FEATURES, generator=g), 0.1 * torch.randn(b, t, 2, generator=g),
+            0.05 + 0.1 * torch.rand(b, t, generator=g))
 
 
 def test_output_shapes_units_and_one_symmetric_skeleton():
     model = MotioNet(LifterConfig(**SMALL)).eval()
-    x, r = _inputs()
-    out = model(x, r)
+    x, r, sc = _inputs()
+    out = model(x, r, sc)
     assert out['rotations'].shape == (2, 40, NUM_JOINTS, 4)
     assert torch.allclose(out['rotations'].norm(dim=-1), torch.ones(2, 40, NUM_JOINTS))
     assert out['lengths'].shape == (2, NUM_BONE_GROUPS) and torch.all(out['lengths'] > 0)
     assert out['contacts'].shape == (2, 40, 4) and torch.all(out['depth'] > 0)
     # root = depth * (root_x, root_y, 1)
     torch.testing.assert_close(out['root'][..., :2], r * out['depth'][..., None])
+    # a person twice as large in the image is at half the depth
+    twice = model(x, r, 2 * sc)
+    torch.testing.assert_close(twice['depth'], out['depth'] / 2)
     pos = out['positions'].detach().numpy()
     assert bone_length_spread_mm(pos[0]) < 1e-3        # one skeleton over time
     sk = Skeleton.from_group_lengths(out['lengths'][0].detach().double().numpy())
@@ -45,22 +49,23 @@ def test_fk_layer_gradients():
 
 def test_causal_mode_ignores_future_frames():
     model = MotioNet(LifterConfig(**SMALL, causal=True)).eval()
-    x, r = _inputs(t=50)
-    x2, r2 = x.clone(), r.clone()
+    x, r, sc = _inputs(t=50)
+    x2, r2, sc2 = x.clone(), r.clone(), sc.clone()
     x2[:, 30:] += 3.0
     r2[:, 30:] += 0.5
+    sc2[:, 30:] *= 2.0
     with torch.no_grad():
-        lengths = model(x, r)['lengths']
-        a = model(x, r, lengths=lengths)
-        b = model(x2, r2, lengths=lengths)
+        lengths = model(x, r, sc)['lengths']
+        a = model(x, r, sc, lengths=lengths)
+        b = model(x2, r2, sc2, lengths=lengths)
     for k in ('rotations', 'depth', 'contacts', 'positions'):
         torch.testing.assert_close(a[k][:, :30], b[k][:, :30])
         assert not torch.allclose(a[k][:, 30:], b[k][:, 30:])
     # the centred model does look ahead
     centred = MotioNet(LifterConfig(**SMALL, causal=False)).eval()
     with torch.no_grad():
-        c1 = centred(x, r, lengths=lengths)['rotations']
-        c2 = centred(x2, r2, lengths=lengths)['rotations']
+        c1 = centred(x, r, sc, lengths=lengths)['rotations']
+        c2 = centred(x2, r2, sc2, lengths=lengths)['rotations']
     assert not torch.allclose(c1[:, 25:30], c2[:, 25:30])
 
 
@@ -74,8 +79,9 @@ def test_features_are_intrinsics_invariant_and_root_is_mid_hip():
     kp_a[..., 1] = canon[..., 1] * a.fy + a.cy
     kp_b[..., 0] = canon[..., 0] * b.fx + b.cx
     kp_b[..., 1] = canon[..., 1] * b.fy + b.cy
-    fa, ra, _ = lifter_features(kp_a, a)
-    fb, rb, _ = lifter_features(kp_b, b)
+    fa, ra, sa, _ = lifter_features(kp_a, a)
+    fb, rb, sb, _ = lifter_features(kp_b, b)
+    np.testing.assert_allclose(sa, sb, rtol=1e-6)
     np.testing.assert_allclose(fa, fb, atol=1e-5)
     np.testing.assert_allclose(ra, 0.5 * (canon[:, 11] + canon[:, 12]), atol=1e-9)
     assert fa.shape == (5, NUM_FEATURES)
@@ -110,10 +116,10 @@ def test_online_lifter_causal_matches_batch_and_resets():
     online = OnlineLifter(model, 'causal', skeleton_frames=10)
     frames = [f for i in range(60) for f in online.push(1_000_000 * 33 * i + 1, kp[i], intr)[0]]
     assert len(frames) == 60 and frames[-1].skeleton_fixed
-    feats, root, _ = lifter_features(kp, intr)
+    feats, root, scale, _ = lifter_features(kp, intr)
     with torch.no_grad():
         batch = model(torch.as_tensor(feats[None]), torch.as_tensor(root[None]).float(),
-                      lengths=online.lengths)
+                      torch.as_tensor(scale[None]).float(), lengths=online.lengths)
     np.testing.assert_allclose(frames[-1].pose.rotations, batch['rotations'][0, -1].double(),
                                atol=1e-5)
     out, event = online.push(frames[-1].stamp_ns + 5_000_000_000, kp[0], intr)
