@@ -170,6 +170,37 @@ def cmd_plot_keypoints(args: argparse.Namespace) -> int:
 MODEL_COMMANDS = ('mocap_lifter.cli',)
 
 
+def cmd_plot_motion(args: argparse.Namespace) -> int:
+    """Plot the skeleton of a motion topic (MultiDOFJointTrajectory) at a few frames."""
+    from ..bag_io import BagError, BagReader, deserialize
+    from ..plots import plot_motion_frames
+    from ..ros_conversions import MessageError, motion_to_pose, stamp_to_ns
+
+    times, frames, parents = [], [], None
+    try:
+        with BagReader(args.bag) as reader:
+            for m in reader.messages(topics=[args.topic]):
+                try:
+                    msg = deserialize(m.data, m.msgtype)
+                    pose = motion_to_pose(msg)
+                except MessageError as exc:
+                    print(f'skipping a message: {exc}', file=sys.stderr)
+                    continue
+                times.append(stamp_to_ns(msg.header.stamp) * 1e-9)
+                frames.append(pose.joint_positions())
+                parents = pose.skeleton.parents
+    except BagError as exc:
+        print(f'mocap plot motion: error: {exc}', file=sys.stderr)
+        return 1
+    if not frames:
+        print(f'mocap plot motion: error: no motion on {args.topic}', file=sys.stderr)
+        return 1
+    out = plot_motion_frames(times, np.stack(frames), parents, args.output, frame=args.frame,
+                             title=f'{args.topic} ({len(frames)} frames)')
+    print(f'wrote {out}')
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='mocap', description='Monocular motion capture pipeline: tools.')
@@ -193,6 +224,14 @@ def build_parser() -> argparse.ArgumentParser:
     pk.add_argument('-o', '--output', default='keypoints.png', help='output PNG')
     pk.add_argument('--topic', default='/mocap/keypoints2d', help='keypoint topic')
     pk.set_defaults(func=cmd_plot_keypoints)
+    pm = plot_sub.add_parser('motion', help='3D skeleton of a motion topic, front and side '
+                             'views at a few frames')
+    pm.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
+    pm.add_argument('-o', '--output', default='motion.png', help='output PNG')
+    pm.add_argument('--topic', default='/mocap/lifter/motion', help='motion topic')
+    pm.add_argument('--frame', choices=('camera', 'world'), default='camera',
+                    help="the topic's frame: camera optical frame or z-up world")
+    pm.set_defaults(func=cmd_plot_motion)
 
     p = sub.add_parser('skeleton', help='the default skeleton and its URDF')
     p.add_argument('--urdf', metavar='FILE', help="write the URDF to FILE ('-' = stdout)")

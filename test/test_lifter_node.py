@@ -1,0 +1,169 @@
+"""``ros2 run mocap_lifter lifter`` fed by ``ros2 bag play`` of a committed validation bag, and
+the shipped weights against a trivial baseline on the same bag."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BAG = ROOT / 'bags' / 'gt_cmu_walk_12_02'
+WEIGHTS = ROOT / 'src' / 'mocap_lifter' / 'weights' / 'motionet_windowed.pt'
+OUTPUTS = ('motion', 'joints3d', 'joint_states', 'contacts', 'markers')
+
+
+def _bag_arrays():
+    """Keypoints, intrinsics, ground-truth joints (camera frame) and stamps from the bag."""
+    from mocap_core.bag_io import BagReader, deserialize
+    from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
+                                            cloud_to_positions, stamp_to_ns)
+    kp, gt, stamps, intr = [], [], [], None
+    with BagReader(BAG) as bag:
+        for m in bag.messages(topics=['/mocap/keypoints2d', '/mocap/camera_info',
+                                      '/mocap/groundtruth/joints3d']):
+            msg = deserialize(m.data, m.msgtype)
+            if m.topic == '/mocap/keypoints2d':
+                kp.append(cloud_to_keypoints(msg)[0])
+                stamps.append(stamp_to_ns(msg.header.stamp))
+            elif m.topic == '/mocap/camera_info':
+                intr = camera_info_to_intrinsics(msg)
+            else:
+                gt.append(cloud_to_positions(msg))
+    return np.stack(kp), intr, np.stack(gt), stamps
+
+
+def test_shipped_weights_beat_mean_pose_baseline():
+    import torch
+
+    from mocap_lifter.features import lifter_features
+    from mocap_lifter.metrics import mpjpe_mm, pa_mpjpe_mm
+    from mocap_lifter.train import load_weights
+
+    kp, intr, gt, _ = _bag_arrays()
+    model = load_weights(WEIGHTS)
+    feats, root, scale, _ = lifter_features(kp, intr)
+    with torch.no_grad():
+        out = model(torch.as_tensor(feats[None]), torch.as_tensor(root[None]).float(),
+                    torch.as_tensor(scale[None]).float())
+    pred = out['positions'][0].double().numpy()
+    rel = gt - gt[:, :1]
+    baseline = np.broadcast_to(rel.mean(axis=0), rel.shape)  # this clip's own mean pose
+    model_err, base_err = mpjpe_mm(pred, gt), mpjpe_mm(baseline, rel)
+    print(f'MPJPE model {model_err:.1f} mm, mean-pose baseline {base_err:.1f} mm, '
+          f'PA-MPJPE {pa_mpjpe_mm(pred, gt):.1f} mm')
+    assert model_err < 0.7 * base_err
+    depth_err = np.abs(out['root'][0, :, 2].numpy() - gt[:, 0, 2]) / gt[:, 0, 2]
+    assert np.median(depth_err) < 0.25
+
+
+@pytest.fixture
+def listener(ros_env):
+    import rclpy
+    from sensor_msgs.msg import JointState, PointCloud2
+    from std_msgs.msg import String
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+    from visualization_msgs.msg import MarkerArray
+
+    from mocap_core.qos import LATCHED_QOS, STREAM_QOS
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
+    node = rclpy.create_node('lifter_test_listener', context=context)
+    got = {k: [] for k in OUTPUTS + ('urdf',)}
+    types = {'motion': MultiDOFJointTrajectory, 'joints3d': PointCloud2,
+             'joint_states': JointState, 'contacts': JointState, 'markers': MarkerArray}
+    for name, cls in types.items():
+        node.create_subscription(cls, f'/mocap/lifter/{name}', got[name].append, STREAM_QOS)
+    node.create_subscription(String, '/mocap/skeleton/urdf', got['urdf'].append, LATCHED_QOS)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    yield executor, node, got
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def _spin(executor, seconds: float, until=None) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+        if until is not None and until():
+            return
+
+
+def test_node_lifts_a_played_bag(processes, ros2_cmd, listener):
+    from mocap_core.ros_conversions import (cloud_to_positions, motion_to_pose, msg_to_contacts,
+                                            stamp_to_ns)
+
+    executor, _, got = listener
+    _, _, _, stamps = _bag_arrays()
+    node, log = processes.start(ros2_cmd + ['run', 'mocap_lifter', 'lifter', '--ros-args',
+                                            '-p', 'mode:=windowed'], 'lifter')
+    processes.wait_for_text(log, 'lifter ready', 90, node)
+    player, plog = processes.start(ros2_cmd + ['bag', 'play', str(BAG), '--delay', '3',
+                                               '--topics', '/mocap/camera_info',
+                                               '/mocap/keypoints2d'], 'play')
+    _spin(executor, 120, until=lambda: player.poll() is not None)
+    assert player.returncode == 0, plog.read_text()
+    _spin(executor, 15, until=lambda: len(got['motion']) >= len(stamps))
+    text = log.read_text()
+    assert 'Traceback' not in text, text
+    for name in OUTPUTS:
+        assert len(got[name]) == len(stamps), (name, len(got[name]), text[-2000:])
+        assert [stamp_to_ns(m.header.stamp) if hasattr(m, 'header') else
+                stamp_to_ns(m.markers[0].header.stamp) for m in got[name]] == stamps, name
+    assert got['urdf'] and '<robot' in got['urdf'][-1].data
+    for m in got['joints3d']:
+        assert np.all(np.isfinite(cloud_to_positions(m, 18)))
+    pose = motion_to_pose(got['motion'][-1])
+    assert pose.skeleton.is_symmetric(atol=1e-6)
+    assert np.all((msg_to_contacts(got['contacts'][0]) >= 0) &
+                  (msg_to_contacts(got['contacts'][0]) <= 1))
+
+
+def test_node_survives_bad_input(processes, ros2_cmd, listener):
+    from sensor_msgs.msg import PointCloud2
+
+    from mocap_core.qos import SENSOR_QOS
+    from mocap_core.ros_conversions import array_to_cloud, keypoints_to_cloud, make_header
+
+    executor, node, got = listener
+    kp, intr, _, _ = _bag_arrays()
+    pub = node.create_publisher(PointCloud2, '/mocap/keypoints2d', SENSOR_QOS)
+    proc, log = processes.start(ros2_cmd + ['run', 'mocap_lifter', 'lifter', '--ros-args',
+                                            '-p', 'mode:=windowed'], 'lifter_bad')
+    processes.wait_for_text(log, 'lifter ready', 90, proc)
+    _spin(executor, 20, until=lambda: pub.get_subscription_count() > 0)
+    t0 = 1_000_000_000
+    bad = [
+        array_to_cloud(np.zeros((1, 17, 3)), ('u', 'v', 'confidence'), make_header(t0, 'c')),
+        keypoints_to_cloud(np.zeros((1, 23, 3)), make_header(t0 + 1, 'c')),  # nobody seen
+    ]
+    nan = keypoints_to_cloud(kp[0], make_header(t0 + 2, 'c'))
+    nan.data = np.frombuffer(bytes(nan.data), np.float32).copy()
+    nan.data[0] = np.nan
+    nan.data = nan.data.tobytes()
+    bad.append(nan)
+    for msg in bad:
+        pub.publish(msg)
+        _spin(executor, 0.1)
+    # valid frames without camera_info (approximate intrinsics), then one going backwards
+    for i in range(10):
+        pub.publish(keypoints_to_cloud(kp[i], make_header(t0 + 100_000_000 * (i + 1), 'c')))
+        _spin(executor, 0.05)
+    pub.publish(keypoints_to_cloud(kp[0], make_header(t0 + 5, 'c')))
+    _spin(executor, 5, until=lambda: len(got['motion']) >= 11)
+    text = log.read_text()
+    assert proc.poll() is None, text            # still running
+    assert 'Traceback' not in text
+    assert 'dropping keypoints' in text and 'width' in text
+    assert 'nobody seen' in text and 'no camera_info' in text
+    assert 'did not advance' in text
+    assert len(got['motion']) >= 10
+    from mocap_core.ros_conversions import cloud_to_positions
+    assert all(np.all(np.isfinite(cloud_to_positions(m, 18))) for m in got['joints3d'])
