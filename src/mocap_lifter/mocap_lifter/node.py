@@ -21,8 +21,8 @@ import numpy as np
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
 
 PARAMETERS = (
-    ParamSpec('mode', 'causal', "'causal' (only past frames, for live use) or 'windowed' "
-              '(centred window: better accuracy, delay of `latency` frames)', read_only=True),
+    ParamSpec('mode', 'windowed', "'windowed' (centred window: delay of `latency` frames) or "
+              "'causal' (only past frames; needs causal weights)", read_only=True),
     ParamSpec('weights', '', 'Weights file; empty = the shipped weights of the mode '
               '(share/mocap_lifter/weights/motionet_<mode>.pt)', read_only=True),
     ParamSpec('latency', -1, 'Look-ahead frames in windowed mode (-1 = half the receptive '

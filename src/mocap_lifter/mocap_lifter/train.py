@@ -245,6 +245,16 @@ def save_weights(model: MotioNet, path: Path, info: Optional[Dict] = None) -> No
                 'info': info or {}}, path)
 
 
+def export_checkpoint(checkpoint: Path, out: Path) -> Path:
+    """Write inference weights from a training checkpoint (``last.pt``)."""
+    state = torch.load(checkpoint, map_location='cpu', weights_only=False)
+    cfg = TrainConfig.from_dict(state['config'])
+    model = MotioNet(cfg.model)
+    model.load_state_dict(state['model'])
+    save_weights(model, Path(out), {'steps': state['step'], 'from_checkpoint': True})
+    return Path(out)
+
+
 def load_weights(path: Path, device: str = 'cpu', causal: Optional[bool] = None) -> MotioNet:
     """Load weights written by :func:`save_weights` (``causal`` overrides the mode: the
     padding changes, the weights are the same)."""
