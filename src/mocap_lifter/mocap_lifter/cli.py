@@ -29,6 +29,8 @@ def add_train_parser(sub) -> None:
     p.add_argument('--steps', type=int, help='override the number of steps')
     p.add_argument('--run-dir', help='checkpoints, log.csv, loss.png (default runs/lifter_<mode>)')
     p.add_argument('--device', default='cpu', help="'cpu' or 'cuda'")
+    p.add_argument('--threads', type=int, help='torch CPU threads (default 2; 1 is faster on '
+                   'a machine busy with other work)')
     p.add_argument('--no-resume', action='store_true', help='start over even if a checkpoint '
                    'exists')
     p.add_argument('--install', action='store_true', help='copy the final weights to the '
@@ -59,6 +61,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg.model.causal = args.mode == 'causal'
     if args.steps:
         cfg.steps = args.steps
+    if args.threads:
+        cfg.threads = args.threads
     run_dir = Path(args.run_dir or f'runs/lifter_{args.mode}')
     print(f'loading the dataset (train and validation splits) ...', flush=True)
     t0 = time.time()
