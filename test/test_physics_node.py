@@ -57,7 +57,8 @@ def test_physics_node_standing(processes, ros2_cmd, graph):
 
     executor, pubs, got = graph
     proc, log = processes.start(ros2_cmd + ['run', 'mocap_physics', 'physics', '--ros-args',
-                                            '-p', 'body_mass:=80.0'], 'physics')
+                                            '-p', 'body_mass:=80.0',
+                                            '-p', 'floor_source:=input'], 'physics')
     ready = _spin_until(executor, lambda: pubs['motion'].get_subscription_count() > 0
                         and pubs['contacts'].get_subscription_count() > 0
                         and executor.get_nodes()[0].count_publishers('/mocap/physics/motion') > 0,

@@ -1,25 +1,47 @@
 """The floor frame of the dynamics and its relation to the camera frame (no ROS imports).
 
 The physics cycle runs in a **floor frame**: z up, the floor is the plane z = 0, gravity is
-(0, 0, -9.81), x is the camera's viewing direction projected onto the floor, y points left.
-Incoming motion in the camera's optical frame (REP-103: x right, y down, z forward) is mapped
-into it by a rigid transform ``T_floor_camera`` before the cycle and the outputs can be mapped
-back with its inverse.
+(0, 0, -9.81), x is the camera's viewing direction projected onto the floor, y points left,
+and the origin is the point of the floor below the camera centre. Incoming motion in the
+camera's optical frame (REP-103: x right, y down, z forward) is mapped into it by a rigid
+transform ``T_floor_camera`` (:class:`FloorFrame`)::
 
-This module holds that boundary: :class:`FloorFrame` (the transform) built from the camera
-height and pitch (the ``floor_source = camera_params`` case) or the identity (input already in
-a floor frame, e.g. ground-truth motion capture). A robust estimate from the feet during
-predicted contacts plugs in here later, as another constructor of :class:`FloorFrame`.
+    p_floor = R p_camera + t,      R rows = (x_f, y_f, z_f) in camera axes,  t = (0, 0, h)
+
+where z_f = n is the floor's upward unit normal in camera axes and h the camera's height
+above the floor (the plane is ``n . p_camera + h = 0``). The inverse maps the outputs back.
+The node publishes this transform (geometry_msgs/TransformStamped, header.frame_id = the
+camera frame, child_frame_id = the floor frame, i.e. the pose of the floor frame in the
+camera frame = ``T_floor_camera^-1``) on ``/mocap/physics/floor``.
+
+Sources of the floor (the node's ``floor_source``):
+
+* ``input``: :meth:`FloorFrame.identity`, the input already is in a floor frame (e.g. the
+  ground-truth motion in ``world``);
+* ``camera_params``: :meth:`FloorFrame.from_camera_height_pitch`, a level floor below a
+  camera of known height and pitch (no roll);
+* ``estimate``: :class:`FloorTracker` fits the plane to the foot contact points (heel and
+  toe) of the incoming motion while the contact probabilities say they touch the floor, over
+  a sliding window (:func:`fit_floor_plane`: RANSAC for the inliers, then a least-squares
+  plane through them, regularised towards a prior "up" direction for the rotations that
+  the points cannot determine, e.g. a person standing still or walking along a line).
 """
 
 from __future__ import annotations
 
+import collections
 from dataclasses import dataclass, field
+from typing import Deque, Optional, Sequence, Tuple
 
 import numpy as np
 
 from mocap_core.pose import Pose
 from mocap_core.rotations import matrix_to_quat, quat_multiply
+from mocap_core.skeleton import CONTACT_POINT_NAMES
+
+#: The camera optical frame's "up" (-y): the prior of the floor normal when nothing better
+#: is known (a camera held roughly level).
+CAMERA_UP = np.array([0.0, -1.0, 0.0])
 
 
 @dataclass(frozen=True)
@@ -42,6 +64,8 @@ class FloorFrame:
         if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) \
                 or np.linalg.det(R) < 0:
             raise ValueError('floor rotation must be a proper 3x3 rotation matrix')
+        if not np.all(np.isfinite(t)):
+            raise ValueError('floor translation must be finite')
         object.__setattr__(self, 'rotation', R)
         object.__setattr__(self, 'translation', t)
 
@@ -67,10 +91,38 @@ class FloorFrame:
         R = np.stack([right, down, forward], axis=1)
         return cls(R, np.array([0.0, 0.0, float(height)]), source_frame)
 
+    @classmethod
+    def from_plane(cls, normal: np.ndarray, offset: float,
+                   forward: np.ndarray = np.array([0.0, 0.0, 1.0]),
+                   source_frame: str = 'camera') -> 'FloorFrame':
+        """Floor frame of the plane ``normal . p + offset = 0`` (source frame), ``normal`` the
+        upward normal: z = normal, x = ``forward`` (default: the optical axis) projected onto
+        the floor, origin = the foot of the perpendicular from the source origin (the camera
+        centre), so ``translation = (0, 0, offset)`` and offset is the camera height."""
+        n = np.asarray(normal, dtype=float).reshape(3)
+        norm = np.linalg.norm(n)
+        if not (np.isfinite(norm) and norm > 1e-9 and np.isfinite(offset)):
+            raise ValueError('floor plane must have a finite, non-zero normal and offset')
+        n = n / norm
+        f = np.asarray(forward, dtype=float).reshape(3)
+        x = f - (f @ n) * n
+        if np.linalg.norm(x) < 1e-6:    # looking straight down or up: use the camera's x
+            x = np.array([1.0, 0.0, 0.0]) - n[0] * n
+        x /= np.linalg.norm(x)
+        y = np.cross(n, x)
+        return cls(np.stack([x, y, n]), np.array([0.0, 0.0, float(offset)]), source_frame)
+
+    # -- use ---------------------------------------------------------------------------------
     def inverse(self) -> 'FloorFrame':
         """The transform from the floor frame back to the source frame."""
         R_inv = self.rotation.T
         return FloorFrame(R_inv, -R_inv @ self.translation, 'floor')
+
+    def compose(self, other: 'FloorFrame') -> 'FloorFrame':
+        """``self o other``: first ``other``, then ``self``."""
+        return FloorFrame(self.rotation @ other.rotation,
+                          self.rotation @ other.translation + self.translation,
+                          other.source_frame)
 
     def transform_points(self, points: np.ndarray) -> np.ndarray:
         return np.asarray(points, dtype=float) @ self.rotation.T + self.translation
@@ -85,3 +137,340 @@ class FloorFrame:
     def quaternion(self) -> np.ndarray:
         """(4,) x, y, z, w rotation of the transform."""
         return matrix_to_quat(self.rotation)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """The floor's upward normal in source axes."""
+        return self.rotation[2].copy()
+
+    @property
+    def height(self) -> float:
+        """Height of the source origin (the camera centre) above the floor, m."""
+        return float(self.translation[2])
+
+    def plane(self) -> Tuple[np.ndarray, float]:
+        """(normal, offset) of the floor in the source frame: ``normal . p + offset = 0``."""
+        return self.normal, float(self.rotation[2] @ np.zeros(3) + self.translation[2])
+
+    def difference(self, other: 'FloorFrame') -> Tuple[float, float]:
+        """(angle between the floor normals in rad, height difference of the source origin
+        in m): how much the floor plane itself differs (the in-plane axes may differ)."""
+        c = float(np.clip(self.normal @ other.normal, -1.0, 1.0))
+        return float(np.arccos(c)), abs(self.height - other.height)
+
+
+# ---------------------------------------------------------------------------------------------
+# plane fitting
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class PlaneFit:
+    """A floor plane ``normal . p + offset = 0`` (normal = unit, upward) and how it was found.
+
+    points: number of candidate points; inliers: those within the inlier threshold;
+    rms: RMS distance of the inliers, m; extent: (2,) standard deviations of the inliers
+    along the plane's two principal in-plane directions, m (small second value = the points
+    lie on a line: the prior decided that rotation); prior_angle: angle between the normal and
+    the prior, rad; source: 'points' or 'prior' (too few points: the prior through the lowest
+    ones).
+    """
+
+    normal: np.ndarray
+    offset: float
+    points: int
+    inliers: int
+    rms: float
+    extent: np.ndarray
+    prior_angle: float
+    source: str = 'points'
+
+    def frame(self, forward: np.ndarray = np.array([0.0, 0.0, 1.0]),
+              source_frame: str = 'camera') -> FloorFrame:
+        return FloorFrame.from_plane(self.normal, self.offset, forward, source_frame)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=float).reshape(3)
+    n = np.linalg.norm(v)
+    if not (np.isfinite(n) and n > 1e-12):
+        raise ValueError('direction must be finite and non-zero')
+    return v / n
+
+
+def _regularised_plane(points: np.ndarray, weights: np.ndarray, prior: np.ndarray,
+                       prior_weight: float) -> Tuple[np.ndarray, float]:
+    """Least-squares plane with a penalty ``prior_weight * sin^2(angle(n, prior))``:
+    n = smallest eigenvector of ``C + prior_weight (I - prior prior^T)``, C the weighted
+    scatter matrix about the weighted centroid; oriented along the prior."""
+    w = weights / weights.sum()
+    c = w @ points
+    d = points - c
+    C = (d * weights[:, None]).T @ d
+    A = C + prior_weight * (np.eye(3) - np.outer(prior, prior))
+    vals, vecs = np.linalg.eigh(A)
+    n = vecs[:, 0]
+    if n @ prior < 0:
+        n = -n
+    return n, float(-n @ c)
+
+
+def fit_floor_plane(points: np.ndarray, weights: Optional[np.ndarray] = None,
+                    prior: np.ndarray = CAMERA_UP, prior_weight_m: float = 0.25,
+                    inlier_threshold: float = 0.025, max_tilt_deg: float = 60.0,
+                    iterations: int = 64, min_points: int = 8,
+                    offset_quantile: float = 0.25,
+                    rng: Optional[np.random.Generator] = None) -> PlaneFit:
+    """Robust floor plane through foot contact points (source frame, e.g. camera).
+
+    1. RANSAC: planes through 3 random points (normal within ``max_tilt_deg`` of the prior)
+       keep the largest set of points within ``inlier_threshold`` of them (a foot wrongly
+       predicted in contact, a detector glitch, a step onto a stair are outliers).
+    2. A weighted least-squares plane through the inliers, regularised towards ``prior`` by
+       an equivalent in-plane spread of ``prior_weight_m`` (:func:`_regularised_plane`): the
+       tilt along a direction in which the points spread much more than that (walking
+       several metres: std 1.4 m vs 0.25 m, 30 times the weight of the prior) comes from
+       the points; across a direction in which they do not (the two feet of a person walking
+       straight, std ~5 cm; both directions for a person standing), from the prior. A foot
+       patch cannot give the tilt: a few mm of height difference between heel and toe or
+       left and right foot tilt it by degrees. Refined twice with the inliers of the refined
+       plane.
+    3. The offset puts the ``offset_quantile`` weighted quantile of the inlier heights on
+       the floor (default: the lower quartile, as contact labels include heels and toes a
+       little above the floor during roll-over, while the floor is where the feet rest).
+
+    Args:
+        points: (N, 3) contact point positions. weights: (N,) >= 0 (e.g. probabilities).
+        prior: upward direction expected (camera -y by default, or the body's up).
+        min_points: fewer points than this: the plane with the prior normal through the
+            lowest points (``source='prior'``).
+    Raises:
+        ValueError: no finite point at all.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=float).reshape(-1)
+    ok = np.all(np.isfinite(p), axis=1) & np.isfinite(w) & (w > 0)
+    p, w = p[ok], w[ok]
+    prior = _unit(prior)
+    if len(p) == 0:
+        raise ValueError('no finite contact point to fit a floor to')
+    if len(p) < min_points:
+        h = p @ prior
+        offset = -float(np.percentile(h, 10))
+        return PlaneFit(prior.copy(), offset, len(p), len(p),
+                        float(np.sqrt(np.mean((h + offset) ** 2))), np.zeros(2), 0.0, 'prior')
+    rng = np.random.default_rng(0) if rng is None else rng
+    cos_tilt = np.cos(np.radians(max_tilt_deg))
+    best_mask, best_score = None, -1.0
+    # the prior plane through the median height is always a candidate
+    h0 = p @ prior
+    cand = [(prior, -float(np.median(h0)))]
+    n_pts = len(p)
+    for _ in range(iterations):
+        i, j, k = rng.choice(n_pts, 3, replace=False)
+        n = np.cross(p[j] - p[i], p[k] - p[i])
+        norm = np.linalg.norm(n)
+        if norm < 1e-6:
+            continue
+        n = n / norm
+        if n @ prior < 0:
+            n = -n
+        if n @ prior < cos_tilt:
+            continue
+        cand.append((n, -float(n @ p[i])))
+    for n, off in cand:
+        mask = np.abs(p @ n + off) <= inlier_threshold
+        score = float(w[mask].sum())
+        if score > best_score:
+            best_score, best_mask = score, mask
+    mask = best_mask
+    if mask.sum() < 3:
+        mask = np.ones(n_pts, dtype=bool)
+    n, off = prior, 0.0
+    for _ in range(3):
+        wi = w[mask]
+        lam = float(wi.sum()) * prior_weight_m ** 2
+        n, off = _regularised_plane(p[mask], wi, prior, lam)
+        new_mask = np.abs(p @ n + off) <= inlier_threshold
+        if new_mask.sum() < 3 or np.array_equal(new_mask, mask):
+            break
+        mask = new_mask
+    # offset: weighted quantile of the inlier heights
+    h = p[mask] @ n
+    order = np.argsort(h)
+    cw = np.cumsum(w[mask][order])
+    k = min(int(np.searchsorted(cw, offset_quantile * cw[-1])), len(h) - 1)
+    off = -float(h[order][k])
+    resid = p[mask] @ n + off
+    d = p[mask] - p[mask].mean(axis=0)
+    d = d - np.outer(d @ n, n)
+    ext = np.sqrt(np.maximum(np.linalg.eigvalsh(d.T @ d / len(d))[::-1][:2], 0.0))
+    return PlaneFit(n, off, n_pts, int(mask.sum()), float(np.sqrt(np.mean(resid ** 2))), ext,
+                    float(np.arccos(np.clip(n @ prior, -1.0, 1.0))), 'points')
+
+
+def body_up(pose: Pose) -> np.ndarray:
+    """The body's up direction in the pose's frame: from the mid-ankles to the neck (a
+    standing or walking person's average of it is close to vertical)."""
+    names = pose.skeleton.joint_names
+    pos = pose.joint_positions()
+    ankles = 0.5 * (pos[names.index('left_ankle')] + pos[names.index('right_ankle')])
+    return _unit(pos[names.index('neck')] - ankles)
+
+
+# ---------------------------------------------------------------------------------------------
+# online estimate
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class FloorTrackerParams:
+    """Parameters of :class:`FloorTracker` (the node exposes them as ROS parameters)."""
+
+    window: int = 300                 # frames of contact points kept (10 s at 30 fps)
+    min_frames: int = 15              # frames with a contact before the estimate is 'ready'
+    contact_threshold: float = 0.5    # contact probability above which a point is used
+    prior: str = 'body'               # 'body' (mean body up) or 'camera' (camera -y)
+    prior_weight_m: float = 0.25      # see fit_floor_plane
+    inlier_threshold: float = 0.025   # m
+    offset_quantile: float = 0.25     # see fit_floor_plane
+    update_every: int = 15            # frames between re-fits
+    min_change_deg: float = 0.5       # a new fit replaces the frame only when the floor
+    min_change_m: float = 0.01        # moved by more than this
+    freeze_after: int = 0             # frames after which the frame is fixed (0: never)
+
+    def validate(self) -> None:
+        bad = []
+        for name in ('window', 'min_frames', 'update_every'):
+            if int(getattr(self, name)) < 1:
+                bad.append(f'{name}={getattr(self, name)} (>= 1)')
+        if self.prior not in ('body', 'camera'):
+            bad.append(f"prior={self.prior!r} ('body' or 'camera')")
+        for name in ('prior_weight_m', 'inlier_threshold', 'min_change_deg', 'min_change_m'):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                bad.append(f'{name}={v} (>= 0)')
+        if not 0.0 <= self.contact_threshold <= 1.0:
+            bad.append(f'contact_threshold={self.contact_threshold}')
+        if not 0.0 <= self.offset_quantile <= 1.0:
+            bad.append(f'offset_quantile={self.offset_quantile}')
+        if bad:
+            raise ValueError('bad floor parameters: ' + '; '.join(bad))
+
+
+class FloorTracker:
+    """The floor frame of a motion stream in the camera frame, estimated from its feet.
+
+    :meth:`update` takes each incoming pose (camera frame) with its contact probabilities,
+    keeps the contact points that are in contact (probability above the threshold) over the
+    last ``window`` frames, and re-fits the plane (:func:`fit_floor_plane`) every
+    ``update_every`` frames. The first frame gives a provisional floor (the prior direction
+    through the lowest foot point) so that the physics can start at once; the frame is
+    replaced only when a fit moves the floor by more than ``min_change_deg`` /
+    ``min_change_m`` (the caller re-expresses its state in the new frame,
+    :meth:`~mocap_physics.cycle.PhysicsCycle.change_frame`), and never after
+    ``freeze_after`` frames (when > 0).
+
+    Attributes:
+        frame: the current :class:`FloorFrame` (None before the first frame).
+        fit: the :class:`PlaneFit` it came from.
+        ready: at least ``min_frames`` frames with contacts were seen.
+        changes: number of times the frame was replaced.
+    """
+
+    def __init__(self, params: Optional[FloorTrackerParams] = None,
+                 source_frame: str = 'camera') -> None:
+        self.params = params if params is not None else FloorTrackerParams()
+        self.params.validate()
+        self.source_frame = source_frame
+        n = self.params.window
+        self._points: Deque[np.ndarray] = collections.deque(maxlen=n)
+        self._weights: Deque[np.ndarray] = collections.deque(maxlen=n)
+        self._up: Deque[np.ndarray] = collections.deque(maxlen=n)
+        self._lowest: Deque[np.ndarray] = collections.deque(maxlen=n)
+        self.frames = 0
+        self.contact_frames = 0
+        self.frame: Optional[FloorFrame] = None
+        self.fit: Optional[PlaneFit] = None
+        self.changes = 0
+        self._since_fit = 0
+        self._rng = np.random.default_rng(0)
+
+    @property
+    def ready(self) -> bool:
+        return self.contact_frames >= self.params.min_frames
+
+    def prior(self) -> np.ndarray:
+        if self.params.prior == 'body' and self._up:
+            m = np.mean(np.asarray(self._up), axis=0)
+            if np.linalg.norm(m) > 1e-6:
+                return _unit(m)
+        return CAMERA_UP.copy()
+
+    def add(self, contact_points: np.ndarray, probabilities: Optional[Sequence[float]],
+            up: Optional[np.ndarray] = None) -> None:
+        """Record one frame: (4, 3) contact points (source frame) and their probabilities
+        (None: unknown, only the lowest point is kept for the provisional floor)."""
+        pts = np.asarray(contact_points, dtype=float).reshape(-1, 3)
+        if not np.all(np.isfinite(pts)):
+            return
+        self.frames += 1
+        self._since_fit += 1
+        if up is not None and np.all(np.isfinite(up)):
+            self._up.append(_unit(up))
+        prior = self.prior()
+        self._lowest.append(pts[np.argmin(pts @ prior)])
+        if probabilities is None:
+            return
+        prob = np.asarray(probabilities, dtype=float).reshape(-1)
+        if prob.shape != (len(pts),):
+            return
+        use = np.isfinite(prob) & (prob > self.params.contact_threshold)
+        if use.any():
+            self.contact_frames += 1
+            self._points.append(pts[use])
+            self._weights.append(prob[use])
+
+    def estimate(self) -> Optional[PlaneFit]:
+        """A fit of the plane to the points in the window (None before the first frame)."""
+        if not self._lowest:
+            return None
+        prior = self.prior()
+        p = self.params
+        if self._points:
+            pts = np.concatenate(list(self._points))
+            w = np.concatenate(list(self._weights))
+            fit = fit_floor_plane(pts, w, prior, p.prior_weight_m, p.inlier_threshold,
+                                  offset_quantile=p.offset_quantile, rng=self._rng)
+            if fit.source == 'points':
+                return fit
+        low = np.asarray(self._lowest)
+        return fit_floor_plane(low, None, prior, p.prior_weight_m, p.inlier_threshold,
+                               min_points=10 ** 9)
+
+    def update(self, pose: Pose, probabilities: Optional[Sequence[float]]
+               ) -> Tuple[FloorFrame, bool]:
+        """Record ``pose`` (source frame) and return (current floor frame, changed)."""
+        cps = pose.contact_positions()
+        pts = np.array([cps[n] for n in CONTACT_POINT_NAMES])
+        try:
+            up = body_up(pose)
+        except ValueError:
+            up = None
+        self.add(pts, probabilities, up)
+        p = self.params
+        frozen = p.freeze_after > 0 and self.frames > p.freeze_after and self.frame is not None
+        due = self.frame is None or (self._since_fit >= p.update_every) or \
+            (self.fit is not None and self.fit.source == 'prior' and self.ready)
+        if frozen or not due:
+            return self.frame, False
+        self._since_fit = 0
+        fit = self.estimate()
+        if fit is None:
+            return self.frame, False
+        new = fit.frame(source_frame=self.source_frame)
+        if self.frame is not None:
+            angle, dh = new.difference(self.frame)
+            if np.degrees(angle) < p.min_change_deg and dh < p.min_change_m:
+                return self.frame, False
+        changed = self.frame is not None
+        self.frame, self.fit = new, fit
+        if changed:
+            self.changes += 1
+        return self.frame, changed

@@ -1,9 +1,10 @@
 """``ros2 run mocap_physics physics``: physics-based correction of the lifter's motion, live.
 
-The dynamic cycle of neural PhysCap (§3.4; :mod:`mocap_physics.cycle`, fixed PD gains) on a
-Pinocchio model of the incoming skeleton: PD control towards the kinematic pose, ground
-reaction forces in friction pyramids, forward dynamics and a QP that forbids foot-floor
-penetration.
+The dynamic cycle of neural PhysCap (§3.4; :mod:`mocap_physics.cycle`; fixed PD gains, or
+DyNet's learned ones with ``gains_mode: learned``) on a Pinocchio model of the incoming
+skeleton: PD control towards the kinematic pose, ground reaction forces in friction
+pyramids, forward dynamics and a QP that forbids foot-floor penetration and holds the feet
+in contact in place (``foot_stick``).
 
 Subscribes:
   * ``motion_topic`` (default ``/mocap/lifter/motion``, trajectory_msgs/MultiDOFJointTrajectory):
@@ -22,16 +23,33 @@ Publishes, stamped with the input's stamp, in the floor frame (z up, floor z = 0
     reaction force (N, floor axes) and its moment (N m) about the foot's reference point, the
     midpoint of its heel and toe contact points (not about the frame origin);
   * ``/mocap/physics/com`` (geometry_msgs/PointStamped): the centre of mass;
-  * ``/mocap/physics/markers``: stick figure, contact states (red = force), force arrows;
+  * ``/mocap/physics/markers``: stick figure, contact states (red = force), force arrows
+    (ids 10-13, one per contact point, zero length without force) and the friction cones
+    (namespace ``physics_friction_cones``: LINE_LIST of the cone mu at each contact point
+    that takes a force);
+  * ``/mocap/physics/floor`` (geometry_msgs/TransformStamped, every frame; not with
+    ``floor_source: input``): the floor frame in the input's frame, header.frame_id = the
+    input's frame (e.g. ``camera_optical_frame``), child_frame_id = the outputs' frame
+    (``floor``): ``p_camera = R p_floor + t``, as tf2 stores a transform;
   * ``/diagnostics``: processing time, rates, solver status and time, residual root force
     over body weight, counters of fallbacks, solver failures, re-initialisations, time jumps.
 
-Floor frame (``floor_source``): ``input`` - the input already is in a floor frame (e.g. the
-ground-truth motion in ``world``), outputs use the input's frame_id; ``camera_params`` - the
-input is in the camera optical frame, the floor frame is below the camera at
-``camera_height`` m with the camera pitched down by ``camera_pitch_deg`` (no roll), outputs use
-``frame_id`` (default ``floor``): p_floor = R p_camera + (0, 0, camera_height), see
-:mod:`mocap_physics.floor`. Estimating the floor from the feet is a later step.
+Floor frame (``floor_source``, :mod:`mocap_physics.floor`): the dynamics and the outputs are
+in a floor frame (z up, floor z = 0, x = the camera's viewing direction on the floor, origin
+below the camera): p_floor = R p_camera + (0, 0, camera height).
+
+  * ``estimate`` (default): the input is in the camera optical frame; the floor plane is
+    fitted to the heel and toe points of the incoming motion while their contact
+    probability is above ``floor_contact_threshold``, over the last ``floor_window`` frames,
+    re-fitted every ``floor_update_every`` frames (RANSAC + least squares regularised towards
+    the body's mean up direction). It starts provisional (the body's up direction through
+    the lowest foot point) and is replaced when a fit moves it by more than 0.5 deg or
+    1 cm; the simulation state is carried over into the new frame. ``floor_freeze_after``
+    > 0 fixes it after that many frames.
+  * ``camera_params``: a level floor ``camera_height`` m below a camera pitched down by
+    ``camera_pitch_deg`` (no roll).
+  * ``input``: the input already is in a floor frame (e.g. ground-truth motion in
+    ``world``); outputs use the input's frame_id.
 
 Bad input never stops the node: malformed or NaN motion is logged and dropped (or held by the
 cycle), a non-increasing stamp is dropped, a degenerate skeleton is reported and skipped, a
@@ -42,6 +60,7 @@ the simulation; all are counted on /diagnostics.
 from __future__ import annotations
 
 import collections
+import os
 import sys
 import time
 from typing import Deque, List, Optional, Tuple
@@ -51,8 +70,10 @@ import numpy as np
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
 
 from .cycle import PhysicsParams
+from .floor import FloorTrackerParams
 
 _D = PhysicsParams()
+_F = FloorTrackerParams()
 
 PARAMETERS = (
     ParamSpec('motion_topic', '/mocap/lifter/motion', 'Input motion (kinematic target), '
@@ -65,12 +86,14 @@ PARAMETERS = (
               'this old (stamp time), else none', min_value=0.0),
     ParamSpec('body_mass', _D.body_mass, 'Body mass, kg (segment masses: de Leva 1996)',
               min_value=1.0, max_value=500.0, read_only=True),
-    ParamSpec('gains_mode', 'fixed', 'PD gains: fixed (kp/kd below); learned (DyNet) is not '
-              'available yet', read_only=True),
+    ParamSpec('gains_mode', 'fixed', 'PD gains: fixed (kp/kd below) or learned (DyNet, '
+              'dynet_weights; kp/kd below are its kp_ini)', read_only=True),
+    ParamSpec('dynet_weights', '', 'gains_mode learned: DyNet weights (mocap train physics); '
+              'empty = the package\'s weights/dynet.pt', read_only=True),
     ParamSpec('kp_root', _D.kp_root, 'PD stiffness of the root, s^-2 (acceleration per unit '
               'error, multiplied by M(q))', min_value=0.0, read_only=True),
-    ParamSpec('kd_root', _D.kd_root, 'PD damping of the root, s^-1', min_value=0.0,
-              read_only=True),
+    ParamSpec('kd_root', _D.kd_root, 'PD damping of the root, s^-1 (default: 20 rad/s, '
+              'critically damped with kp 400)', min_value=0.0, read_only=True),
     ParamSpec('kp_joint', _D.kp_joint, 'PD stiffness of the ball joints, s^-2 (default: '
               '60 rad/s natural frequency, critically damped with kd 120)', min_value=0.0,
               read_only=True),
@@ -92,14 +115,32 @@ PARAMETERS = (
               'that is applied: 1 = paper; 0 = root driven by contact forces and gravity only',
               min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('penetration_metric', _D.penetration_metric, 'Metric of the penetration QP: '
-              'identity (paper), mass (M) or diagonal (diag M)', read_only=True),
+              'diagonal (diag M), identity (paper) or mass (M)', read_only=True),
+    ParamSpec('foot_stick', _D.foot_stick, 'Hold contact points in contact at their anchor '
+              'on the floor (no foot skating; needs root_residual 1)', read_only=True),
+    ParamSpec('stick_release', _D.stick_release, 'The stick anchor follows the target when '
+              'the target foot moves farther than this from it, m', min_value=0.0,
+              read_only=True),
     ParamSpec('max_frame_gap_s', _D.max_frame_gap, 'A longer gap between frames (stamp time) '
               're-initialises the simulation from the target', min_value=0.001, read_only=True),
     ParamSpec('skeleton_tolerance', _D.skeleton_tolerance, 'Bone offset change (m) that '
               'rebuilds the model', min_value=0.0, read_only=True),
-    ParamSpec('floor_source', 'input', 'Floor frame: input (input is already in a floor '
-              'frame, z up, floor z = 0) or camera_params (input in the camera optical frame; '
-              'camera_height, camera_pitch_deg)', read_only=True),
+    ParamSpec('floor_source', 'estimate', 'Floor frame: estimate (fitted to the feet in '
+              'contact, input in the camera optical frame), camera_params (camera_height, '
+              'camera_pitch_deg) or input (input already in a floor frame, z up, floor z = 0)',
+              read_only=True),
+    ParamSpec('floor_window', _F.window, 'floor_source estimate: frames of foot contacts '
+              'kept for the fit', min_value=10, read_only=True),
+    ParamSpec('floor_update_every', _F.update_every, 'floor_source estimate: frames between '
+              're-fits', min_value=1, read_only=True),
+    ParamSpec('floor_contact_threshold', _F.contact_threshold, 'floor_source estimate: '
+              'contact probability above which a heel/toe point is used', min_value=0.0,
+              max_value=1.0, read_only=True),
+    ParamSpec('floor_prior', _F.prior, 'floor_source estimate: up direction for what the '
+              'feet cannot determine: body (mean ankles-to-neck direction) or camera (-y)',
+              read_only=True),
+    ParamSpec('floor_freeze_after', _F.freeze_after, 'floor_source estimate: frames after '
+              'which the floor is fixed (0 = keep refining)', min_value=0, read_only=True),
     ParamSpec('camera_height', 1.5, 'floor_source camera_params: camera height above the '
               'floor, m', min_value=0.0, read_only=True),
     ParamSpec('camera_pitch_deg', 0.0, 'floor_source camera_params: camera pitch down from '
@@ -117,7 +158,7 @@ def main(args: Optional[List[str]] = None) -> int:
         return 0
 
     import rclpy
-    from geometry_msgs.msg import PointStamped, WrenchStamped
+    from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
     from sensor_msgs.msg import JointState, PointCloud2
@@ -132,31 +173,47 @@ def main(args: Optional[List[str]] = None) -> int:
                                             positions_to_cloud, stamp_to_ns, wrench_to_msg)
 
     from .cycle import InvalidInput, PhysicsCycle
-    from .floor import FloorFrame
+    from .floor import FloorFrame, FloorTracker
+    from .markers import floor_transform_msg, friction_cone_marker
     from .model import SkeletonError, revolute_efforts
 
     class PhysicsNode(Node):
         def __init__(self) -> None:
             super().__init__('physics')
             self.p = p = declare_parameters(self, PARAMETERS)
-            if p['gains_mode'] != 'fixed':
-                raise ValueError(f"gains_mode {p['gains_mode']!r}: only 'fixed' is available")
+            weights = p['dynet_weights']
+            if p['gains_mode'] == 'learned' and not weights:
+                from .dynet import WEIGHTS_DIR
+                weights = str(WEIGHTS_DIR / 'dynet.pt')
+            if p['gains_mode'] == 'learned' and not os.path.isfile(weights):
+                raise ValueError(f'gains_mode learned: no DyNet weights at {weights} (train '
+                                 'them with `mocap train physics --install`)')
             self.params = PhysicsParams(
                 body_mass=p['body_mass'], substeps=p['substeps'], kp_root=p['kp_root'],
                 kd_root=p['kd_root'], kp_joint=p['kp_joint'], kd_joint=p['kd_joint'],
                 friction=p['friction'], contact_probability_threshold=p['contact_threshold'],
                 contact_height=p['contact_height'], grf_smoothness=p['grf_smoothness'],
                 root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
-                max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'])
+                max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'],
+                foot_stick=p['foot_stick'], stick_release=p['stick_release'],
+                gains_mode=p['gains_mode'],
+                dynet_weights=weights if p['gains_mode'] == 'learned' else '')
             self.cycle = PhysicsCycle(params=self.params)      # validates the parameters
+            self.tracker: Optional[FloorTracker] = None
+            self.floor: Optional[FloorFrame] = None
             if p['floor_source'] == 'input':
-                self.floor: Optional[FloorFrame] = None
+                pass
             elif p['floor_source'] == 'camera_params':
                 self.floor = FloorFrame.from_camera_height_pitch(
                     p['camera_height'], np.deg2rad(p['camera_pitch_deg']))
+            elif p['floor_source'] == 'estimate':
+                self.tracker = FloorTracker(FloorTrackerParams(
+                    window=p['floor_window'], update_every=p['floor_update_every'],
+                    contact_threshold=p['floor_contact_threshold'], prior=p['floor_prior'],
+                    freeze_after=p['floor_freeze_after']))     # validates them
             else:
-                raise ValueError(f"floor_source {p['floor_source']!r}: use input or "
-                                 'camera_params')
+                raise ValueError(f"floor_source {p['floor_source']!r}: use estimate, "
+                                 'camera_params or input')
             self.pub_motion = self.create_publisher(MultiDOFJointTrajectory, OUT + '/motion',
                                                     STREAM_QOS)
             self.pub_joints = self.create_publisher(PointCloud2, OUT + '/joints3d', STREAM_QOS)
@@ -165,10 +222,13 @@ def main(args: Optional[List[str]] = None) -> int:
             self.pub_grf = {f: self.create_publisher(WrenchStamped, f'{OUT}/grf/{f}', STREAM_QOS)
                             for f in ('left', 'right')}
             self.pub_com = self.create_publisher(PointStamped, OUT + '/com', STREAM_QOS)
+            self.pub_floor = (self.create_publisher(TransformStamped, OUT + '/floor', STREAM_QOS)
+                              if p['floor_source'] != 'input' else None)
             self.pub_markers = (self.create_publisher(MarkerArray, OUT + '/markers', STREAM_QOS)
                                 if p['publish_markers'] else None)
             self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
-            self.diag.set_value('gains', 'fixed')
+            self.diag.set_value('gains', p['gains_mode'] if p['gains_mode'] == 'fixed'
+                                else f'learned ({weights})')
             self.diag.set_value('model', 'none yet (waiting for the first motion)')
             self.pending: Deque[Tuple[int, object, str, float]] = collections.deque()
             self.contacts: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
@@ -257,6 +317,26 @@ def main(args: Optional[List[str]] = None) -> int:
             if probs is None and self.contacts_sub is not None:
                 self._warn_limited('nocontacts', 'no contact probabilities for this frame: '
                                    'contacts from the kinematics only', 10.0)
+            source_frame = frame_id or 'camera_optical_frame'
+            if self.tracker is not None:
+                try:
+                    new, changed = self.tracker.update(pose, probs)
+                except ValueError as exc:      # no finite contact point: keep the last floor
+                    new, changed = self.floor, False
+                    self._warn_limited('floor', f'floor estimate not updated: {exc}')
+                if new is None:
+                    self.diag.dropped += 1
+                    self._problem('floor', 'no floor estimate yet (no valid foot point): '
+                                  'frame skipped')
+                    return
+                if changed and self.floor is not None:
+                    delta = new.compose(self.floor.inverse())
+                    self.cycle.change_frame(delta.rotation, delta.translation)
+                    self.get_logger().info(
+                        'floor re-estimated: camera height %.3f m, normal %s (%d inliers of '
+                        '%d points)' % (new.height, np.round(new.normal, 4).tolist(),
+                                        self.tracker.fit.inliers, self.tracker.fit.points))
+                self.floor = new
             if self.floor is not None:
                 pose = self.floor.transform_pose(pose)
                 frame_id = self.p['frame_id'] or 'floor'
@@ -282,6 +362,9 @@ def main(args: Optional[List[str]] = None) -> int:
             self.last_stamp = stamp
             self.last_result = res
             self._publish(stamp, frame_id, res)
+            if self.pub_floor is not None and self.floor is not None:
+                self.pub_floor.publish(floor_transform_msg(make_header(stamp, source_frame),
+                                                           self.floor, frame_id))
             self.diag.output.tick()
 
         def _publish(self, stamp: int, frame_id: str, res) -> None:
@@ -299,11 +382,18 @@ def main(args: Optional[List[str]] = None) -> int:
             self.pub_com.publish(com)
             if self.pub_markers is not None:
                 names = self.cycle.model.contact_names
-                forces = {n: res.contact_forces[i] for i, n in enumerate(names)
-                          if res.contact_active[i]}
-                self.pub_markers.publish(pose_to_markers(
+                # every contact point always has its arrow (ids 10-13 stay the same; zero
+                # length without force)
+                forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
+                markers = pose_to_markers(
                     pose, header, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
-                    contacts=res.contact_active.astype(float), forces=forces))
+                    contacts=res.contact_active.astype(float), forces=forces)
+                cps = pose.contact_positions()
+                loaded = [cps[n] for i, n in enumerate(names)
+                          if res.contact_forces[i, 2] > 1e-6]
+                markers.markers.append(friction_cone_marker(header, np.array(loaded),
+                                                            self.params.friction))
+                self.pub_markers.publish(markers)
 
         def _refresh_diagnostics(self) -> None:
             st = self.cycle.stats
@@ -319,6 +409,23 @@ def main(args: Optional[List[str]] = None) -> int:
             d.set_value('time_jumps', st.time_jumps)
             d.set_value('invalid_inputs', st.invalid_inputs)
             d.set_value('model_builds', st.model_builds)
+            d.set_value('friction_cone_violations', st.cone_violations)
+            d.set_value('stick_failures', st.stick_failures)
+            if self.tracker is not None:
+                tr = self.tracker
+                d.set_value('floor', 'ready' if tr.ready else
+                            f'provisional ({tr.contact_frames}/{tr.params.min_frames} contact '
+                            'frames)')
+                if self.floor is not None:
+                    d.set_value('floor_camera_height_m', f'{self.floor.height:.3f}')
+                    d.set_value('floor_normal_in_camera', ' '.join(
+                        f'{x:.4f}' for x in self.floor.normal))
+                if tr.fit is not None:
+                    d.set_value('floor_fit', f'{tr.fit.inliers}/{tr.fit.points} inliers, rms '
+                                f'{tr.fit.rms * 1e3:.1f} mm, {tr.fit.source}')
+                d.set_value('floor_changes', tr.changes)
+            elif self.floor is not None:
+                d.set_value('floor_camera_height_m', f'{self.floor.height:.3f}')
             r = self.last_result
             if r is not None:
                 d.set_value('last_status', r.status)

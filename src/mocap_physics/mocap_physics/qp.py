@@ -7,10 +7,17 @@ solves; a new set builds (and caches) a new solver. The formulations are restate
 
 Ground reaction forces (neural PhysCap eq. 8, 9, 11), :class:`GrfQP`
     variables: lambda_c in R^3 for each active contact point c, world (floor) frame, z up
-    minimise   || tau_root - J_1^T lambda ||^2 + w_s || lambda - lambda_prev ||^2 + w_r ||lambda||^2
+    minimise   || tau_root - J_1^T lambda ||_Wm^2 + w_s || lambda - lambda_prev ||^2
+               + w_r ||lambda||^2
     subject to lambda_c,z >= 0,  |lambda_c,x| <= mu' lambda_c,z,  |lambda_c,y| <= mu' lambda_c,z
   ``J_1^T lambda`` = sum_c J_c[:, :6]^T lambda_c is the generalised root force that the contact
   forces produce (``J_c``: 3 x nv linear Jacobian of the contact point, world-aligned axes).
+  ``Wm = diag(1, 1, 1, w_m, w_m, w_m)`` weighs the root moment (N m) against the root force
+  (N); eq. 8 is w_m = 1. With one foot point on the floor, the moment that the PD asks of
+  the root (dominated by the swing leg's desired acceleration) can only come from large
+  forces at a lever arm, and matching it inflates the vertical force to allow the friction
+  the moment needs: on the ground-truth walks w_m = 1 gives a mean vertical GRF of 1.7-2.5
+  body weights (walking is ~1.0), so the cycle uses a smaller w_m (``grf_moment_weight``).
   The friction cone of eq. 9 (mu = 0.8) is replaced by its inscribed four-sided pyramid,
   mu' = mu / sqrt(2): every force inside the pyramid is inside the true cone (conservative).
   The problem is solved in units of body weight (lambda / m g) for good conditioning; w_s
@@ -34,13 +41,19 @@ Penetration (neural PhysCap eq. 15-16), :class:`PenetrationQP`
     minimise   1/2 y^T (A W^-1 A^T) y + (A qdot - b)^T y    subject to  y >= 0
   and ``qdot* = qdot + W^-1 A^T y``. When ``qdot`` already satisfies every row, it is the
   solution and no solver runs.
+
+  Foot stick (optional equality rows ``E qdot* = e``, :meth:`PenetrationQP.solve` ``A_eq``):
+  the horizontal velocity of a contact point in contact, ``E_c = J_c,xy``, equals a small
+  velocity ``e_c`` that holds it at its anchor on the floor (a no-slip condition in the same
+  velocity-level form as eq. 15-16). Their dual variables z are free (y >= 0 stays for the
+  inequality rows): ``qdot* = qdot + W^-1 (A^T y + E^T z)``.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 import osqp
@@ -101,7 +114,8 @@ class GrfQP:
     """
 
     def __init__(self, num_contacts: int = 4, friction: float = 0.8, smoothness: float = 0.1,
-                 regularization: float = 1e-4, eps: float = 1e-6, max_iter: int = 2000) -> None:
+                 regularization: float = 1e-4, eps: float = 1e-6, max_iter: int = 2000,
+                 moment_weight: float = 1.0) -> None:
         if not friction > 0:
             raise ValueError(f'friction coefficient must be positive, got {friction}')
         if smoothness < 0 or regularization <= 0:
@@ -110,6 +124,10 @@ class GrfQP:
         self.friction = float(friction)
         self.mu_pyramid = self.friction * PYRAMID_FACTOR
         self.smoothness = float(smoothness)
+        if not moment_weight > 0:
+            raise ValueError('moment_weight must be positive')
+        #: weight of the root-moment rows of the residual relative to the force rows
+        self.row_weights = np.sqrt(np.array([1.0, 1.0, 1.0] + [float(moment_weight)] * 3))
         self.regularization = float(regularization)
         self.settings = dict(verbose=False, eps_abs=eps, eps_rel=eps, max_iter=max_iter,
                              polishing=False, warm_starting=True, adaptive_rho=True)
@@ -175,11 +193,12 @@ class GrfQP:
         r0 = tau_root / weight
         x_prev = self.prev[idx].reshape(-1)
         w = self.smoothness + self.regularization
-        H = A.T @ A
+        Aw = A * self.row_weights[:, None]
+        H = Aw.T @ Aw
         H[np.diag_indices_from(H)] += w
         solver, rows, cols = self._solver(active_t)
         P_x = 2.0 * H[rows, cols]
-        q = -2.0 * (A.T @ r0 + self.smoothness * x_prev)
+        q = -2.0 * (Aw.T @ (self.row_weights * r0) + self.smoothness * x_prev)
         t0 = time.perf_counter()
         try:
             solver.update(q=q, Px=P_x)
@@ -249,32 +268,60 @@ class PenetrationQP:
     max_iter: int = 400
     failures: int = 0
     solves: int = 0
-    _solvers: Dict[int, Tuple[osqp.OSQP, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    second_chances: int = 0
+    _solvers: Dict[Tuple[int, int], Tuple[osqp.OSQP, np.ndarray, np.ndarray]] = \
+        field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.metric not in ('mass', 'diagonal', 'identity'):
             raise ValueError(f"metric must be 'mass', 'diagonal' or 'identity', got "
                              f"{self.metric!r}")
 
-    def _solver(self, m: int):
-        entry = self._solvers.get(m)
+    def _solver(self, m: int, m_eq: int = 0):
+        key = (m, m_eq)
+        entry = self._solvers.get(key)
         if entry is None:
-            P, rows, cols = _dense_triu_csc(m)
+            n = m + m_eq
+            P, rows, cols = _dense_triu_csc(n)
             solver = osqp.OSQP()
-            solver.setup(P=P, q=np.zeros(m), A=sp.identity(m, format='csc'), l=np.zeros(m),
-                         u=np.full(m, np.inf), verbose=False, eps_abs=self.eps,
+            lower = np.concatenate([np.zeros(m), np.full(m_eq, -np.inf)])
+            solver.setup(P=P, q=np.zeros(n), A=sp.identity(n, format='csc'), l=lower,
+                         u=np.full(n, np.inf), verbose=False, eps_abs=self.eps,
                          eps_rel=self.eps, max_iter=self.max_iter, polishing=False,
                          warm_starting=True)
             entry = (solver, rows, cols)
-            self._solvers[m] = entry
+            self._solvers[key] = entry
         return entry
 
     @staticmethod
-    def _refine(y: np.ndarray, P: np.ndarray, q: np.ndarray) -> np.ndarray:
+    def _clarabel(P: np.ndarray, q: np.ndarray, m_eq: int):
+        """The dual with Clarabel (interior point): the fallback when OSQP does not converge
+        (ill-conditioned rows, e.g. heel and toe of one foot). Returns (y, status text)."""
+        import clarabel
+        n = len(q)
+        m = n - m_eq
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        # constraints: -y_I + s = 0, s >= 0 (y_I >= 0); the equality duals are free
+        A = sp.csc_matrix(-np.eye(n)[:m]) if m else sp.csc_matrix((0, n))
+        cones = [clarabel.NonnegativeConeT(m)] if m else []
+        solver = clarabel.DefaultSolver(sp.csc_matrix(np.triu(P)), q, A, np.zeros(m), cones,
+                                        settings)
+        sol = solver.solve()
+        ok = str(sol.status) in ('Solved', 'AlmostSolved', 'SolverStatus.Solved',
+                                 'SolverStatus.AlmostSolved')
+        return (np.asarray(sol.x, dtype=float) if ok else None), f'clarabel {sol.status}'
+
+    @staticmethod
+    def _refine(y: np.ndarray, P: np.ndarray, q: np.ndarray, m_eq: int = 0) -> np.ndarray:
         """Exact solution on the support set found by OSQP (our own 'polishing', which OSQP
         would print about): solve P_SS y_S = -q_S; keep it if it satisfies the KKT conditions
-        (y >= 0, P y + q >= 0 off the support)."""
-        support = y > 1e-9 * max(1.0, float(y.max(initial=0.0)))
+        (y >= 0, P y + q >= 0 off the support). The last ``m_eq`` variables are free (always
+        in the support)."""
+        m = len(y) - m_eq
+        free = np.zeros(len(y), dtype=bool)
+        free[m:] = True
+        support = free | (y > 1e-9 * max(1.0, float(np.abs(y).max(initial=0.0))))
         if not support.any():
             return y
         y_ref = np.zeros_like(y)
@@ -283,53 +330,78 @@ class PenetrationQP:
         except np.linalg.LinAlgError:
             return y
         grad = P @ y_ref + q
-        if np.all(y_ref >= 0.0) and np.all(grad[~support] >= -1e-9):
+        if np.all(y_ref[:m] >= 0.0) and np.all(grad[~support] >= -1e-9):
             return y_ref
         return y
 
     def solve(self, velocity: np.ndarray, A: np.ndarray, b: np.ndarray,
-              solve_metric=None, scale: float = 1.0) -> PenetrationResult:
-        """Closest velocity to ``velocity`` with ``A v >= b``.
+              solve_metric=None, scale: float = 1.0, A_eq: Optional[np.ndarray] = None,
+              b_eq: Optional[np.ndarray] = None) -> PenetrationResult:
+        """Closest velocity to ``velocity`` with ``A v >= b`` (and ``A_eq v = b_eq``).
 
         Args:
             velocity: (nv,) the velocity after the dynamics update.
-            A: (R, nv) constraint rows; b: (R,) bounds.
+            A: (R, nv) constraint rows; b: (R,) bounds (R may be 0).
             solve_metric: callable X -> W^-1 X for (nv, k) X (the mass metric; e.g. a Cholesky
                 solve); None for the identity metric.
             scale: a typical value of W (body mass for the mass metric) used to scale the dual.
+            A_eq, b_eq: optional (E, nv) equality rows and (E,) values (the foot stick).
+        The ``impulses`` of the result hold the R inequality duals, then the E equality ones.
         """
         v = np.asarray(velocity, dtype=float)
-        A = np.atleast_2d(np.asarray(A, dtype=float))
+        A = np.asarray(A, dtype=float).reshape(-1, v.size)
         b = np.asarray(b, dtype=float).reshape(-1)
-        m = A.shape[0]
+        if A_eq is None:
+            E, e = np.zeros((0, v.size)), np.zeros(0)
+        else:
+            E = np.asarray(A_eq, dtype=float).reshape(-1, v.size)
+            e = np.asarray(b_eq, dtype=float).reshape(-1)
+        m, m_eq = A.shape[0], E.shape[0]
         slack = A @ v - b
-        if m == 0 or np.all(slack >= -self.tolerance):
-            return PenetrationResult(v.copy(), np.zeros(m))
-        WinvAt = A.T.copy() if solve_metric is None else solve_metric(A.T)
-        D = A @ WinvAt
+        eq_res = E @ v - e
+        if (m == 0 or np.all(slack >= -self.tolerance)) and \
+                (m_eq == 0 or np.all(np.abs(eq_res) <= self.tolerance)):
+            return PenetrationResult(v.copy(), np.zeros(m + m_eq))
+        G = np.concatenate([A, E]) if m_eq else A
+        q = np.concatenate([slack, eq_res]) if m_eq else slack
+        WinvGt = G.T.copy() if solve_metric is None else solve_metric(G.T)
+        D = G @ WinvGt
         D = 0.5 * (D + D.T)
         D[np.diag_indices_from(D)] += 1e-10 * max(np.trace(D), 1e-12)
-        solver, rows, cols = self._solver(m)
+        solver, rows, cols = self._solver(m, m_eq)
         t0 = time.perf_counter()
         try:
-            solver.update(q=slack, Px=scale * D[rows, cols])
-            solver.warm_start(x=np.maximum(-slack, 0.0) / max(np.diag(scale * D).max(), 1e-12))
+            x0 = np.concatenate([np.maximum(-slack, 0.0), -eq_res])
+            solver.update(q=q, Px=scale * D[rows, cols])
+            solver.warm_start(x=x0 / max(np.diag(scale * D).max(), 1e-12))
             res = solver.solve(raise_error=False)
             status_val = res.info.status_val
             y = np.asarray(res.x, dtype=float)
             status_text = _status_name(status_val)
         except Exception as exc:
             status_val, y, status_text = None, None, f'error: {exc}'
+        if status_val not in _OSQP_OK or y is None or not np.all(np.isfinite(y)):
+            # second chance: Clarabel on the same dual (scaled the same way)
+            try:
+                y, text = self._clarabel(scale * D, q, m_eq)
+            except Exception as exc:  # pragma: no cover - solver errors are failures
+                y, text = None, f'clarabel error: {exc}'
+            status_text = f'{status_text}, then {text}'
+            if y is not None and np.all(np.isfinite(y)):
+                status_val = osqp.SolverStatus.OSQP_SOLVED
+                self.second_chances += 1
         dt = time.perf_counter() - t0
         self.solves += 1
+        viol0 = float(max(0.0, -slack.min(initial=0.0), np.abs(eq_res).max(initial=0.0)))
         if status_val not in _OSQP_OK or y is None or not np.all(np.isfinite(y)):
             self.failures += 1
-            return PenetrationResult(v.copy(), np.zeros(m), ok=False, status=status_text,
-                                     solved=True, solve_time=dt,
-                                     max_violation=float(max(0.0, -slack.min())))
-        y = self._refine(np.maximum(y, 0.0), scale * D, slack) * scale  # solver's var: y/scale
-        v_new = v + WinvAt @ y
-        viol = float(max(0.0, -(A @ v_new - b).min()))
+            return PenetrationResult(v.copy(), np.zeros(m + m_eq), ok=False, status=status_text,
+                                     solved=True, solve_time=dt, max_violation=viol0)
+        y[:m] = np.maximum(y[:m], 0.0)
+        y = self._refine(y, scale * D, q, m_eq) * scale  # solver's var: y/scale
+        v_new = v + WinvGt @ y
+        viol = float(max(0.0, -(A @ v_new - b).min(initial=0.0),
+                         np.abs(E @ v_new - e).max(initial=0.0)))
         if viol > max(self.tolerance, 1e-4):
             self.failures += 1
             return PenetrationResult(v_new, y, ok=False, status=f'{status_text} (violation '

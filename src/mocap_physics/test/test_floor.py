@@ -38,3 +38,132 @@ def test_pose_round_trip():
 def test_bad_rotation_rejected():
     with pytest.raises(ValueError):
         FloorFrame(np.diag([1.0, 1.0, -1.0]))
+
+
+# -- floor estimation from the feet ------------------------------------------------------------
+from mocap_core.data.synth2d import look_at  # noqa: E402
+from mocap_core.rotations import axis_angle_to_quat, matrix_to_quat, quat_multiply  # noqa: E402
+from mocap_core.skeleton import JOINT_INDEX  # noqa: E402
+from mocap_physics.floor import (CAMERA_UP, FloorTracker, FloorTrackerParams,  # noqa: E402
+                                 body_up, fit_floor_plane)
+
+
+def _camera(pitch_deg=20.0, roll_deg=4.0, height=1.6):
+    """A tilted camera 4 m behind the walk, world -> camera rotation and position."""
+    pos = np.array([-4.0, 0.7, height])
+    aim = pos + np.array([np.cos(np.radians(pitch_deg)), 0.0, -np.sin(np.radians(pitch_deg))])
+    return look_at(pos, aim, np.radians(roll_deg)), pos
+
+
+def _walk_in_camera(R, c, frames=150, seed=0, jitter=0.003):
+    """A person on the floor (z = 0) walking a curved path in the world, seen from the camera
+    (R world->camera, c centre): poses in the camera frame, contact probabilities (feet
+    alternating), and the upper body leaning randomly (+-5 deg about a vertical mean)."""
+    rng = np.random.default_rng(seed)
+    sk = Skeleton.default()
+    rest = Pose.rest(sk)
+    qc = matrix_to_quat(R)
+    poses, probs = [], []
+    for k in range(frames):
+        t = k / 30.0
+        root = np.array([0.6 * t, 0.4 * np.sin(0.8 * t), rest.root_position[2]])
+        yaw = 0.3 * np.cos(0.8 * t)
+        rot = np.array(rest.rotations)
+        rot[0] = axis_angle_to_quat(np.array([0.0, 0.0, yaw]))
+        rot[JOINT_INDEX['spine']] = axis_angle_to_quat(np.radians(5) * rng.normal(size=3))
+        world = Pose(sk, rot, root + jitter * rng.normal(size=3))
+        cam_rot = np.array(world.rotations)
+        cam_rot[0] = quat_multiply(qc, cam_rot[0])
+        poses.append(Pose(sk, cam_rot, R @ (world.root_position - c)))
+        left = np.sin(2 * np.pi * 0.9 * t) > -0.3
+        right = np.sin(2 * np.pi * 0.9 * t) < 0.3
+        probs.append(np.array([left, left, right, right], dtype=float) * 0.9 + 0.05)
+    return poses, probs
+
+
+@pytest.mark.parametrize('pitch,roll', [(20.0, 4.0), (35.0, -6.0), (5.0, 0.0)])
+def test_tracker_recovers_tilted_floor(pitch, roll):
+    """Known tilted camera, feet on the floor: plane within 1 deg and 1 cm (camera height)."""
+    R, c = _camera(pitch, roll)
+    poses, probs = _walk_in_camera(R, c)
+    tracker = FloorTracker()
+    for pose, p in zip(poses, probs):
+        frame, _ = tracker.update(pose, p)
+    assert tracker.ready and tracker.fit.source == 'points'
+    true_normal = R @ np.array([0.0, 0.0, 1.0])     # world up in camera axes
+    angle = np.degrees(np.arccos(np.clip(frame.normal @ true_normal, -1, 1)))
+    assert angle < 1.0, angle
+    # the true floor under the person (mean position) is within 1 cm of the estimated one,
+    # and so is the camera height (measured 4-6 m away from the person)
+    mean_root_cam = np.mean([pose.root_position for pose in poses], axis=0)
+    under = mean_root_cam - (true_normal @ mean_root_cam + c[2]) * true_normal
+    assert abs(frame.transform_points(under)[2]) < 0.01
+    assert abs(frame.height - c[2]) < 0.02, (frame.height, c[2])
+    # the floor frame: feet on z = 0, z up, x along the viewing direction
+    feet = np.array([[q for q in frame.transform_pose(pose).contact_positions().values()]
+                     for pose in poses])
+    assert np.abs(feet[..., 2]).max() < 0.015
+    assert frame.rotation[0] @ np.array([0.0, 0.0, 1.0]) > 0.8
+
+
+def test_fit_is_robust_to_outliers_and_uses_prior_when_degenerate():
+    rng = np.random.default_rng(1)
+    n_true = np.array([0.0, -np.cos(0.3), -np.sin(0.3)])       # a pitched camera's floor
+    offset = 1.4
+    # points on the floor spread over 2 m x 1 m, 3 mm noise, 15 % outliers 5-20 cm above
+    u = np.cross(n_true, [1.0, 0, 0])
+    u /= np.linalg.norm(u)
+    v = np.cross(n_true, u)
+    pts = (rng.uniform(-1, 1, (200, 1)) * u + rng.uniform(-0.5, 0.5, (200, 1)) * v
+           - offset * n_true + 0.003 * rng.normal(size=(200, 3)))
+    out = rng.random(200) < 0.15
+    pts[out] += rng.uniform(0.05, 0.2, (out.sum(), 1)) * n_true
+    fit = fit_floor_plane(pts, prior=CAMERA_UP, prior_weight_m=0.02)
+    assert np.degrees(np.arccos(fit.normal @ n_true)) < 0.5
+    assert abs(fit.offset - offset) < 0.01
+    assert fit.inliers <= 200 - out.sum() + 3
+    # a single foot patch (standing): the rotation comes from the prior
+    patch = -offset * n_true + 0.05 * rng.normal(size=(50, 1)) * u \
+        + 0.05 * rng.normal(size=(50, 1)) * v + 0.004 * rng.normal(size=(50, 3))
+    fit = fit_floor_plane(patch, prior=n_true)
+    assert np.degrees(np.arccos(fit.normal @ n_true)) < 1.0
+    # too few points: the prior through the lowest ones
+    fit = fit_floor_plane(pts[:3], prior=n_true)
+    assert fit.source == 'prior' and np.allclose(fit.normal, n_true)
+
+
+def test_tracker_provisional_then_refined_and_frozen():
+    R, c = _camera(25.0, 3.0)
+    poses, probs = _walk_in_camera(R, c, frames=120)
+    tracker = FloorTracker(FloorTrackerParams(freeze_after=90))
+    frame, changed = tracker.update(poses[0], probs[0])
+    assert frame is not None and not changed and not tracker.ready
+    assert tracker.fit.source == 'prior'
+    changes = []
+    for pose, p in zip(poses[1:], probs[1:]):
+        f, ch = tracker.update(pose, p)
+        changes.append(ch)
+        if ch:
+            # a change re-expresses the frame: the previous one is a different plane
+            assert f is tracker.frame
+    assert tracker.ready and any(changes)
+    assert not any(changes[95:])               # frozen after 90 frames
+    # NaN and unknown contacts are ignored without error
+    bad = Pose(Skeleton.default(), poses[0].rotations, poses[0].root_position)
+    tracker.add(np.full((4, 3), np.nan), [1, 1, 1, 1])
+    tracker.update(bad, None)
+
+
+def test_from_plane_and_body_up():
+    n = np.array([0.1, -0.95, -0.2])
+    ff = FloorFrame.from_plane(n, 1.3)
+    np.testing.assert_allclose(ff.normal, n / np.linalg.norm(n))
+    assert ff.height == pytest.approx(1.3)
+    p = -1.3 * ff.normal + 0.4 * np.cross(ff.normal, [1.0, 0, 0])   # a point on the plane
+    assert ff.transform_points(p)[2] == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(ff.compose(ff.inverse()).rotation, np.eye(3), atol=1e-12)
+    assert ff.difference(ff) == (pytest.approx(0.0, abs=1e-7), 0.0)
+    up = body_up(Pose.rest(Skeleton.default()))
+    np.testing.assert_allclose(up, [0, 0, 1], atol=1e-9)
+    with pytest.raises(ValueError):
+        FloorFrame.from_plane(np.zeros(3), 1.0)

@@ -149,3 +149,65 @@ def test_penetration_feasible_velocity_unchanged(model):
     res = PenetrationQP().solve(v, J[:, 2, :], np.zeros(4))
     assert res.ok and not res.solved
     np.testing.assert_array_equal(res.velocity, v)
+
+
+@pytest.mark.parametrize('metric', ['diagonal', 'identity'])
+def test_penetration_with_stick_rows_matches_cvxpy(model, metric):
+    """Inequality rows (no penetration) plus equality rows (foot stick: the heel's x, y and
+    z, the toe's z and across-foot velocity) against cvxpy."""
+    rng = np.random.default_rng(5)
+    dt = 1.0 / 180
+    for _ in range(3):
+        q = _perturbed_rest(model, rng, scale=0.03)
+        q[2] -= model.contact_positions(q)[:, 2].min() + 0.003
+        J = _contact_jacobians(model, q)
+        z = model.contact_positions(q)[:, 2]
+        v = rng.normal(size=model.nv) * 0.5
+        A, b = J[2:, 2, :], np.minimum(-z[2:] / dt, 0.5)              # right foot: inequality
+        E = np.stack([J[0, 0], J[0, 1], J[0, 2], J[1, 2], J[1, 1]])    # left foot stuck
+        e = np.array([0.01, -0.02, 0.0, 0.0, 0.005])
+        M = model.mass_matrix(q)
+        d = np.diag(M).copy()
+        W, solve_metric, scale = {
+            'diagonal': (np.diag(d), lambda X: X / d[:, None], 70.0),
+            'identity': (np.eye(model.nv), None, 1.0)}[metric]
+        res = PenetrationQP(metric=metric).solve(v, A, b, solve_metric=solve_metric,
+                                                 scale=scale, A_eq=E, b_eq=e)
+        assert res.ok and res.solved, res.status
+        np.testing.assert_allclose(E @ res.velocity, e, atol=1e-6)
+        assert np.all(A @ res.velocity >= b - 1e-6)
+        x = cp.Variable(model.nv)
+        L = np.linalg.cholesky(W)
+        cp.Problem(cp.Minimize(0.5 * cp.sum_squares(L.T @ (x - v))),
+                   [A @ x >= b, E @ x == e]).solve(solver=cp.CLARABEL)
+        np.testing.assert_allclose(res.velocity, x.value, atol=1e-4)
+        assert len(res.impulses) == len(b) + len(e) and np.all(res.impulses[:len(b)] >= 0)
+
+
+def test_penetration_clarabel_second_chance(model, monkeypatch):
+    """OSQP not converging: Clarabel solves the same dual."""
+    q = model.pose_to_q(Pose.rest(model.skeleton))
+    q[2] -= 0.004
+    J = _contact_jacobians(model, q)
+    v = np.zeros(model.nv)
+    v[2] = -1.0
+    qp = PenetrationQP(max_iter=1)
+    res = qp.solve(v, J[:, 2, :], np.full(4, 0.1))
+    assert res.ok, res.status
+    assert qp.second_chances == 1 and 'clarabel' in res.status
+    assert np.all(J[:, 2, :] @ res.velocity >= 0.1 - 1e-6)
+
+
+def test_grf_moment_weight(model):
+    """w_m = 1 is eq. 8; a smaller w_m lets the root moment go unexplained first."""
+    q = model.pose_to_q(Pose.rest(model.skeleton))
+    J = _contact_jacobians(model, q)[:, :, :6]
+    W = model.weight
+    tau_root = np.array([0.0, 0.0, W, 0.0, 80.0, 0.0])    # weight + a pitch moment
+    full = GrfQP(4, MU).solve(tau_root, J, np.ones(4, bool), W)
+    light = GrfQP(4, MU, moment_weight=0.01).solve(tau_root, J, np.ones(4, bool), W)
+    assert full.ok and light.ok
+    assert abs(light.residual[2]) <= abs(full.residual[2]) + 1e-6
+    assert np.linalg.norm(light.residual[3:]) >= np.linalg.norm(full.residual[3:]) - 1e-6
+    with pytest.raises(ValueError):
+        GrfQP(moment_weight=0.0)

@@ -167,7 +167,7 @@ def cmd_plot_keypoints(args: argparse.Namespace) -> int:
 
 
 #: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
-MODEL_COMMANDS = ('mocap_lifter.cli',)
+MODEL_COMMANDS = ('mocap_lifter.cli', 'mocap_physics.cli', 'mocap_global.cli')
 
 
 def cmd_plot_motion(args: argparse.Namespace) -> int:

@@ -1,0 +1,76 @@
+"""Markers and transform messages of the physics node (ROS message types, no rclpy).
+
+:func:`friction_cone_lines` gives the geometry (plain numpy, tested on its own);
+:func:`friction_cone_marker` wraps it in a visualization_msgs/Marker and
+:func:`floor_transform_msg` writes the floor frame as a geometry_msgs/TransformStamped.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+#: Namespace of the friction-cone marker in /mocap/physics/markers.
+CONE_NS = 'physics_friction_cones'
+
+
+def friction_cone_lines(apexes: np.ndarray, friction: float, height: float = 0.12,
+                        segments: int = 12) -> np.ndarray:
+    """Line segments drawing the friction cones ``|f_t| <= mu f_n`` (normal = +z) at each
+    apex: ``segments`` generators from the apex to a circle of radius ``mu height`` at
+    ``height`` above it, and the circle.
+
+    Returns:
+        (2 * 2 * segments * N, 3) points, consecutive pairs are segments (LINE_LIST order).
+    """
+    apexes = np.asarray(apexes, dtype=float).reshape(-1, 3)
+    ang = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    ring = np.stack([friction * height * np.cos(ang), friction * height * np.sin(ang),
+                     np.full(segments, height)], axis=1)
+    out = []
+    for a in apexes:
+        top = a + ring
+        for k in range(segments):
+            out += [a, top[k], top[k], top[(k + 1) % segments]]
+    return np.array(out).reshape(-1, 3)
+
+
+def friction_cone_marker(header, apexes: np.ndarray, friction: float,
+                         color: Sequence[float] = (0.1, 0.8, 0.9, 0.8)):
+    """LINE_LIST Marker (ns :data:`CONE_NS`, id 0) of the friction cones at the contact
+    points that carry a force; a DELETE marker when there is none."""
+    from geometry_msgs.msg import Point
+    from std_msgs.msg import ColorRGBA
+    from visualization_msgs.msg import Marker
+
+    m = Marker(header=header, ns=CONE_NS, id=0, type=Marker.LINE_LIST)
+    m.pose.orientation.w = 1.0
+    apexes = np.asarray(apexes, dtype=float).reshape(-1, 3)
+    if len(apexes) == 0:
+        m.action = Marker.DELETE
+        return m
+    m.action = Marker.ADD
+    m.scale.x = 0.005
+    m.color = ColorRGBA(r=float(color[0]), g=float(color[1]), b=float(color[2]),
+                        a=float(color[3]))
+    m.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+                for p in friction_cone_lines(apexes, friction)]
+    return m
+
+
+def floor_transform_msg(header, floor, child_frame_id: str):
+    """geometry_msgs/TransformStamped of the floor frame in the source (camera) frame:
+    ``header.frame_id`` = source frame, ``child_frame_id`` = the floor frame, transform =
+    ``T_floor_camera^-1`` (a point p_floor in the floor frame is
+    ``rotation * p_floor + translation`` in the camera frame), as tf2 would store it."""
+    from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
+
+    inv = floor.inverse()
+    q = inv.quaternion()
+    t = inv.translation
+    return TransformStamped(
+        header=header, child_frame_id=child_frame_id,
+        transform=Transform(translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+                            rotation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]),
+                                                w=float(q[3]))))
