@@ -145,9 +145,9 @@ def test_node_survives_bad_input(processes, ros2_cmd, listener):
         keypoints_to_cloud(np.zeros((1, 23, 3)), make_header(t0 + 1, 'c')),  # nobody seen
     ]
     nan = keypoints_to_cloud(kp[0], make_header(t0 + 2, 'c'))
-    nan.data = np.frombuffer(bytes(nan.data), np.float32).copy()
-    nan.data[0] = np.nan
-    nan.data = nan.data.tobytes()
+    values = np.frombuffer(bytes(nan.data), np.float32).copy()
+    values[0] = np.nan                      # the nose's u
+    nan.data = values.tobytes()
     bad.append(nan)
     for msg in bad:
         pub.publish(msg)

@@ -145,9 +145,14 @@ def main(args: Optional[List[str]] = None) -> int:
             self.last_stamp = stamp
             person = self.p['person']
             if person >= len(people) or not np.any(people[person, :, 2] > 0):
-                self.diag.dropped += 1
+                # A frame without the person still goes through the network (trained with
+                # dropped frames: the pose is carried by the temporal context), unless nothing
+                # has been seen yet.
                 self.get_logger().info('nobody seen in this frame', throttle_duration_sec=2.0)
-                return
+                if self.lifter.frames_seen == 0:
+                    self.diag.dropped += 1
+                    return
+                people = np.zeros((person + 1, people.shape[1], 3))
             intr = self.intrinsics
             if intr is None:
                 intr = self._approximate_intrinsics(people[person])

@@ -240,9 +240,11 @@ def _discriminator_step(disc, opt_d, fake_q, real_vel, rng, device) -> None:
 
 
 def save_weights(model: MotioNet, path: Path, info: Optional[Dict] = None) -> None:
-    """Inference weights: state dict + network configuration (+ free-form info)."""
-    torch.save({'model': model.state_dict(), 'config': asdict(model.cfg),
-                'info': info or {}}, path)
+    """Inference weights: state dict (floating tensors stored as float16 to keep the shipped
+    file small) + network configuration (+ free-form info)."""
+    state = {k: (v.half() if v.is_floating_point() else v) for k, v in
+             model.state_dict().items()}
+    torch.save({'model': state, 'config': asdict(model.cfg), 'info': info or {}}, path)
 
 
 def export_checkpoint(checkpoint: Path, out: Path) -> Path:
@@ -263,7 +265,8 @@ def load_weights(path: Path, device: str = 'cpu', causal: Optional[bool] = None)
     if causal is not None:
         cfg.causal = causal
     model = MotioNet(cfg).to(device)
-    model.load_state_dict(state['model'])
+    model.load_state_dict({k: (v.float() if v.is_floating_point() else v)
+                           for k, v in state['model'].items()})
     model.eval()
     return model
 
