@@ -44,7 +44,7 @@ pids+=("$lifter")
 wait_for "$out/lifter.log" 'lifter ready' 120
 
 echo "[demo] ros2 run mocap_keypoints keypoints on $video"
-ros2 run mocap_keypoints keypoints --ros-args -p path:="$video" -p realtime:=false \
+ros2 run mocap_keypoints keypoints --ros-args -p path:="$video" -p realtime:=true \
   -p wait_for_subscribers:=2 -p wait_timeout_s:=30.0 2>&1 | tee "$out/keypoints.log"
 
 sleep 3   # the lifter emits the frames that waited for look-ahead, the recorder writes them
