@@ -96,3 +96,25 @@ def test_skeleton_urdf_loads_in_pinocchio(tmp_path, ros_env):
     model = pin.buildModelFromUrdf(str(out), pin.JointModelFreeFlyer())
     assert sum(i.mass for i in model.inertias) == pytest.approx(80.0)
 
+
+
+def test_export_bvh_reproduces_ground_truth_joints(tmp_path, ros_env):
+    """`mocap export bvh` of a committed bag's motion re-reads to the bag's joint positions."""
+    from mocap_core.bag_io import BagReader, deserialize
+    from mocap_core.data.bvh import BVH_TO_WORLD, bvh_fk, read_bvh
+    from mocap_core.data.bvh_writer import FRAME_TO_BVH
+    from mocap_core.ros_conversions import cloud_to_positions
+
+    bag = ROOT / 'bags' / 'gt_cmu_walk_12_02'
+    out = tmp_path / 'gt.bvh'
+    r = run(['export', 'bvh', bag, '--topic', '/mocap/groundtruth/motion', '-o', out], ros_env)
+    assert r.returncode == 0, r.stderr
+    with BagReader(bag) as reader:
+        joints = np.stack([cloud_to_positions(deserialize(m.data, m.msgtype)) for m in
+                           reader.messages(topics=['/mocap/groundtruth/joints3d'])])
+    got = bvh_fk(read_bvh(out), unit_scale=0.01).positions[:, :18]
+    want = joints @ (np.asarray(BVH_TO_WORLD) @ FRAME_TO_BVH['camera']).T
+    assert got.shape == want.shape
+    np.testing.assert_allclose(got, want, atol=1e-3)   # float32 joints in the bag
+    r = run(['export', 'bvh', bag, '--topic', '/none', '-o', out], ros_env)
+    assert r.returncode == 1 and 'Traceback' not in r.stderr

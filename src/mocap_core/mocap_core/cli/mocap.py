@@ -8,6 +8,7 @@ export and bench sub-commands).
     mocap skeleton [--urdf FILE]      # the default skeleton, its bone lengths and URDF
     mocap data build|report|split|to-bag|from-openpose|fit-confidence
                                       # motion-capture data (see mocap_core.cli.mocap_data)
+    mocap export bvh <bag> -o out.bvh # a motion topic as BVH for animation tools
     mocap train lifter | mocap eval lifter   # models (see mocap_lifter.cli)
 """
 
@@ -166,6 +167,37 @@ def cmd_plot_keypoints(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export_bvh(args: argparse.Namespace) -> int:
+    """Write the motion topic of a bag as a BVH file."""
+    from ..bag_io import BagError, BagReader, deserialize
+    from ..data.bvh_writer import write_bvh
+    from ..ros_conversions import MessageError, motion_to_pose, stamp_to_ns
+
+    poses, stamps = [], []
+    try:
+        with BagReader(args.bag) as reader:
+            for m in reader.messages(topics=[args.topic]):
+                try:
+                    msg = deserialize(m.data, m.msgtype)
+                    poses.append(motion_to_pose(msg))
+                    stamps.append(stamp_to_ns(msg.header.stamp))
+                except MessageError as exc:
+                    print(f'skipping a message: {exc}', file=sys.stderr)
+    except BagError as exc:
+        print(f'mocap export bvh: error: {exc}', file=sys.stderr)
+        return 1
+    if not poses:
+        print(f'mocap export bvh: error: no motion on {args.topic}', file=sys.stderr)
+        return 1
+    fps = args.fps or (1e9 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 30.0)
+    # one skeleton for the file: the last estimate (the lifter holds it after a while)
+    skeleton = poses[-1].skeleton
+    out = write_bvh(args.output, skeleton, np.stack([p.rotations for p in poses]),
+                    np.stack([p.root_position for p in poses]), fps, frame=args.frame)
+    print(f'wrote {out}: {len(poses)} frames at {fps:.2f} fps')
+    return 0
+
+
 #: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
 MODEL_COMMANDS = ('mocap_lifter.cli', 'mocap_physics.cli', 'mocap_global.cli')
 
@@ -240,6 +272,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .mocap_data import add_data_parser
     add_data_parser(sub)
+
+    p = sub.add_parser('export', help='export motion to other formats')
+    export_sub = p.add_subparsers(dest='export_command', metavar='FORMAT')
+    pb = export_sub.add_parser('bvh', help='a motion topic of a bag as a BVH file (y up, cm)')
+    pb.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
+    pb.add_argument('-o', '--output', default='motion.bvh', help='output BVH file')
+    pb.add_argument('--topic', default='/mocap/lifter/motion', help='motion topic')
+    pb.add_argument('--frame', choices=('camera', 'world'), default='camera',
+                    help="the topic's frame: camera optical frame or z-up world")
+    pb.add_argument('--fps', type=float, help='frame rate (default: from the stamps)')
+    pb.set_defaults(func=cmd_export_bvh)
 
     # Training and evaluation commands live with their models, in the node packages.
     train_sub = sub.add_parser('train', help='train a model').add_subparsers(
