@@ -136,59 +136,58 @@ def cmd_skeleton(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_plot_keypoints(args: argparse.Namespace) -> int:
-    """Plot the first person's keypoints of a bag's keypoint topic."""
-    from ..bag_io import BagError, BagReader, deserialize
-    from ..plots import plot_keypoint_frames
-    from ..ros_conversions import MessageError, cloud_to_keypoints, stamp_to_ns
+class CommandError(Exception):
+    """A one-line error of a sub-command (printed as ``mocap <command>: error: ...``)."""
 
-    times, frames = [], []
+
+def read_topic(bag: str, topic: str, convert: Callable, what: str):
+    """Stamps (ns) and converted messages of one topic of a bag, in time order.
+
+    Messages the converter rejects are skipped with a note on stderr. Raises CommandError for
+    an unreadable bag or when nothing on the topic converts."""
+    from ..bag_io import BagError, BagReader, deserialize
+    from ..ros_conversions import MessageError, stamp_to_ns
+
+    stamps, values = [], []
     try:
-        with BagReader(args.bag) as reader:
-            for m in reader.messages(topics=[args.topic]):
+        with BagReader(bag) as reader:
+            for m in reader.messages(topics=[topic]):
                 try:
                     msg = deserialize(m.data, m.msgtype)
-                    kp = cloud_to_keypoints(msg)
+                    values.append(convert(msg))
                 except MessageError as exc:
                     print(f'skipping a message: {exc}', file=sys.stderr)
                     continue
-                if len(kp):
-                    times.append(stamp_to_ns(msg.header.stamp) * 1e-9)
-                    frames.append(kp[0])
+                stamps.append(stamp_to_ns(msg.header.stamp))
     except BagError as exc:
-        print(f'mocap plot keypoints: error: {exc}', file=sys.stderr)
-        return 1
-    if not frames:
-        print(f'mocap plot keypoints: error: no keypoints on {args.topic}', file=sys.stderr)
-        return 1
-    out = plot_keypoint_frames(times, np.stack(frames), args.output,
-                               title=f'{args.topic} ({len(frames)} frames)')
+        raise CommandError(str(exc)) from None
+    if not values:
+        raise CommandError(f'no {what} on {topic}')
+    return stamps, values
+
+
+def cmd_plot_keypoints(args: argparse.Namespace) -> int:
+    """Plot the first person's keypoints of a bag's keypoint topic."""
+    from ..plots import plot_keypoint_frames
+    from ..ros_conversions import cloud_to_keypoints
+
+    stamps, clouds = read_topic(args.bag, args.topic, cloud_to_keypoints, 'keypoints')
+    keep = [i for i, kp in enumerate(clouds) if len(kp)]
+    if not keep:
+        raise CommandError(f'no person rows on {args.topic}')
+    out = plot_keypoint_frames([stamps[i] * 1e-9 for i in keep],
+                               np.stack([clouds[i][0] for i in keep]), args.output,
+                               title=f'{args.topic} ({len(keep)} frames)')
     print(f'wrote {out}')
     return 0
 
 
 def cmd_export_bvh(args: argparse.Namespace) -> int:
     """Write the motion topic of a bag as a BVH file."""
-    from ..bag_io import BagError, BagReader, deserialize
     from ..data.bvh_writer import write_bvh
-    from ..ros_conversions import MessageError, motion_to_pose, stamp_to_ns
+    from ..ros_conversions import motion_to_pose
 
-    poses, stamps = [], []
-    try:
-        with BagReader(args.bag) as reader:
-            for m in reader.messages(topics=[args.topic]):
-                try:
-                    msg = deserialize(m.data, m.msgtype)
-                    poses.append(motion_to_pose(msg))
-                    stamps.append(stamp_to_ns(msg.header.stamp))
-                except MessageError as exc:
-                    print(f'skipping a message: {exc}', file=sys.stderr)
-    except BagError as exc:
-        print(f'mocap export bvh: error: {exc}', file=sys.stderr)
-        return 1
-    if not poses:
-        print(f'mocap export bvh: error: no motion on {args.topic}', file=sys.stderr)
-        return 1
+    stamps, poses = read_topic(args.bag, args.topic, motion_to_pose, 'motion')
     fps = args.fps or (1e9 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 30.0)
     # one skeleton for the file: the last estimate (the lifter holds it after a while)
     skeleton = poses[-1].skeleton
@@ -196,6 +195,24 @@ def cmd_export_bvh(args: argparse.Namespace) -> int:
                     np.stack([p.root_position for p in poses]), fps, frame=args.frame)
     print(f'wrote {out}: {len(poses)} frames at {fps:.2f} fps')
     return 0
+
+
+def cmd_plot_motion(args: argparse.Namespace) -> int:
+    """Plot the skeleton of a motion topic (MultiDOFJointTrajectory) at a few frames."""
+    from ..plots import plot_motion_frames
+    from ..ros_conversions import motion_to_pose
+
+    stamps, poses = read_topic(args.bag, args.topic, motion_to_pose, 'motion')
+    out = plot_motion_frames([t * 1e-9 for t in stamps],
+                             np.stack([p.joint_positions() for p in poses]),
+                             poses[-1].skeleton.parents, args.output, frame=args.frame,
+                             title=f'{args.topic} ({len(poses)} frames)')
+    print(f'wrote {out}')
+    return 0
+
+
+#: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
+MODEL_COMMANDS = ('mocap_lifter.cli', 'mocap_physics.cli', 'mocap_global.cli')
 
 
 #: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
@@ -307,6 +324,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 0 if args.command is None else 2
     try:
         return int(args.func(args) or 0)
+    except CommandError as exc:
+        print(f"mocap {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
     except (OSError, ValueError) as exc:
