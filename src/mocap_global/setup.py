@@ -1,3 +1,5 @@
+from glob import glob
+
 from setuptools import find_packages, setup
 
 package_name = 'mocap_global'
@@ -9,6 +11,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/weights', glob('weights/*.pt') + glob('weights/*.md')
+         + glob('weights/*.json')),
     ],
     install_requires=['setuptools'],
     zip_safe=False,
@@ -19,7 +23,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-
+            'gmr = mocap_global.node:main',
         ],
     },
 )

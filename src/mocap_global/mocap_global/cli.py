@@ -1,0 +1,170 @@
+"""``mocap train gmr`` and ``mocap eval gmr`` (also ``python -m mocap_global.cli``).
+
+    mocap train gmr [--config cfg.json] [--fps 30|10] [--size cpu|paper] [--steps N]
+                    [--minutes M] [--run-dir runs/gmr_30fps] [--device cpu|cuda]
+                    [--threads N] [--no-resume] [--install]
+    mocap eval gmr [--weights FILE] [--noise none|lifter|both] [--lookahead N]
+                   [--out DIR] [--device cpu|cuda] [--no-bags]
+
+Training reads the train split of the processed dataset (``mocap data build``; built on
+first use), evaluation the validation split (and the committed ground-truth bags for the
+static-camera fusion).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import List, Optional
+
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / 'weights'
+
+
+def passive_openmp() -> None:
+    """Idle OpenMP threads sleep instead of spinning (set before torch is imported). With the
+    default spinning, two torch threads on a 2-core machine that also runs other work were
+    measured 30x slower per training step."""
+    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')
+
+
+def weights_name(fps: float) -> str:
+    """Shipped weights file of a model rate: ``gmr.pt`` (30 fps), ``gmr_10fps.pt`` ..."""
+    return 'gmr.pt' if round(fps) == 30 else f'gmr_{int(round(fps))}fps.pt'
+
+
+def add_train_parser(sub) -> None:
+    p = sub.add_parser('gmr', help='train GMR (world-frame global motion from local poses)')
+    p.add_argument('--config', help='JSON file with TrainConfig fields (model: GMRConfig, '
+                   'augmentation: Augmentation)')
+    p.add_argument('--fps', type=float, help='model frame rate: 30 (default, the pipeline '
+                   'rate) or 10 (as in the paper)')
+    p.add_argument('--size', choices=('cpu', 'paper'), default='cpu',
+                   help="'cpu': 2 x 128 GRU (default, shipped); 'paper': 4 x 2048 GRU, "
+                   'batch 32, lr 5e-5 (a GPU configuration)')
+    p.add_argument('--steps', type=int, help='override the number of steps')
+    p.add_argument('--minutes', type=float, help='fit the run into this many minutes: the '
+                   'number of steps is set from the speed of the first steps')
+    p.add_argument('--run-dir', help='checkpoints, log.csv, loss.png (default '
+                   'runs/gmr_<fps>fps)')
+    p.add_argument('--device', default='cpu', help="'cpu' or 'cuda'")
+    p.add_argument('--threads', type=int, help='torch CPU threads (default 2)')
+    p.add_argument('--no-resume', action='store_true', help='start over even if a checkpoint '
+                   'exists')
+    p.add_argument('--install', action='store_true', help='copy the final weights, loss curve '
+                   'and training record to the package (weights/gmr.pt for 30 fps)')
+    p.set_defaults(func=cmd_train)
+
+
+def add_eval_parser(sub) -> None:
+    p = sub.add_parser('gmr', help='evaluate GMR on the validation split')
+    p.add_argument('--weights', help='weights file (default: the shipped weights/gmr.pt)')
+    p.add_argument('--noise', choices=('none', 'lifter', 'both'), default='both',
+                   help='input local poses: ground truth, lifter-like noisy, or both')
+    p.add_argument('--lookahead', type=int, default=15, help='look-ahead frames of the '
+                   'online (node) evaluation (default 15)')
+    p.add_argument('--window', type=int, default=48, help='frames per GRU pass of the online '
+                   'evaluation (default 48, the node\'s default)')
+    p.add_argument('--max-clips', type=int, help='evaluate on the first N clips only')
+    p.add_argument('--out', help='report directory (default: next to the weights)')
+    p.add_argument('--device', default='cpu')
+    p.add_argument('--threads', type=int, default=1, help='torch CPU threads (default 1)')
+    p.add_argument('--no-bags', action='store_true', help='skip the static-camera fusion '
+                   'evaluation on the committed bags')
+    p.set_defaults(func=cmd_eval)
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    passive_openmp()
+    from mocap_core.data.dataset import load_dataset
+
+    from .train import TrainConfig, train
+
+    cfg = TrainConfig.paper() if args.size == 'paper' else TrainConfig()
+    if args.config:
+        cfg = TrainConfig.from_dict(json.loads(Path(args.config).read_text()))
+    if args.fps:
+        cfg.model.fps = float(args.fps)
+    if args.steps:
+        cfg.steps = args.steps
+    if args.threads:
+        cfg.threads = args.threads
+    fps = int(round(cfg.model.fps))
+    run_dir = Path(args.run_dir or f'runs/gmr_{fps}fps')
+    print('loading the dataset (train and validation splits) ...', flush=True)
+    t0 = time.time()
+    train_motions = load_dataset('train')
+    val_motions = load_dataset('validation')
+    print(f'{len(train_motions)} training clips, {len(val_motions)} validation clips '
+          f'({time.time() - t0:.0f} s)', flush=True)
+    weights = train(train_motions, val_motions, run_dir, cfg, device=args.device,
+                    resume=not args.no_resume, minutes=args.minutes)
+    print(f'weights: {weights}')
+    if args.install:
+        WEIGHTS_DIR.mkdir(exist_ok=True)
+        name = weights_name(cfg.model.fps)
+        dest = WEIGHTS_DIR / name
+        shutil.copy(weights, dest)
+        stem = Path(name).stem
+        shutil.copy(run_dir / 'loss.png', WEIGHTS_DIR / f'{stem}_loss.png')
+        shutil.copy(run_dir / 'log.csv', WEIGHTS_DIR / f'{stem}_log.csv')
+        import torch
+        info = torch.load(weights, map_location='cpu', weights_only=False)['info']
+        (WEIGHTS_DIR / f'{stem}_train.json').write_text(json.dumps(
+            {'config': asdict(cfg), 'command': ' '.join(['mocap', 'train', 'gmr']
+                                                       + sys.argv[3:]),
+             'steps': info.get('steps'), 'train_seconds': info.get('train_seconds'),
+             'validation_windows': info.get('validation_windows')}, indent=1))
+        print(f'installed {dest}')
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    passive_openmp()
+    from mocap_core.data.dataset import load_dataset
+
+    from .evaluate import evaluate_all, write_report
+    from .model import load_weights
+
+    import torch
+    torch.set_num_threads(args.threads)
+    weights = Path(args.weights) if args.weights else WEIGHTS_DIR / 'gmr.pt'
+    if not weights.exists():
+        print(f'mocap eval gmr: error: weights not found: {weights} (train them with '
+              '`mocap train gmr --install`)', file=sys.stderr)
+        return 1
+    model = load_weights(weights, args.device)
+    val = load_dataset('validation')
+    if args.max_clips:
+        val = val[:args.max_clips]
+    noises = ('none', 'lifter') if args.noise == 'both' else (args.noise,)
+    t0 = time.time()
+    bags = None if args.no_bags else sorted((Path(__file__).resolve().parents[3] / 'bags')
+                                            .glob('gt_*'))
+    report = evaluate_all(model, val, noises, args.lookahead, args.device, bags=bags,
+                          progress=True, window=args.window)
+    report['eval_seconds'] = round(time.time() - t0, 1)
+    report['weights'] = str(weights)
+    out = Path(args.out) if args.out else weights.parent / f'{weights.stem}_eval'
+    path = write_report(report, out, f'GMR ({weights.name}) on the validation split')
+    print(path.read_text())
+    print(f'report: {path} (and eval.json)')
+    return 0
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    parser = argparse.ArgumentParser(prog='python -m mocap_global.cli')
+    sub = parser.add_subparsers(dest='command', required=True)
+    add_train_parser(sub.add_parser('train').add_subparsers(dest='what', required=True))
+    add_eval_parser(sub.add_parser('eval').add_subparsers(dest='what', required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,195 @@
+"""The global motion regressor (GMR, §3.3 and Fig. 4; PyTorch, no ROS imports).
+
+Temporal encoder: a bidirectional multi-layer GRU over the per-frame input features
+(:mod:`.features`), its forward and backward hidden states concatenated (2H per frame), then a
+linear projection to P features (§4.1: 4 x 2048 GRU, 2048 projection). Motion regression layer:
+one linear layer per frame that outputs the global motion ``dG_i = (dA_i, dT_i)`` between
+frames i and i + 1 in the body frame of frame i (axis-angle, metres; the output at the last
+frame of a sequence has no motion to predict and is ignored), scaled by fixed output
+statistics of the training data. Beyond the paper the same layer also outputs the world's up
+direction in the body frame (3 values, normalised): the root's tilt, which the node uses for a
+gravity-aligned first pose and optional tilt correction.
+
+Differences from the paper (documented choices): a ReLU between the projection and the
+regression layer (two linear layers in a row would be one linear map); input/output
+normalisation by training statistics; by default the local pose as joint positions in the
+root frame instead of quaternions (``pose_input='positions'``: blind to the bone twists a
+lifter cannot see, :mod:`.features`), the bone-group lengths (``skeleton_input``) and the
+forward differences of the pose features (``velocity_input``: joint velocities in the root
+frame, computed inside the network so that a window never looks beyond its end) as extra
+inputs. :meth:`GMRConfig.paper` is the paper's input (quaternions only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Union
+
+import numpy as np
+import torch
+from torch import nn
+
+from mocap_core.rotations import axis_angle_to_matrix
+from mocap_core.skeleton import JOINT_NAMES
+
+from .features import num_features, pose_dims
+
+
+@dataclass
+class GMRConfig:
+    """Network configuration; the defaults are the shipped CPU model."""
+
+    layers: int = 2
+    hidden: int = 128
+    projection: int = 128
+    root_input: str = 'none'
+    fps: float = 30.0
+    window: int = 64
+    velocity_input: bool = True
+    skeleton_input: bool = True
+    pose_input: str = 'positions'
+    joint_names: List[str] = field(default_factory=lambda: list(JOINT_NAMES))
+
+    @classmethod
+    def paper(cls) -> 'GMRConfig':
+        """The paper's configuration (§4.1, S5): 4 layers of 2048 units, 2048 projection,
+        10 fps, 64-frame windows, local-pose quaternions only. A GPU configuration."""
+        return cls(layers=4, hidden=2048, projection=2048, fps=10.0, window=64,
+                   velocity_input=False, skeleton_input=False, pose_input='quat')
+
+    @property
+    def num_features(self) -> int:
+        return num_features(self.root_input, self.skeleton_input, self.pose_input)
+
+
+def reverse_padded(x: torch.Tensor, lengths: Optional[torch.Tensor]) -> torch.Tensor:
+    """Reverse (B, T, C) sequences in time within their valid ``lengths`` (the padding stays
+    at the end); its own inverse. ``lengths=None``: all T frames are valid."""
+    if lengths is None:
+        return x.flip(1)
+    t = torch.arange(x.shape[1], device=x.device)[None]
+    n = lengths.to(x.device)[:, None]
+    idx = torch.where(t < n, n - 1 - t, t)
+    return x.gather(1, idx[..., None].expand(-1, -1, x.shape[-1]))
+
+
+class BiGRU(nn.Module):
+    """A stack of bidirectional GRU layers for padded batches: each layer runs a forward GRU
+    on the sequences and a second GRU on the sequences reversed within their lengths, and
+    concatenates both (2H per frame). The same as ``nn.GRU(bidirectional=True)`` on packed
+    sequences, without the packing, whose backward pass is very slow on the CPU."""
+
+    def __init__(self, inputs: int, hidden: int, layers: int) -> None:
+        super().__init__()
+        self.fwd = nn.ModuleList(nn.GRU(inputs if i == 0 else 2 * hidden, hidden,
+                                        batch_first=True) for i in range(layers))
+        self.bwd = nn.ModuleList(nn.GRU(inputs if i == 0 else 2 * hidden, hidden,
+                                        batch_first=True) for i in range(layers))
+
+    def forward(self, x: torch.Tensor, lengths: Optional[torch.Tensor] = None) -> torch.Tensor:
+        if lengths is not None and not bool((lengths < x.shape[1]).any()):
+            lengths = None
+        if lengths is None and not torch.is_grad_enabled():
+            return self._fused(x)
+        for f, b in zip(self.fwd, self.bwd):
+            hf, _ = f(x)
+            hb, _ = b(reverse_padded(x, lengths))
+            x = torch.cat([hf, reverse_padded(hb, lengths)], dim=-1)
+        return x
+
+    def _fused(self, x: torch.Tensor) -> torch.Tensor:
+        """Inference without padding: the same weights through PyTorch's fused bidirectional
+        GRU kernel (what ``nn.GRU(bidirectional=True)`` calls; ~10 % faster per window)."""
+        from torch import _VF
+        weights = []
+        for f, b in zip(self.fwd, self.bwd):
+            weights += [f.weight_ih_l0, f.weight_hh_l0, f.bias_ih_l0, f.bias_hh_l0,
+                        b.weight_ih_l0, b.weight_hh_l0, b.bias_ih_l0, b.bias_hh_l0]
+        h0 = x.new_zeros(2 * len(self.fwd), x.shape[0], self.fwd[0].hidden_size)
+        out, _ = _VF.gru(x, h0, weights, True, len(self.fwd), 0.0, False, True, True)
+        return out
+
+
+class GMR(nn.Module):
+    """Bidirectional GRU encoder + linear projection + motion regression layer."""
+
+    def __init__(self, cfg: Optional[GMRConfig] = None) -> None:
+        super().__init__()
+        self.cfg = cfg or GMRConfig()
+        c = self.cfg
+        self.gru = BiGRU(c.num_features + (pose_dims(c.pose_input) if c.velocity_input else 0),
+                         c.hidden, c.layers)
+        self.projection = nn.Linear(2 * c.hidden, c.projection)
+        self.regression = nn.Linear(c.projection, 9)
+        with torch.no_grad():
+            self.regression.weight.mul_(0.1)
+            self.regression.bias.zero_()
+        self.register_buffer('feature_mean', torch.zeros(c.num_features))
+        self.register_buffer('feature_std', torch.ones(c.num_features))
+        self.register_buffer('out_mean', torch.zeros(6))
+        self.register_buffer('out_std', torch.ones(6))
+
+    def set_normalisation(self, feature_mean, feature_std, out_mean, out_std) -> None:
+        """Input and output statistics (NumPy or tensors); tiny stds are clamped."""
+        def t(v):
+            return torch.as_tensor(np.asarray(v, dtype=np.float32),
+                                   device=self.feature_mean.device)
+        self.feature_mean.copy_(t(feature_mean))
+        self.feature_std.copy_(torch.clamp(t(feature_std), min=1e-3))
+        self.out_mean.copy_(t(out_mean))
+        self.out_std.copy_(torch.clamp(t(out_std), min=1e-4))
+
+    def forward(self, x: torch.Tensor,
+                lengths: Optional[torch.Tensor] = None) -> Dict[str, torch.Tensor]:
+        """``x`` (B, T, C) features; ``lengths`` (B,) valid frames per sequence (the rest is
+        padding: the backward GRU starts at each sequence's own end, :class:`BiGRU`).
+
+        Returns ``axis_angle`` (B, T, 3) and ``translation`` (B, T, 3): the motion from
+        frame i to i + 1 in the body frame of frame i; ``rotation`` (B, T, 3, 3) its matrix;
+        ``up`` (B, T, 3): the world's up direction in the body frame of frame i (unit)."""
+        h = (x - self.feature_mean) / self.feature_std
+        if self.cfg.velocity_input:
+            h = torch.cat([h, self._velocity(x, lengths)], dim=-1)
+        h = torch.relu(self.projection(self.gru(h, lengths)))
+        raw = self.regression(h)
+        motion = raw[..., :6] * self.out_std + self.out_mean
+        up = raw[..., 6:] + torch.tensor([0.0, 0.0, 1.0], device=raw.device, dtype=raw.dtype)
+        up = up / up.norm(dim=-1, keepdim=True).clamp(min=1e-6)
+        aa = motion[..., :3]
+        return {'axis_angle': aa, 'translation': motion[..., 3:],
+                'rotation': axis_angle_to_matrix(aa), 'up': up}
+
+
+    def _velocity(self, x: torch.Tensor, lengths: Optional[torch.Tensor]) -> torch.Tensor:
+        """Forward differences of the local-pose features, x_{i+1} - x_i (quaternions x 10,
+        root-frame joint positions x fps: m/s), zero at the last valid frame of each sequence
+        (a window never sees beyond its end)."""
+        q = x[..., :pose_dims(self.cfg.pose_input)]
+        d = torch.zeros_like(q)
+        d[:, :-1] = q[:, 1:] - q[:, :-1]
+        if lengths is not None:
+            t = torch.arange(x.shape[1], device=x.device)[None]
+            d = d * (t < lengths.to(x.device)[:, None] - 1)[..., None].to(d.dtype)
+        return d * (10.0 if self.cfg.pose_input == 'quat' else self.cfg.fps)
+
+
+def save_weights(model: GMR, path: Union[str, Path], info: Optional[Dict] = None) -> None:
+    """Inference weights: state dict + configuration (+ free-form info)."""
+    torch.save({'model': model.state_dict(), 'config': asdict(model.cfg), 'info': info or {}},
+               path)
+
+
+def load_weights(path: Union[str, Path], device: str = 'cpu') -> GMR:
+    """Load :func:`save_weights` output; raises ValueError for a file that is not GMR
+    weights."""
+    try:
+        state = torch.load(path, map_location=device, weights_only=False)
+        cfg = GMRConfig(**state['config'])
+    except (KeyError, TypeError, RuntimeError, EOFError) as exc:
+        raise ValueError(f'{path}: not GMR weights ({type(exc).__name__}: {exc})') from None
+    model = GMR(cfg).to(device)
+    model.load_state_dict(state['model'])
+    model.eval()
+    model.info = state.get('info', {})
+    return model

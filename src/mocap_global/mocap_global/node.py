@@ -1,0 +1,324 @@
+"""``ros2 run mocap_global gmr``: world-frame pose independent of camera motion (GMR).
+
+Subscribes ``motion_topic`` (default ``/mocap/physics/motion``; the lifter's
+``/mocap/lifter/motion`` works too, by the parameter or a remap), a
+trajectory_msgs/MultiDOFJointTrajectory per frame. Only the local joint rotations and the
+bone lengths are used (the paper's camera-agnostic input): the GRU runs over a sliding window
+of ``window`` frames and frame k is emitted when frame k + ``lookahead`` has arrived (latency
+``lookahead`` / fps seconds; ``lookahead:=0`` is the causal option). The world pose is
+accumulated from a gravity-aligned first pose (z up, heading +x, feet on z = 0), see
+:mod:`mocap_global.online`.
+
+Publishes, stamped with the input's stamps, in ``frame_id`` (default ``world``):
+``/mocap/world/motion`` (MultiDOFJointTrajectory), ``/mocap/world/joints3d`` (PointCloud2),
+``/mocap/world/joint_states`` (JointState), ``/mocap/world/odom`` (nav_msgs/Odometry: root
+pose, twist in the root frame), ``/mocap/world/path`` (nav_msgs/Path), ``/mocap/world/markers``
+(MarkerArray) and ``/diagnostics``.
+
+``static_camera:=true`` (beyond the paper) fuses the GMR motion with the input's root
+trajectory, which does not drift when the camera does not move
+(:class:`~mocap_global.online.StaticCameraFusion`).
+
+Bad input never stops the node: a malformed or NaN message is dropped with a warning, a
+joint set that does not match the model is reported with the joints it needs, a stamp that
+does not advance is dropped, a gap longer than ``max_gap_s`` restarts the accumulation (logged
+and counted), and nothing is published until ``lookahead + 1`` frames have arrived (said
+once).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+
+from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
+
+PARAMETERS = (
+    ParamSpec('motion_topic', '/mocap/physics/motion', 'Input motion '
+              '(MultiDOFJointTrajectory): the physics or the lifter stage', read_only=True),
+    ParamSpec('weights', '', 'GMR weights file; empty = the shipped weights '
+              '(share/mocap_global/weights/gmr.pt)', read_only=True),
+    ParamSpec('lookahead', 15, 'Future frames each output waits for: latency = lookahead / '
+              'fps (0 = causal; the bidirectional GRU is more accurate with more)',
+              read_only=True, min_value=0),
+    ParamSpec('window', 48, 'Frames the GRU sees per update (0 = the training window, 64); '
+              'the time per frame grows with it', read_only=True, min_value=0),
+    ParamSpec('max_gap_s', 0.25, 'A larger gap between input stamps restarts the '
+              'accumulation from a new gravity-aligned pose', min_value=0.0),
+    ParamSpec('tilt_correction', 0.05, 'Fraction per frame by which the accumulated '
+              'orientation\'s pitch and roll are pulled towards the network\'s tilt estimate '
+              '(removes the tilt drift; 0 = the paper\'s pure accumulation)', min_value=0.0,
+              max_value=1.0),
+    ParamSpec('static_camera', False, 'The camera does not move: fuse GMR with the input\'s '
+              'root trajectory (removes drift)', read_only=True),
+    ParamSpec('input_up', 'auto', "Up direction of the input frame for the fusion: 'auto' "
+              "(z up, unless the input frame_id is an optical frame: then estimated), "
+              "'estimate', or three numbers 'x y z'", read_only=True),
+    ParamSpec('fusion_init_s', 1.0, 'Static camera with an estimated up: seconds of GMR '
+              'alone while the input frame\'s tilt and heading are estimated', min_value=0.0),
+    ParamSpec('fusion_position_time_constant_s', 0.5, 'Time constant of the position '
+              'correction towards the input root', min_value=0.0),
+    ParamSpec('fusion_orientation_time_constant_s', 1.0, 'Time constant of the orientation '
+              'correction towards the input root', min_value=0.0),
+    ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
+    ParamSpec('path_length', 3000, 'Poses kept in /mocap/world/path (0 = all)', min_value=0),
+    ParamSpec('flush_after_s', 0.3, 'When no input arrives for this long, emit the frames '
+              'still waiting for look-ahead', min_value=0.0),
+    ParamSpec('threads', 1, 'Torch CPU threads', read_only=True, min_value=1),
+    ParamSpec('device', 'cpu', "Torch device ('cpu' or 'cuda')", read_only=True),
+)
+
+
+def default_weights() -> Path:
+    """The shipped weights, from the package share directory (or the source tree)."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = Path(get_package_share_directory('mocap_global')) / 'weights' / 'gmr.pt'
+        if path.exists():
+            return path
+    except Exception:  # noqa: BLE001 - not installed through ament: use the source tree
+        pass
+    return Path(__file__).resolve().parents[1] / 'weights' / 'gmr.pt'
+
+
+def parse_up(text: str) -> Optional[np.ndarray]:
+    """'x y z' (or 'x,y,z') -> unit vector; raises ValueError."""
+    try:
+        v = np.array([float(t) for t in text.replace(',', ' ').split()], dtype=np.float64)
+    except ValueError:
+        raise ValueError(f"input_up must be 'auto', 'estimate' or 'x y z', got {text!r}") \
+            from None
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or np.linalg.norm(v) < 1e-9:
+        raise ValueError(f"input_up must be 'auto', 'estimate' or 'x y z', got {text!r}")
+    return v / np.linalg.norm(v)
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
+        return 0
+    import os
+    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')   # see mocap_global.cli
+
+    import rclpy
+    import torch
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+    from nav_msgs.msg import Odometry, Path as PathMsg
+    from sensor_msgs.msg import JointState, PointCloud2
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+    from visualization_msgs.msg import MarkerArray
+
+    from mocap_core import ros_conversions as rc
+    from mocap_core.diagnostics import NodeDiagnostics
+    from mocap_core.qos import STREAM_QOS
+
+    from .model import load_weights
+    from .online import OnlineGMR, StaticCameraFusion
+
+    class GMRNode(Node):
+        def __init__(self) -> None:
+            super().__init__('gmr')
+            self.p = p = declare_parameters(self, PARAMETERS)
+            torch.set_num_threads(int(p['threads']))
+            path = Path(p['weights']) if p['weights'] else default_weights()
+            if not path.exists():
+                raise FileNotFoundError(f'weights not found: {path} (train them with '
+                                        '`mocap train gmr --install`)')
+            self.model = load_weights(path, p['device'])
+            cfg = self.model.cfg
+            self.fps = cfg.fps
+            if p['input_up'] not in ('auto', 'estimate'):
+                parse_up(p['input_up'])              # fail early on a malformed vector
+            window = p['window'] or cfg.window
+            if p['lookahead'] > window - 2:
+                raise ValueError(f"lookahead ({p['lookahead']}) must be at most window - 2 "
+                                 f'({window - 2})')
+            self.online: Optional[OnlineGMR] = None   # built at the first frame (frame_id)
+            self.last_stamp = -1
+            self.last_input = time.monotonic()
+            self.said_waiting = False
+            self.restarts = 0
+            self.restart_time: Optional[float] = None
+            self.intervals: List[float] = []
+            self.rate_checked = False
+            self.path = PathMsg()
+            self.pub = {
+                'motion': self.create_publisher(MultiDOFJointTrajectory, '/mocap/world/motion',
+                                                STREAM_QOS),
+                'joints3d': self.create_publisher(PointCloud2, '/mocap/world/joints3d',
+                                                  STREAM_QOS),
+                'joint_states': self.create_publisher(JointState, '/mocap/world/joint_states',
+                                                      STREAM_QOS),
+                'odom': self.create_publisher(Odometry, '/mocap/world/odom', STREAM_QOS),
+                'path': self.create_publisher(PathMsg, '/mocap/world/path', STREAM_QOS),
+                'markers': self.create_publisher(MarkerArray, '/mocap/world/markers',
+                                                 STREAM_QOS),
+            }
+            self.diag = NodeDiagnostics(self, 'gmr', hardware_id=path.name)
+            self.diag.set_value('model', f'GMR {cfg.layers}x{cfg.hidden} bi-GRU, '
+                                f'{cfg.fps:g} fps, window {p["window"] or cfg.window}')
+            self.diag.set_value('lookahead_frames', p['lookahead'])
+            self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
+            self.diag.set_value('static_camera', p['static_camera'])
+            self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'],
+                                     self.on_motion, STREAM_QOS)
+            self.create_timer(0.1, self.on_idle)
+            self.get_logger().info(
+                f"gmr ready: {path} ({cfg.layers}x{cfg.hidden} GRU at {cfg.fps:g} fps), input "
+                f"{p['motion_topic']}, look-ahead {p['lookahead']} frames "
+                f"({p['lookahead'] / cfg.fps:.2f} s), static camera {p['static_camera']}")
+
+        def _make_online(self, frame_id: str) -> OnlineGMR:
+            p = self.p
+            fusion = None
+            up = None
+            if p['input_up'] == 'auto':
+                up = None if 'optical' in frame_id else np.array([0.0, 0.0, 1.0])
+            elif p['input_up'] != 'estimate':
+                up = parse_up(p['input_up'])
+            if p['static_camera']:
+                fusion = StaticCameraFusion(
+                    self.fps, p['fusion_init_s'], p['fusion_position_time_constant_s'],
+                    p['fusion_orientation_time_constant_s'], input_up=up)
+                self.get_logger().info(
+                    'static camera: fusing with the input root trajectory ('
+                    + ('input frame up = ' + np.array2string(up, precision=3)
+                       if up is not None else
+                       f"up of '{frame_id}' estimated over {p['fusion_init_s']:g} s") + ')')
+            model_up = None
+            if self.model.cfg.root_input == 'up':
+                model_up = up if up is not None else np.array([0.0, -1.0, 0.0])
+            return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
+                             p['tilt_correction'], fusion, model_up, p['device'])
+
+        def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
+            self.diag.input.tick()
+            names = self.model.cfg.joint_names
+            try:
+                pose = rc.motion_to_pose(msg, names)
+            except rc.MessageError as exc:
+                self.diag.errors += 1
+                if 'lacks joint' in str(exc):
+                    self.diag.error('joint set does not match the model')
+                    self.get_logger().error(
+                        f'dropping motion: joint set does not match the GMR model ({exc}); '
+                        f'the model needs {len(names)} joints: {", ".join(names)}',
+                        throttle_duration_sec=2.0)
+                else:
+                    self.get_logger().error(f'dropping motion: {exc}',
+                                            throttle_duration_sec=2.0)
+                return
+            stamp = rc.stamp_to_ns(msg.header.stamp)
+            if stamp <= self.last_stamp:
+                self.diag.dropped += 1
+                self.get_logger().warn('motion stamp did not advance; frame dropped',
+                                       throttle_duration_sec=2.0)
+                return
+            if self.online is None:
+                self.online = self._make_online(msg.header.frame_id)
+            gap = (stamp - self.last_stamp) * 1e-9 if self.last_stamp >= 0 else 0.0
+            self.last_stamp = stamp
+            self._check_rate(gap)
+            try:
+                with self.diag.processing():
+                    frames, event = self.online.push(stamp, pose)
+            except ValueError as exc:
+                self.diag.errors += 1
+                self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
+                return
+            self.diag.error(None)
+            self.last_input = time.monotonic()
+            if event:
+                self.restart_time = time.monotonic()
+                self.restarts += 1
+                self.diag.set_value('restarts', self.restarts)
+                self.diag.warn(f'accumulation restarted ({event})')
+                self.get_logger().warn(f'time gap of {gap:.3f} s (> max_gap_s): world pose '
+                                       'accumulation restarted from a new gravity-aligned '
+                                       'pose')
+            if not frames and self.online.pending() and not self.said_waiting:
+                self.said_waiting = True
+                self.get_logger().info(
+                    f'waiting for {self.online.frames_needed()} frames (look-ahead) before '
+                    'the first world pose')
+            self._publish(frames)
+
+        def _check_rate(self, dt: float) -> None:
+            """Warn once when the input rate is not the model's (the motions per frame would
+            be wrong by the ratio)."""
+            if self.rate_checked or not 0 < dt <= self.p['max_gap_s']:
+                return
+            self.intervals.append(dt)
+            if len(self.intervals) >= 30:
+                self.rate_checked = True
+                rate = 1.0 / float(np.median(self.intervals))
+                self.diag.set_value('input_stamp_rate_hz', f'{rate:.1f}')
+                if abs(rate / self.fps - 1.0) > 0.2:
+                    msg = (f'input rate {rate:.1f} Hz differs from the model rate '
+                           f'{self.fps:g} fps: the per-frame motions will be off by that ratio')
+                    self.diag.warn(msg)
+                    self.get_logger().warn(msg)
+
+        def on_idle(self) -> None:
+            """Emit the frames waiting for look-ahead when the input pauses; clear the
+            restart warning on /diagnostics after 5 s."""
+            if self.restart_time is not None and time.monotonic() - self.restart_time > 5.0:
+                self.restart_time = None
+                self.diag.warn(None)
+            if self.online is not None and self.online.pending() and \
+                    time.monotonic() - self.last_input > self.p['flush_after_s']:
+                self._publish(self.online.flush())
+
+        def _publish(self, frames) -> None:
+            for f in frames:
+                pose = f.pose
+                if not (np.all(np.isfinite(pose.rotations))
+                        and np.all(np.isfinite(pose.root_position))):
+                    self.diag.errors += 1
+                    self.get_logger().error('world pose not finite; frame dropped')
+                    continue
+                header = rc.make_header(f.stamp_ns, self.p['frame_id'])
+                self.pub['motion'].publish(rc.pose_to_motion(pose, header))
+                self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(),
+                                                                   header))
+                self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
+                odom = rc.root_to_odometry(pose.root_position, pose.rotations[0], header,
+                                           linear_velocity=f.linear_velocity,
+                                           angular_velocity=f.angular_velocity)
+                self.pub['odom'].publish(odom)
+                if f.first:
+                    self.path.poses = []             # a new segment: a new path
+                rc.append_to_path(self.path, odom, self.p['path_length'])
+                self.pub['path'].publish(self.path)
+                self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='world'))
+                self.diag.output.tick()
+            if self.online is not None:
+                fusion = self.online.fusion
+                self.diag.set_value('segments', self.online.segments)
+                if fusion is not None:
+                    self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = GMRNode()
+        rclpy.spin(node)
+        return 0
+    except (FileNotFoundError, ValueError) as exc:
+        print(f'gmr: error: {exc}', file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,306 @@
+"""Frame-by-frame GMR for the live node (no ROS imports).
+
+:class:`OnlineGMR` keeps the last ``window`` frames of one person's local poses. When frame
+``n`` arrives it emits frame ``k = n - lookahead``: the GRU runs over the window ending at
+``n`` (so the motion ``dG_{k-1}`` into frame ``k`` sees ``lookahead + 1`` future frames; a
+bidirectional model needs them, and the delay is ``lookahead / fps`` seconds), and the world
+pose is accumulated, ``G_k = G_{k-1} dG_{k-1}`` (eq. 2-4). ``lookahead = 0`` is the causal
+option: the newest frame is emitted at once.
+
+World frame (§3.6, adapted): the paper starts from ``G_1 = I``. Here the first pose of a
+segment is gravity-aligned: its tilt is the model's estimate of the up direction in the body
+frame (an extra output, :mod:`.model`), its heading 0 (facing +x), its root above the origin
+at the height that puts the lowest foot contact point on the floor z = 0. Optionally
+(``tilt_correction`` > 0, beyond the paper) every accumulated orientation is pulled towards
+the estimated tilt by that fraction per frame, which removes the pitch/roll part of the drift
+(the heading and the position drift remain).
+
+Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
+the frames waiting for look-ahead are emitted with the future frames that exist, the
+accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
+Until ``lookahead + 1`` frames of a segment exist nothing is emitted (:meth:`frames_needed`).
+
+Static camera (``fusion``, beyond the paper, :class:`StaticCameraFusion`): the input's root
+trajectory in its own frame (the camera frame of the lifter, a floor frame of the physics
+stage) is fixed to the world when the camera does not move. GMR keeps the trajectory smooth
+and consistent; the input root removes the drift.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+from typing import Deque, List, Optional, Tuple
+
+import numpy as np
+import torch
+
+from mocap_core.pose import Pose
+from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat,
+                                  quat_from_two_vectors, quat_to_matrix)
+
+from .features import features_for
+from .model import GMR
+from .se3 import heading_rotation, tilt_rotation, yaw_of
+
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass
+class WorldFrame:
+    """One output frame in the world frame (z up, floor z = 0)."""
+
+    stamp_ns: int
+    pose: Pose                      # row 0 of the rotations: the root orientation in the world
+    linear_velocity: np.ndarray     # (3,) m/s in the root frame (REP-105 twist)
+    angular_velocity: np.ndarray    # (3,) rad/s in the root frame
+    first: bool                     # first frame of a segment (accumulation (re)started)
+    fused: bool                     # the static-camera fusion corrected this frame
+
+
+class StaticCameraFusion:
+    """Complementary filter of the GMR world pose with the input's root pose when the camera
+    is static (beyond the paper).
+
+    The input frame (the camera's optical frame, or the physics stage's floor frame) is fixed
+    to the world, so the input root trajectory does not drift; GMR's does, but it is smooth.
+    The world frame of the fused output is the input frame turned so that z is up:
+
+    * ``input_up`` given (the up direction of the input frame, e.g. (0, 0, 1) for a floor
+      frame): the world is the input frame rotated by the minimal rotation taking
+      ``input_up`` to +z, and the fusion starts at the first frame (first pose = the
+      measurement);
+    * ``input_up=None`` (a camera frame of unknown tilt): for the first ``init_s`` seconds
+      GMR runs alone while the up direction of the input frame is estimated as the mean of
+      ``R_in u_i`` (the measured root orientation times GMR's up estimate in the body frame);
+      the heading and origin are then chosen to match the GMR poses of that period (circular
+      mean of the heading differences, mean position offset), and held.
+
+    Each new GMR pose ``G = G_prev dG`` is then pulled towards the measurement ``W (R_in,
+    T_in)``: the position by ``1 - exp(-dt / position_time_constant_s)`` per frame, the
+    orientation (geodesically) by ``1 - exp(-dt / orientation_time_constant_s)``.
+    """
+
+    def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.5,
+                 orientation_time_constant_s: float = 1.0,
+                 input_up: Optional[np.ndarray] = None) -> None:
+        self.init_frames = max(1, int(round(init_s * fps)))
+        self.alpha_p = 1.0 - math.exp(-1.0 / (fps * max(position_time_constant_s, 1e-6)))
+        self.alpha_r = 1.0 - math.exp(-1.0 / (fps * max(orientation_time_constant_s, 1e-6)))
+        self.input_up = None if input_up is None else \
+            np.asarray(input_up, dtype=np.float64) / np.linalg.norm(input_up)
+        self.reset()
+
+    def reset(self) -> None:
+        self._pairs: List[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.W_R: Optional[np.ndarray] = None
+        self.W_t: Optional[np.ndarray] = None
+        if self.input_up is not None:
+            self.W_R = quat_to_matrix(quat_from_two_vectors(self.input_up, _EZ))
+            self.W_t = np.zeros(3)
+
+    @property
+    def ready(self) -> bool:
+        return self.W_R is not None
+
+    def measurement(self, R_in: np.ndarray, T_in: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """The input root pose in the fused world frame."""
+        return self.W_R @ R_in, self.W_R @ T_in + self.W_t
+
+    def step(self, R: np.ndarray, T: np.ndarray, R_in: np.ndarray, T_in: np.ndarray,
+             up_body: np.ndarray, first: bool = False) -> Tuple[np.ndarray, np.ndarray, bool]:
+        """GMR pose (R, T), input root pose, GMR's up estimate in the body frame -> fused
+        (R, T) and whether the measurement was used. ``first``: the first frame of a
+        segment (with a known input up, the fused pose starts at the measurement)."""
+        if self.W_R is None:
+            self._pairs.append((R, T, R_in, T_in, up_body))
+            if len(self._pairs) >= self.init_frames:
+                self._estimate()
+            return R, T, False
+        Rm, Tm = self.measurement(R_in, T_in)
+        if first:
+            return Rm, Tm, True
+        T = T + self.alpha_p * (Tm - T)
+        corr = matrix_to_axis_angle(R.T @ Rm)
+        R = R @ axis_angle_to_matrix(self.alpha_r * corr)
+        return R, T, True
+
+    def _estimate(self) -> None:
+        g = np.mean([R_in @ u for _, _, R_in, _, u in self._pairs], axis=0)
+        W0 = quat_to_matrix(quat_from_two_vectors(g, _EZ))
+        d = np.array([yaw_of(R) - yaw_of(W0 @ R_in) for R, _, R_in, _, _ in self._pairs])
+        psi = math.atan2(np.mean(np.sin(d)), np.mean(np.cos(d)))
+        self.W_R = heading_rotation(psi) @ W0
+        self.W_t = np.mean([T - self.W_R @ T_in for _, T, _, T_in, _ in self._pairs], axis=0)
+        self._pairs = []
+
+
+class OnlineGMR:
+    """Streaming GMR with accumulation (module docstring).
+
+    Args:
+        model: the network.
+        lookahead: future frames each emitted frame waits for (0 = causal).
+        window: frames the GRU sees per update (default: the model's training window).
+        max_gap_s: a larger gap between stamps restarts the accumulation.
+        tilt_correction: fraction per frame by which the orientation is pulled towards the
+            estimated tilt (0 = the paper's pure accumulation).
+        fusion: a :class:`StaticCameraFusion` when the camera is static, else None.
+        input_up: up direction of the input frame, for models with ``root_input='up'``.
+    """
+
+    def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
+                 max_gap_s: float = 0.25, tilt_correction: float = 0.0,
+                 fusion: Optional[StaticCameraFusion] = None,
+                 input_up: Optional[np.ndarray] = None, device: str = 'cpu') -> None:
+        self.model = model.eval()
+        self.cfg = model.cfg
+        self.window = int(window or self.cfg.window)
+        self.lookahead = int(lookahead)
+        if not 0 <= self.lookahead <= self.window - 2:
+            raise ValueError(f'lookahead must be in [0, {self.window - 2}] for a window of '
+                             f'{self.window} frames, got {lookahead}')
+        self.max_gap_ns = int(max_gap_s * 1e9)
+        self.tilt_correction = float(tilt_correction)
+        self.fusion = fusion
+        if self.cfg.root_input == 'up' and input_up is None:
+            raise ValueError("this model needs the input frame's up direction (input_up)")
+        self.input_up = None if input_up is None else np.asarray(input_up, dtype=np.float64)
+        self.device = device
+        self.joint_names = tuple(self.cfg.joint_names)
+        self.segments = 0
+        self.reset()
+
+    # -- state -----------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the buffer; the next frame starts a new segment (new first pose)."""
+        size = self.window
+        self._feats: Deque[np.ndarray] = collections.deque(maxlen=size)
+        self._poses: Deque[Pose] = collections.deque(maxlen=size)
+        self._stamps: Deque[int] = collections.deque(maxlen=size)
+        self._received = 0          # frames of this segment
+        self._emitted = 0           # frames of this segment emitted
+        self._R: Optional[np.ndarray] = None
+        self._T: Optional[np.ndarray] = None
+        self._cache: Optional[Tuple[int, dict]] = None
+        if self.fusion is not None:
+            self.fusion.reset()
+
+    def frames_needed(self) -> int:
+        """Frames of a segment before the first output."""
+        return self.lookahead + 1
+
+    def pending(self) -> int:
+        """Frames received but not yet emitted."""
+        return self._received - self._emitted
+
+    # -- input -----------------------------------------------------------------------------
+    def check_pose(self, pose: Pose) -> None:
+        """Raise ValueError when the pose's joints are not the model's."""
+        if tuple(pose.joint_names) != self.joint_names:
+            missing = [n for n in self.joint_names if n not in pose.joint_names]
+            extra = [n for n in pose.joint_names if n not in self.joint_names]
+            raise ValueError(
+                f'joint set does not match the GMR model: it needs {len(self.joint_names)} '
+                f'joints {list(self.joint_names)} in this order; the motion has '
+                f'{len(pose.joint_names)} (missing {missing}, unknown {extra})')
+
+    def push(self, stamp_ns: int, pose: Pose) -> Tuple[List[WorldFrame], str]:
+        """Add one frame. Returns (frames, event): the world frames that became ready and ''
+        or the reason the accumulation restarted ('backwards', 'gap'); on a restart the frames
+        of the previous segment still waiting for look-ahead come first."""
+        self.check_pose(pose)
+        if not (np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(pose.root_position))
+                and np.all(np.isfinite(pose.skeleton.offsets))):
+            raise ValueError('pose contains NaN or inf')
+        frames: List[WorldFrame] = []
+        event = ''
+        if self._stamps:
+            dt = int(stamp_ns) - self._stamps[-1]
+            if dt <= 0:
+                event = 'backwards'
+            elif dt > self.max_gap_ns:
+                event = 'gap'
+        if event:
+            frames = self.flush()
+            self.reset()
+        up = None
+        if self.cfg.root_input == 'up':
+            up = quat_to_matrix(pose.rotations[0]).T @ self.input_up
+            up = up / np.linalg.norm(up)
+        self._feats.append(features_for(self.cfg, pose.rotations[None],
+                                        pose.skeleton.group_lengths(),
+                                        None if up is None else up[None])[0])
+        self._poses.append(pose)
+        self._stamps.append(int(stamp_ns))
+        self._received += 1
+        self._cache = None
+        while self._emitted + self.lookahead < self._received:
+            frames.append(self._emit())
+        return frames, event
+
+    def flush(self) -> List[WorldFrame]:
+        """Emit the frames still waiting for look-ahead with the future frames that exist
+        (the end of a stream, a long pause, a restart)."""
+        frames = []
+        while self.pending() > 0:
+            frames.append(self._emit())
+        return frames
+
+    # -- inference ---------------------------------------------------------------------------
+    @torch.no_grad()
+    def _outputs(self) -> dict:
+        """Network outputs over the current window (cached until the next push)."""
+        if self._cache is None:
+            x = torch.as_tensor(np.stack(self._feats)[None], device=self.device)
+            out = self.model(x)
+            self._cache = (self._received, {k: v[0].cpu().numpy().astype(np.float64)
+                                            for k, v in out.items()})
+        return self._cache[1]
+
+    def _emit(self) -> WorldFrame:
+        k = self._emitted                               # segment index of the frame
+        first_in_buffer = self._received - len(self._stamps)
+        pos = k - first_in_buffer                       # its position in the window
+        out = self._outputs()
+        pose = self._poses[pos]
+        up = out['up'][pos]
+        lin = np.zeros(3)
+        ang = np.zeros(3)
+        fused = False
+        if k == 0:
+            R = tilt_rotation(up)
+            T = np.array([0.0, 0.0, 0.0])
+            probe = Pose(pose.skeleton, np.concatenate([matrix_to_quat(R)[None],
+                                                        pose.rotations[1:]]), T)
+            T[2] = -min(p[2] for p in probe.contact_positions().values())
+        else:
+            dR = axis_angle_to_matrix(out['axis_angle'][pos - 1])
+            dT = out['translation'][pos - 1]
+            R = self._R @ dR                            # eq. 3
+            T = self._R @ dT + self._T                  # eq. 4
+            if self.tilt_correction > 0:
+                b = R.T @ _EZ
+                corr = matrix_to_axis_angle(quat_to_matrix(quat_from_two_vectors(up, b)))
+                R = R @ axis_angle_to_matrix(self.tilt_correction * corr)
+            if self.fusion is not None:
+                R, T, fused = self.fusion.step(R, T, quat_to_matrix(pose.rotations[0]),
+                                               pose.root_position, up)
+            dt = (self._stamps[pos] - self._stamps[pos - 1]) * 1e-9
+            if dt > 0:
+                lin = R.T @ (T - self._T) / dt
+                ang = matrix_to_axis_angle(self._R.T @ R) / dt
+        if k == 0 and self.fusion is not None:
+            R, T, fused = self.fusion.step(R, T, quat_to_matrix(pose.rotations[0]),
+                                           pose.root_position, up, first=True)
+        if k % 64 == 0:
+            R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
+        self._R, self._T = R, T
+        self._emitted += 1
+        if k == 0:
+            self.segments += 1
+        rot = np.array(pose.rotations)
+        rot[0] = matrix_to_quat(R)
+        return WorldFrame(self._stamps[pos], Pose(pose.skeleton, rot, T), lin, ang, k == 0,
+                          fused)

@@ -1,0 +1,157 @@
+"""Training windows for GMR with their targets and augmentations (no ROS imports).
+
+A window is up to ``window`` consecutive frames of one clip at the model's frame rate (30 fps
+clips are subsampled with a random phase for a 10 fps model, as the paper trains at 10 fps,
+§4.1). Clips shorter than the window, and a share of deliberately shortened windows (the node
+starts with short windows), are padded; the padding is masked in the losses.
+
+Augmentations (:class:`Augmentation`):
+
+* flip augmentation (§3.5): the sequence is reversed in time; the targets follow, the motions
+  of the reversed sequence being the inverted motions in reverse order;
+* beyond the paper: left/right mirroring (the skeleton is symmetric), a global body scale
+  (bone lengths and trajectory together), and lifter-like noise on the input local pose and
+  bone lengths (:func:`~.features.noisy_local_pose`) for robustness to estimated poses.
+
+Targets: ``dR`` (T-1, 3, 3), ``dT`` (T-1, 3) global motions (:mod:`.se3`), ``up`` (T, 3) the
+world's up direction in the root frame, ``joints`` (T, J, 3) joint positions in the root frame
+(for the joint-motion loss).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Dict, List, Sequence
+
+import numpy as np
+
+from mocap_core.data.motion import Motion
+from mocap_core.rotations import quat_to_matrix
+from mocap_core.skeleton import NUM_JOINTS
+
+from . import features as F
+from .se3 import relative_motion, up_in_body
+
+
+@dataclass
+class Augmentation:
+    """Probabilities and ranges of the augmentations (module docstring)."""
+
+    reverse_prob: float = 0.5
+    mirror_prob: float = 0.5
+    scale_range: float = 0.1
+    noise_prob: float = 0.5
+    noise_level: float = 1.0      # maximum, in units of the lifter-like noise defaults
+    short_prob: float = 0.15
+    min_length: int = 8
+
+    @classmethod
+    def none(cls) -> 'Augmentation':
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def frame_step(source_fps: float, fps: float) -> int:
+    """Subsampling step from the data rate to the model rate (an integer)."""
+    step = source_fps / fps
+    if abs(step - round(step)) > 1e-6 or round(step) < 1:
+        raise ValueError(f'model rate {fps} fps must divide the data rate {source_fps} fps')
+    return int(round(step))
+
+
+class WindowSampler:
+    """Random windows of a set of clips (module docstring)."""
+
+    def __init__(self, motions: Sequence[Motion], window: int, fps: float = 30.0,
+                 seed: int = 0, aug: Augmentation = Augmentation(),
+                 root_input: str = 'none', skeleton_input: bool = True,
+                 pose_input: str = 'quat') -> None:
+        if not motions:
+            raise ValueError('no clips to sample from')
+        self.window = int(window)
+        self.fps = float(fps)
+        self.step = frame_step(motions[0].fps, fps)
+        self.aug = aug
+        self.root_input = root_input
+        self.skeleton_input = skeleton_input
+        self.pose_input = pose_input
+        self.rng = np.random.default_rng(seed)
+        keep = [m for m in motions if (m.num_frames - 1) // self.step + 1 >= 3]
+        if not keep:
+            raise ValueError('every clip is too short')
+        self.lengths = np.array([m.num_frames for m in keep])
+        self.offsets = np.concatenate([[0], np.cumsum(self.lengths)])
+        self.rotations = np.concatenate([m.rotations for m in keep]).astype(np.float32)
+        self.roots = np.concatenate([m.root_positions for m in keep]).astype(np.float32)
+        self.group_lengths = np.stack([m.skeleton.group_lengths() for m in keep])
+        self.bone_offsets = np.stack([m.skeleton.offsets for m in keep])
+        self.prob = self.lengths / self.lengths.sum()
+
+    def sample(self) -> Dict[str, np.ndarray]:
+        """One augmented window (unpadded)."""
+        rng, aug = self.rng, self.aug
+        c = int(rng.choice(len(self.lengths), p=self.prob))
+        phase = int(rng.integers(0, self.step)) if self.lengths[c] > 2 * self.step else 0
+        avail = (self.lengths[c] - 1 - phase) // self.step + 1
+        t = min(self.window, avail)
+        if rng.random() < aug.short_prob and t > aug.min_length:
+            t = int(rng.integers(aug.min_length, t + 1))
+        s = int(rng.integers(0, avail - t + 1))
+        idx = self.offsets[c] + phase + self.step * (s + np.arange(t))
+        rot = self.rotations[idx].astype(np.float64)
+        root = self.roots[idx].astype(np.float64)
+        gl = self.group_lengths[c].copy()
+        off = self.bone_offsets[c].copy()
+        if aug.scale_range > 0:
+            sc = 1.0 + aug.scale_range * (2.0 * rng.random() - 1.0)
+            gl, off, root = gl * sc, off * sc, root * sc
+        if rng.random() < aug.mirror_prob:
+            rot, root = F.mirror_rotations(rot), F.mirror_vectors(root)
+        if rng.random() < aug.reverse_prob:
+            rot, root = rot[::-1].copy(), root[::-1].copy()
+        rot_in, gl_in = rot, gl
+        if aug.noise_prob > 0 and rng.random() < aug.noise_prob:
+            level = aug.noise_level * rng.random()
+            rot_in = F.noisy_local_pose(rot, rng, self.fps, F.NOISE_SMOOTH_DEG * level,
+                                        F.NOISE_JITTER_DEG * level,
+                                        F.NOISE_CORRELATION_S)
+            gl_in = F.noisy_lengths(gl, rng, F.NOISE_LENGTH_REL * level)
+        return {'rot': rot, 'rot_in': rot_in, 'root': root, 'lengths_in': gl_in,
+                'offsets': off}
+
+    def batch(self, size: int) -> Dict[str, np.ndarray]:
+        """``size`` windows padded to the longest: see :func:`collate`."""
+        return collate([self.sample() for _ in range(size)], self.root_input,
+                       self.skeleton_input, self.pose_input)
+
+
+def collate(samples: List[Dict[str, np.ndarray]], root_input: str = 'none',
+            skeleton_input: bool = True, pose_input: str = 'quat') -> Dict[str, np.ndarray]:
+    """Pad samples and compute inputs and targets for the whole batch at once.
+
+    Returns float32 arrays: ``features`` (B, T, C), ``dR`` (B, T-1, 3, 3), ``dT`` (B, T-1, 3),
+    ``up`` (B, T, 3), ``joints`` (B, T, J, 3); ``lengths`` (B,) int64; ``motion_mask``
+    (B, T-1) and ``frame_mask`` (B, T) bool."""
+    b = len(samples)
+    t = max(len(s['rot']) for s in samples)
+    rot = np.zeros((b, t, NUM_JOINTS, 4))
+    rot[..., 3] = 1.0
+    rot_in = rot.copy()
+    root = np.zeros((b, t, 3))
+    lengths = np.array([len(s['rot']) for s in samples], dtype=np.int64)
+    for i, s in enumerate(samples):
+        n = lengths[i]
+        rot[i, :n], rot_in[i, :n], root[i, :n] = s['rot'], s['rot_in'], s['root']
+        rot[i, n:], rot_in[i, n:], root[i, n:] = s['rot'][-1], s['rot_in'][-1], s['root'][-1]
+    R = quat_to_matrix(rot[:, :, 0])
+    dR, dT = relative_motion(R, root)
+    up = up_in_body(R)
+    gl_in = np.stack([s['lengths_in'] for s in samples])
+    offsets = np.stack([s['offsets'] for s in samples])
+    joints = F.body_joint_positions(offsets, rot)
+    feats = F.gmr_features(rot_in, gl_in, up if root_input == 'up' else None, root_input,
+                           skeleton_input, pose_input)
+    frame_mask = np.arange(t)[None] < lengths[:, None]
+    return {'features': feats, 'dR': dR.astype(np.float32), 'dT': dT.astype(np.float32),
+            'up': up.astype(np.float32), 'joints': joints.astype(np.float32),
+            'lengths': lengths, 'frame_mask': frame_mask,
+            'motion_mask': frame_mask[:, 1:]}

@@ -1,0 +1,381 @@
+"""Unit tests of GMR: accumulation (eq. 2-4), flip augmentation, features, model, metrics,
+the online accumulation and the static-camera fusion (no ROS, no training)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from mocap_core.data.motion import Motion
+from mocap_core.pose import Pose
+from mocap_core.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
+from mocap_core.skeleton import NUM_JOINTS, Skeleton
+
+from mocap_global import features as F
+from mocap_global import metrics as M
+from mocap_global.model import GMR, GMRConfig, load_weights, save_weights
+from mocap_global.online import OnlineGMR, StaticCameraFusion
+from mocap_global.samples import Augmentation, WindowSampler
+from mocap_global.se3 import (accumulate, align_yaw_translation, compose_steps, invert_motion,
+                              relative_motion, time_reverse_motion, tilt_rotation, up_in_body)
+from mocap_global.train import TrainConfig, losses, total_loss
+
+EZ = np.array([0.0, 0.0, 1.0])
+
+
+def rz(a):
+    return axis_angle_to_matrix(np.asarray(a, dtype=np.float64)[..., None] * EZ)
+
+
+def circle_walk(frames=90, radius=2.0, turn=0.05, pitch_deg=4.0):
+    """A body walking counter-clockwise on a circle, facing along the tangent, with a pelvis
+    pitch oscillation: R_i, T_i."""
+    i = np.arange(frames)
+    yaw = turn * i
+    pitch = np.radians(pitch_deg) * np.sin(0.3 * i)
+    R = rz(yaw) @ axis_angle_to_matrix(pitch[:, None] * np.array([0.0, 1.0, 0.0]))
+    T = np.stack([radius * np.sin(yaw), radius * (1 - np.cos(yaw)), 0.9 + 0.02 * np.sin(0.6 * i)],
+                 axis=-1)
+    return R, T
+
+
+def test_accumulation_reproduces_a_known_trajectory():
+    R, T = circle_walk()
+    dR, dT = relative_motion(R, T)
+    # body-frame motion of a uniform circle without pitch: constant, analytic
+    R0, T0 = circle_walk(pitch_deg=0.0)
+    T0[:, 2] = 0.9
+    dR0, dT0 = relative_motion(R0, T0)
+    w, r = 0.05, 2.0
+    np.testing.assert_allclose(dR0, np.broadcast_to(rz(w), dR0.shape), atol=1e-12)
+    np.testing.assert_allclose(dT0, np.broadcast_to([r * np.sin(w), r * (1 - np.cos(w)), 0.0],
+                                                    dT0.shape), atol=1e-12)
+    # eq. 3-4 from the first pose give the whole trajectory back
+    Ra, Ta = accumulate(R[0], T[0], dR, dT)
+    np.testing.assert_allclose(Ta, T, atol=1e-9)
+    np.testing.assert_allclose(Ra, R, atol=1e-9)
+    # the motion does not depend on the world frame (camera agnostic)
+    C = axis_angle_to_matrix(np.array([0.3, -1.2, 0.7]))
+    dR2, dT2 = relative_motion(C @ R, T @ C.T + np.array([5.0, -2.0, 1.0]))
+    np.testing.assert_allclose(dR2, dR, atol=1e-12)
+    np.testing.assert_allclose(dT2, dT, atol=1e-12)
+
+
+def test_accumulation_by_hand():
+    # 1 m forward, then turn 90 deg left while stepping 1 m forward: ends at (1, 1)
+    dR = np.stack([np.eye(3), rz(np.pi / 2)])
+    dT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    R, T = accumulate(np.eye(3), np.zeros(3), dR, dT)
+    dR2 = np.stack([rz(0.0)])
+    R2, T2 = accumulate(R[-1], T[-1], dR2, np.array([[1.0, 0.0, 0.0]]))
+    np.testing.assert_allclose(T2[-1], [1.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(R2[-1], rz(np.pi / 2), atol=1e-12)
+
+
+def test_time_reversal_inverts_the_motion():
+    R, T = circle_walk(40)
+    dR, dT = relative_motion(R, T)
+    rR, rT = relative_motion(R[::-1], T[::-1])
+    fR, fT = time_reverse_motion(dR, dT)
+    np.testing.assert_allclose(fR, rR, atol=1e-12)
+    np.testing.assert_allclose(fT, rT, atol=1e-12)
+    # dG'_i dG_{F-2-i} = I
+    n = len(dR)
+    for i in range(n):
+        Rc = fR[i] @ dR[n - 1 - i]
+        Tc = fR[i] @ dT[n - 1 - i] + fT[i]
+        np.testing.assert_allclose(Rc, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(Tc, 0.0, atol=1e-12)
+    iR, iT = invert_motion(dR[:1], dT[:1])
+    np.testing.assert_allclose(iR[0] @ dR[0], np.eye(3), atol=1e-12)
+
+
+def _motion(R, T, frames=None, seed=0) -> Motion:
+    rng = np.random.default_rng(seed)
+    n = len(R)
+    rot = np.zeros((n, NUM_JOINTS, 4))
+    rot[..., 3] = 1.0
+    rot[:, 0] = matrix_to_quat(R)
+    rot[:, 1:] = matrix_to_quat(axis_angle_to_matrix(
+        0.2 * rng.standard_normal((n, NUM_JOINTS - 1, 3))))
+    return Motion('synthetic', 30.0, Skeleton.default(), rot, T, np.zeros((n, 4), bool))
+
+
+def test_sampler_flip_augmentation_targets_are_the_reversed_motion():
+    R, T = circle_walk(30)
+    m = _motion(R, T)
+    aug = Augmentation(reverse_prob=1.0, mirror_prob=0.0, scale_range=0.0, noise_prob=0.0,
+                       short_prob=0.0)
+    s = WindowSampler([m], 30, 30.0, 0, aug)
+    b = s.batch(1)
+    dR, dT = relative_motion(R, T)
+    fR, fT = time_reverse_motion(dR, dT)
+    np.testing.assert_allclose(b['dR'][0], fR, atol=1e-5)
+    np.testing.assert_allclose(b['dT'][0], fT, atol=1e-5)
+    # accumulated from the last pose, the flipped targets retrace the trajectory backwards
+    Rb, Tb = accumulate(R[-1], T[-1], b['dR'][0].astype(np.float64), b['dT'][0].astype(np.float64))
+    np.testing.assert_allclose(Tb[::-1], T, atol=1e-4)
+    # the input features are the local poses in reverse order
+    fwd = F.gmr_features(m.rotations, m.skeleton.group_lengths())
+    np.testing.assert_allclose(b['features'][0], fwd[::-1], atol=1e-6)
+    s.pose_input = 'positions'
+    s.rng = np.random.default_rng(0)
+    b = s.batch(1)
+    fwd = F.gmr_features(m.rotations, m.skeleton.group_lengths(), pose_input='positions')
+    np.testing.assert_allclose(b['features'][0], fwd[::-1], atol=1e-5)
+
+
+def test_mirror_augmentation_mirrors_the_motion():
+    R, T = circle_walk(20)
+    m = _motion(R, T)
+    rot = F.mirror_rotations(m.rotations)
+    Rm = quat_to_matrix(rot[:, 0])
+    dR, dT = relative_motion(R, T)
+    dRm, dTm = relative_motion(Rm, F.mirror_vectors(T))
+    S = np.diag([1.0, -1.0, 1.0])
+    np.testing.assert_allclose(dRm, S @ dR @ S, atol=1e-12)
+    np.testing.assert_allclose(dTm, dT @ S, atol=1e-12)
+    # mirroring twice is the identity (up to quaternion sign)
+    twice = F.mirror_rotations(rot)
+    np.testing.assert_allclose(quat_to_matrix(twice), quat_to_matrix(m.rotations), atol=1e-12)
+
+
+def test_compose_steps_is_the_subsampled_motion():
+    R, T = circle_walk(31)
+    dR, dT = relative_motion(R, T)
+    cR, cT = compose_steps(dR, dT, 3)
+    sR, sT = relative_motion(R[::3], T[::3])
+    np.testing.assert_allclose(cR, sR, atol=1e-12)
+    np.testing.assert_allclose(cT, sT, atol=1e-12)
+
+
+def test_features_and_noise():
+    R, T = circle_walk(50)
+    m = _motion(R, T)
+    f = F.gmr_features(m.rotations, m.skeleton.group_lengths())
+    assert f.shape == (50, F.num_features('none')) and f.dtype == np.float32
+    q = f[:, :F.NUM_POSE_FEATURES].reshape(50, NUM_JOINTS - 1, 4)
+    assert np.all(q[..., 3] >= 0)                    # one code per rotation
+    f_up = F.gmr_features(m.rotations, m.skeleton.group_lengths(), up_in_body(R), 'up')
+    assert f_up.shape == (50, F.num_features('up'))
+    with pytest.raises(ValueError):
+        F.gmr_features(m.rotations, m.skeleton.group_lengths(), None, 'up')
+    with pytest.raises(ValueError):
+        F.gmr_features(m.rotations[:, :10], m.skeleton.group_lengths())
+    noisy = F.noisy_local_pose(m.rotations, np.random.default_rng(0))
+    np.testing.assert_allclose(noisy[:, 0], m.rotations[:, 0])
+    from mocap_core.rotations import quat_angle
+    ang = np.degrees(quat_angle(noisy[:, 1:], m.rotations[:, 1:]))
+    assert 5.0 < ang.mean() < 25.0
+    # joints in the root frame: the root at the origin, the rest pose offsets at identity
+    p = F.body_joint_positions(m.skeleton.offsets, np.tile(np.array([0, 0, 0, 1.0]),
+                                                           (2, NUM_JOINTS, 1)))
+    np.testing.assert_allclose(p[0], m.skeleton.rest_positions(), atol=1e-12)
+
+
+def _small_model(**kw) -> GMR:
+    torch.manual_seed(0)
+    return GMR(GMRConfig(layers=1, hidden=16, projection=16, window=24, **kw)).eval()
+
+
+def test_model_shapes_padding_and_weights_roundtrip(tmp_path):
+    model = _small_model()
+    x = torch.randn(3, 24, model.cfg.num_features)
+    lengths = torch.tensor([24, 10, 5])
+    with torch.no_grad():
+        out = model(x, lengths)
+        assert out['axis_angle'].shape == (3, 24, 3) and out['rotation'].shape == (3, 24, 3, 3)
+        assert torch.allclose(out['up'].norm(dim=-1), torch.ones(3, 24))
+        # a padded sequence gives the same output as the sequence alone
+        alone = model(x[1:2, :10])
+        assert torch.allclose(alone['translation'][0], out['translation'][1, :10], atol=1e-6)
+        # the fused inference kernel gives the same result as the training path
+        with torch.enable_grad():
+            slow = model(x)['translation']
+        assert torch.allclose(model(x)['translation'], slow, atol=1e-6)
+    save_weights(model, tmp_path / 'w.pt', {'note': 'test'})
+    again = load_weights(tmp_path / 'w.pt')
+    with torch.no_grad():
+        assert torch.allclose(again(x)['translation'], model(x)['translation'])
+    assert again.info == {'note': 'test'}
+    (tmp_path / 'bad.pt').write_bytes(b'not weights')
+    with pytest.raises(Exception):
+        load_weights(tmp_path / 'bad.pt')
+
+
+def test_paper_configuration():
+    cfg = GMRConfig.paper()
+    assert (cfg.layers, cfg.hidden, cfg.projection, cfg.fps) == (4, 2048, 2048, 10.0)
+    small = GMR(GMRConfig(layers=1, hidden=8, projection=8, velocity_input=False,
+                          skeleton_input=False, pose_input='quat'))
+    assert small.cfg.num_features == F.NUM_POSE_FEATURES
+    R, T = circle_walk(12)
+    m = _motion(R, T)
+    x = F.gmr_features(m.rotations, m.skeleton.group_lengths(), skeleton_input=False)
+    with torch.no_grad():
+        assert small(torch.as_tensor(x[None]))['translation'].shape == (1, 12, 3)
+
+
+def test_losses_vanish_at_the_ground_truth_and_train_down():
+    R, T = circle_walk(40)
+    m = _motion(R, T)
+    s = WindowSampler([m, _motion(R[::-1].copy(), T[::-1].copy(), seed=1)], 24, 30.0, 0,
+                      Augmentation(noise_prob=0.0), pose_input='positions')
+    b = {k: torch.as_tensor(v) for k, v in s.batch(4).items()}
+    cfg = TrainConfig()
+    perfect = {'rotation': torch.cat([b['dR'], b['dR'][:, -1:]], 1),
+               'translation': torch.cat([b['dT'], b['dT'][:, -1:]], 1), 'up': b['up']}
+    terms = losses(perfect, b, cfg)
+    assert all(float(v) < 1e-8 for k, v in terms.items() if k != 'smooth')
+    model = _small_model()
+    opt = torch.optim.Adam(model.parameters(), 3e-3)
+    first = None
+    for _ in range(60):
+        out = model(b['features'], b['lengths'])
+        loss = total_loss(losses(out, b, cfg), cfg)
+        first = first if first is not None else float(loss.detach())
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    assert float(loss.detach()) < 0.5 * first
+
+
+def test_motion_metrics():
+    R, T = circle_walk(91)
+    dR, dT = relative_motion(R, T)
+    assert M.ome_deg(dR, dR).max() < 1e-6 and M.tme_mm(dT, dT).max() == 0
+    err = rz(np.radians(1.0))
+    np.testing.assert_allclose(M.ome_deg(dR @ err, dR), 1.0, atol=1e-9)
+    np.testing.assert_allclose(M.tme_mm(dT + [0.002, 0, 0], dT), 2.0, atol=1e-9)
+    joints = np.zeros((90, 2, 3))
+    np.testing.assert_allclose(M.jme_mm(dR, dT + [0, 0.003, 0], dR, dT, joints), 3.0)
+    # on a straight walk a constant 1 mm/frame error drifts 30 mm per second
+    Rs = np.broadcast_to(np.eye(3), (91, 3, 3)).copy()
+    Ts = np.stack([0.04 * np.arange(91), np.zeros(91), np.full(91, 0.9)], axis=-1)
+    sR, sT = relative_motion(Rs, Ts)
+    d = M.drift_mm(sR, sT + np.array([0.001, 0.0, 0.0]), Rs, Ts, [30, 60], 30)
+    assert len(d[30]) == 3 and len(d[60]) == 2
+    np.testing.assert_allclose(d[30], 30.0, rtol=1e-6)
+    traj = M.trajectory_errors(dR, dT, R, T)
+    assert traj['rte_pct'] < 1e-9 and traj['ate_mm'] < 1e-6
+    Rz, t = align_yaw_translation(T, T @ rz(0.7).T + [1.0, 2.0, 0.0])
+    np.testing.assert_allclose(Rz, rz(0.7), atol=1e-12)
+
+
+def _poses(n=40, seed=0):
+    R, T = circle_walk(n)
+    m = _motion(R, T, seed=seed)
+    return [Pose(m.skeleton, r, t) for r, t in zip(m.rotations, m.root_positions)]
+
+
+def test_online_start_up_flush_gap_and_bad_input():
+    model = _small_model()
+    online = OnlineGMR(model, lookahead=5, max_gap_s=0.2)
+    assert online.frames_needed() == 6
+    poses = _poses(40)
+    stamps = [int(i * 1e9 / 30) for i in range(40)]
+    out = []
+    for i in range(5):
+        frames, event = online.push(stamps[i], poses[i])
+        assert frames == [] and event == ''          # waiting for look-ahead
+    frames, _ = online.push(stamps[5], poses[5])
+    assert len(frames) == 1 and frames[0].first and frames[0].stamp_ns == stamps[0]
+    out += frames
+    first = frames[0].pose
+    # gravity-aligned first pose: heading 0, the lowest contact point on the floor
+    assert min(p[2] for p in first.contact_positions().values()) == pytest.approx(0, abs=1e-9)
+    Rf = quat_to_matrix(first.rotations[0])
+    assert abs(np.arctan2(Rf[1, 0], Rf[0, 0])) < 1e-3     # minimal tilt: no turn about z
+    for i in range(6, 20):
+        out += online.push(stamps[i], poses[i])[0]
+    # a gap: the waiting frames come out, then the accumulation restarts
+    frames, event = online.push(stamps[19] + int(0.5e9), poses[20])
+    assert event == 'gap' and len(frames) == 5
+    out += frames
+    assert online.segments == 1 and online.pending() == 1
+    out += online.flush()
+    assert [f.stamp_ns for f in out] == stamps[:20] + [stamps[19] + int(0.5e9)]
+    assert out[-1].first and online.segments == 2
+    assert all(np.all(np.isfinite(f.pose.root_position)) for f in out)
+    # the world pose keeps the input's local pose
+    np.testing.assert_allclose(out[3].pose.rotations[1:], poses[3].rotations[1:], atol=1e-12)
+    # bad input: another joint set, NaN
+    sk = Skeleton(np.zeros((3, 3)), joint_names=('pelvis', 'a', 'b'), parents=(-1, 0, 1))
+    with pytest.raises(ValueError, match='joint set does not match'):
+        online.push(stamps[-1] + 10**9, Pose(sk, np.tile([0, 0, 0, 1.0], (3, 1)), np.zeros(3)))
+    with pytest.raises(ValueError, match='lookahead'):
+        OnlineGMR(model, lookahead=30)
+
+
+def test_online_pure_accumulation_matches_the_network_motions():
+    """With look-ahead = the rest of a short stream, OnlineGMR = eq. 3-4 over the outputs."""
+    model = _small_model()
+    poses = _poses(20)
+    online = OnlineGMR(model, lookahead=19)
+    frames = []
+    for i, p in enumerate(poses):
+        frames += online.push(i * 33_333_333, p)[0]
+    frames += online.flush()
+    x = torch.as_tensor(np.stack([F.features_for(model.cfg, p.rotations[None],
+                                                 p.skeleton.group_lengths())[0]
+                                  for p in poses])[None])
+    with torch.no_grad():
+        out = model(x)
+    R0 = quat_to_matrix(frames[0].pose.rotations[0])
+    R, T = accumulate(R0, frames[0].pose.root_position, out['rotation'][0, :-1].double().numpy(),
+                      out['translation'][0, :-1].double().numpy())
+    np.testing.assert_allclose(np.stack([f.pose.root_position for f in frames]), T, atol=1e-6)
+    np.testing.assert_allclose(R0, tilt_rotation(out['up'][0, 0].double().numpy()), atol=1e-6)
+
+
+def test_static_camera_fusion_removes_drift():
+    R, T = circle_walk(150, turn=0.02)                  # 1.2 m/s for 5 s
+    dR, dT = relative_motion(R, T)
+    biased = dT * 1.1                                   # a GMR that overestimates the speed
+    C = axis_angle_to_matrix(np.array([1.9, 0.2, -0.4]))   # the input (camera) frame
+    c = np.array([0.3, 1.0, 4.0])
+    R_in, T_in = C.T @ R, (T - c) @ C                   # x_world = C x_in + c
+    up = up_in_body(R)
+    from mocap_global.evaluate import fuse_sequence
+    _, T_gmr = fuse_sequence(R[0], T[0], dR, biased, up, R_in, T_in, None)
+    for fusion in (StaticCameraFusion(30.0), StaticCameraFusion(30.0, input_up=C.T @ EZ)):
+        _, T_f = fuse_sequence(R[0], T[0], dR, biased, up, R_in, T_in, fusion)
+        assert fusion.ready
+        # the world frame is gravity-aligned: W maps the input frame's up to +z
+        np.testing.assert_allclose(fusion.W_R @ (C.T @ EZ), EZ, atol=1e-9)
+        # a first-order filter: a lag of about bias speed x time constant remains
+        assert M.ate_mm(T_f, T) < 0.5 * M.ate_mm(T_gmr, T)
+
+
+def test_full_tilt_correction_follows_the_estimated_up():
+    model = _small_model()
+    online = OnlineGMR(model, lookahead=19, tilt_correction=1.0)
+    poses = _poses(20)
+    frames = []
+    for i, p in enumerate(poses):
+        frames += online.push(i * 33_333_333, p)[0]
+    frames += online.flush()
+    x = torch.as_tensor(np.stack([F.features_for(model.cfg, p.rotations[None],
+                                                 p.skeleton.group_lengths())[0]
+                                  for p in poses])[None])
+    with torch.no_grad():
+        up = model(x)['up'][0].double().numpy()
+    R = quat_to_matrix(np.stack([f.pose.rotations[0] for f in frames]))
+    np.testing.assert_allclose(up_in_body(R), up, atol=1e-5)
+
+
+def test_position_input_is_the_root_frame_joints_and_ignores_leaf_twist():
+    R, T = circle_walk(10)
+    m = _motion(R, T)
+    gl = m.skeleton.group_lengths()
+    f = F.gmr_features(m.rotations, gl, pose_input='positions')
+    assert f.shape == (10, F.num_features(pose_input='positions'))
+    p = F.body_joint_positions(m.skeleton.offsets, m.rotations)[:, 1:].reshape(10, -1)
+    np.testing.assert_allclose(f[:, :F.NUM_POSITION_FEATURES], p, atol=1e-6)
+    twisted = np.array(m.rotations)
+    wrist = list(m.skeleton.joint_names).index('left_wrist')
+    twisted[:, wrist] = matrix_to_quat(axis_angle_to_matrix(np.array([1.0, 0.5, 0.0])))
+    f2 = F.gmr_features(twisted, gl, pose_input='positions')
+    np.testing.assert_allclose(f2, f, atol=1e-6)
+    assert not np.allclose(F.gmr_features(twisted, gl), F.gmr_features(m.rotations, gl))

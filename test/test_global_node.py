@@ -1,0 +1,220 @@
+"""``ros2 run mocap_global gmr`` fed by ``ros2 bag play`` of a committed validation bag, bad
+input, and the shipped weights against zero-motion and constant-velocity baselines."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BAG = ROOT / 'bags' / 'gt_cmu_walk_12_02'
+WEIGHTS = ROOT / 'src' / 'mocap_global' / 'weights' / 'gmr.pt'
+OUTPUTS = ('motion', 'joints3d', 'joint_states', 'odom', 'path', 'markers')
+
+
+def _weights(tmp_path: Path) -> Path:
+    """The shipped weights, or (before they are trained) a randomly initialised network of the
+    shipped size: the node tests check the plumbing, not the accuracy."""
+    if WEIGHTS.exists():
+        return WEIGHTS
+    import torch
+
+    from mocap_global.model import GMR, GMRConfig, save_weights
+    torch.manual_seed(0)
+    path = tmp_path / 'gmr_untrained.pt'
+    save_weights(GMR(GMRConfig()), path, {'note': 'untrained, for the node tests'})
+    return path
+
+
+def _world_groundtruth():
+    from mocap_core.rotations import quat_to_matrix
+
+    from mocap_global.evaluate import read_groundtruth_bag
+    b = read_groundtruth_bag(BAG)
+    Rc, tc = b['camera']
+    rot = np.stack([p.rotations for p in b['poses']])
+    root = np.stack([p.root_position for p in b['poses']])
+    return b, Rc @ quat_to_matrix(rot[:, 0]), root @ Rc.T + tc
+
+
+@pytest.mark.skipif(not WEIGHTS.exists(), reason='src/mocap_global/weights/gmr.pt does not exist '
+                    'yet: train it with `mocap train gmr --install`')
+def test_shipped_weights_beat_zero_motion_and_constant_velocity():
+    from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+
+    from mocap_global import metrics as M
+    from mocap_global.evaluate import predict_clip
+    from mocap_global.features import body_joint_positions, features_for
+    from mocap_global.model import load_weights
+    from mocap_global.se3 import relative_motion
+
+    b, Rw, Tw = _world_groundtruth()
+    model = load_weights(WEIGHTS)
+    sk = b['poses'][0].skeleton
+    rot = np.stack([p.rotations for p in b['poses']])
+    feats = features_for(model.cfg, rot, sk.group_lengths())
+    pred = predict_clip(model, feats, lookahead=15)
+    dR_gt, dT_gt = relative_motion(Rw, Tw)
+    joints = body_joint_positions(sk.offsets, rot)[1:]
+    n = len(dR_gt)
+    candidates = {
+        'gmr': (axis_angle_to_matrix(pred['axis_angle']), pred['translation']),
+        'zero': (np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3))),
+        # the clip's true mean motion: an oracle constant velocity and turn rate
+        'constant_velocity': (np.broadcast_to(axis_angle_to_matrix(
+            matrix_to_axis_angle(dR_gt).mean(0)), (n, 3, 3)),
+            np.broadcast_to(dT_gt.mean(0), (n, 3))),
+    }
+    err = {}
+    for name, (dR, dT) in candidates.items():
+        err[name] = {'ome': M.ome_deg(dR, dR_gt).mean(), 'tme': M.tme_mm(dT, dT_gt).mean(),
+                     'jme': M.jme_mm(dR, dT, dR_gt, dT_gt, joints).mean()}
+    print({k: {m: round(float(v), 3) for m, v in e.items()} for k, e in err.items()})
+    g, z, c = err['gmr'], err['zero'], err['constant_velocity']
+    for metric in ('tme', 'jme'):
+        assert g[metric] < 0.5 * z[metric], metric
+        assert g[metric] < 0.75 * c[metric], metric
+    assert g['ome'] < 0.75 * z['ome']
+
+
+@pytest.fixture
+def listener(ros_env):
+    import rclpy
+    from nav_msgs.msg import Odometry, Path as PathMsg
+    from sensor_msgs.msg import JointState, PointCloud2
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+    from visualization_msgs.msg import MarkerArray
+
+    from mocap_core.qos import STREAM_QOS
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
+    node = rclpy.create_node('gmr_test_listener', context=context)
+    got = {k: [] for k in OUTPUTS}
+    types = {'motion': MultiDOFJointTrajectory, 'joints3d': PointCloud2,
+             'joint_states': JointState, 'odom': Odometry, 'path': PathMsg,
+             'markers': MarkerArray}
+    for name, cls in types.items():
+        node.create_subscription(cls, f'/mocap/world/{name}', got[name].append, STREAM_QOS)
+    executor = rclpy.executors.SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    yield executor, node, got
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def _spin(executor, seconds: float, until=None) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+        if until is not None and until():
+            return
+
+
+def _stamp(m):
+    from mocap_core.ros_conversions import stamp_to_ns
+    return stamp_to_ns(m.header.stamp if hasattr(m, 'header') else m.markers[0].header.stamp)
+
+
+def test_node_publishes_the_world_motion_of_a_played_bag(processes, ros2_cmd, listener,
+                                                         tmp_path):
+    from mocap_core.ros_conversions import cloud_to_positions, motion_to_pose, odometry_to_root
+
+    executor, _, got = listener
+    b, Rw, Tw = _world_groundtruth()
+    stamps = b['stamps']
+    node, log = processes.start(ros2_cmd + [
+        'run', 'mocap_global', 'gmr', '--ros-args', '-p',
+        'motion_topic:=/mocap/groundtruth/motion', '-p', f'weights:={_weights(tmp_path)}',
+        '-p', 'lookahead:=10'], 'gmr')
+    processes.wait_for_text(log, 'gmr ready', 90, node)
+    player, plog = processes.start(ros2_cmd + ['bag', 'play', str(BAG), '--delay', '3',
+                                               '--topics', '/mocap/groundtruth/motion'],
+                                   'play')
+    _spin(executor, 120, until=lambda: player.poll() is not None)
+    assert player.returncode == 0, plog.read_text()
+    _spin(executor, 15, until=lambda: all(len(got[k]) >= len(stamps) for k in OUTPUTS))
+    text = log.read_text()
+    assert 'Traceback' not in text, text
+    assert 'waiting for 11 frames' in text
+    for name in OUTPUTS:
+        assert len(got[name]) == len(stamps), (name, len(got[name]), text[-2000:])
+        assert [_stamp(m) for m in got[name]] == stamps, name
+    assert all(m.header.frame_id == 'world' for m in got['motion'])
+    assert len(got['path'][-1].poses) == len(stamps)
+    for m in got['joints3d']:
+        assert np.all(np.isfinite(cloud_to_positions(m, 18)))
+    poses = [motion_to_pose(m) for m in got['motion']]
+    # the local pose is passed through; the world root starts gravity-aligned on the floor
+    np.testing.assert_allclose(poses[5].rotations[1:], b['poses'][5].rotations[1:], atol=1e-6)
+    first = poses[0]
+    assert min(p[2] for p in first.contact_positions().values()) == pytest.approx(0, abs=1e-6)
+    T = np.stack([odometry_to_root(m)[0] for m in got['odom']])
+    assert np.all(np.isfinite(T))
+    if WEIGHTS.exists():   # trained: the trajectory follows the walk (4-DOF aligned)
+        from mocap_global.metrics import ate_mm
+        travelled = np.linalg.norm(Tw[-1] - Tw[0])
+        assert ate_mm(T, Tw) < 0.25 * 1000 * travelled
+
+
+def test_node_survives_bad_input(processes, ros2_cmd, listener, tmp_path):
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+    from mocap_core.qos import STREAM_QOS
+    from mocap_core.ros_conversions import make_header, pose_to_motion
+
+    executor, node, got = listener
+    b, _, _ = _world_groundtruth()
+    pub = node.create_publisher(MultiDOFJointTrajectory, '/mocap/physics/motion', STREAM_QOS)
+    proc, log = processes.start(ros2_cmd + [
+        'run', 'mocap_global', 'gmr', '--ros-args', '-p', f'weights:={_weights(tmp_path)}',
+        '-p', 'lookahead:=3', '-p', 'static_camera:=true', '-p', 'max_gap_s:=0.2'],
+        'gmr_bad')
+    processes.wait_for_text(log, 'gmr ready', 90, proc)
+    _spin(executor, 20, until=lambda: pub.get_subscription_count() > 0)
+    t0 = 1_000_000_000
+    dt = 33_333_333
+
+    def send(i, pose, stamp):
+        pub.publish(pose_to_motion(pose, make_header(stamp, 'floor')))
+        _spin(executor, 0.03)
+
+    poses = b['poses']
+    # a joint set that does not match the model
+    wrong = pose_to_motion(poses[0], make_header(t0, 'floor'))
+    wrong.joint_names = wrong.joint_names[:10]
+    wrong.points[0].transforms = wrong.points[0].transforms[:10]
+    pub.publish(wrong)
+    # NaN
+    nan = pose_to_motion(poses[0], make_header(t0, 'floor'))
+    nan.points[0].transforms[3].rotation.x = float('nan')
+    pub.publish(nan)
+    _spin(executor, 0.2)
+    for i in range(10):                       # start-up: outputs wait for 3 future frames
+        send(i, poses[i], t0 + i * dt)
+    send(0, poses[9], t0 + 9 * dt)            # a stamp that does not advance
+    for i in range(10, 20):                   # after a gap of 1 s: accumulation restarts
+        send(i, poses[i], t0 + int(1e9) + i * dt)
+    _spin(executor, 5, until=lambda: all(len(got[k]) >= 20 for k in OUTPUTS))
+    text = log.read_text()
+    assert proc.poll() is None, text            # still running
+    assert 'Traceback' not in text
+    assert 'joint set does not match the GMR model' in text
+    assert 'dropping motion' in text and 'NaN' in text
+    assert 'did not advance' in text
+    assert 'waiting for 4 frames' in text
+    assert 'accumulation restarted' in text
+    assert 'static camera' in text
+    assert len(got['motion']) == 20, text[-2000:]
+    stamps = [_stamp(m) for m in got['motion']]
+    assert stamps == sorted(stamps)
+    from mocap_core.ros_conversions import cloud_to_positions
+    assert all(np.all(np.isfinite(cloud_to_positions(m, 18))) for m in got['joints3d'])
+    # the restart begins a new path
+    assert len(got['path'][-1].poses) == 10
