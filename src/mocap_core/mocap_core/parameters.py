@@ -71,3 +71,32 @@ def help_requested(argv, doc: str, specs: Iterable[ParamSpec]) -> bool:
     print('Parameters (--ros-args -p name:=value):')
     print(describe_parameters(specs))
     return True
+
+
+def spin_node(make_node, args, name: str) -> int:
+    """Run a node until shutdown: ``rclpy.init(args)``, build it with ``make_node()``, spin.
+
+    Returns the exit code: 0 after Ctrl-C or an external shutdown; 2 with a one-line
+    ``<name>: error: ...`` on stderr when building the node raises FileNotFoundError or
+    ValueError (missing weights, a bad parameter). Always destroys the node and shuts down."""
+    import sys
+
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        rclpy.spin(node)
+        return 0
+    except (FileNotFoundError, ValueError) as exc:
+        print(f'{name}: error: {exc}', file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()

@@ -35,7 +35,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
+from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 
 PARAMETERS = (
     ParamSpec('motion_topic', '/mocap/physics/motion', 'Input motion '
@@ -103,9 +103,7 @@ def main(args: Optional[List[str]] = None) -> int:
     import os
     os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')   # see mocap_global.cli
 
-    import rclpy
     import torch
-    from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
     from nav_msgs.msg import Odometry, Path as PathMsg
     from sensor_msgs.msg import JointState, PointCloud2
@@ -302,22 +300,7 @@ def main(args: Optional[List[str]] = None) -> int:
                 if fusion is not None:
                     self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
 
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = GMRNode()
-        rclpy.spin(node)
-        return 0
-    except (FileNotFoundError, ValueError) as exc:
-        print(f'gmr: error: {exc}', file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    return spin_node(GMRNode, args, 'gmr')
 
 
 if __name__ == '__main__':

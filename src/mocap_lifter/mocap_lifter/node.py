@@ -18,7 +18,7 @@ from typing import List, Optional
 
 import numpy as np
 
-from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
+from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 
 PARAMETERS = (
     ParamSpec('mode', 'windowed', "'windowed' (centred window: delay of `latency` frames) or "
@@ -64,8 +64,6 @@ def main(args: Optional[List[str]] = None) -> int:
     if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
 
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
     from sensor_msgs.msg import CameraInfo, JointState, PointCloud2
     from std_msgs.msg import String
@@ -217,22 +215,7 @@ def main(args: Optional[List[str]] = None) -> int:
             self.diag.set_value('skeleton', 'held' if frame.skeleton_fixed else 'estimating')
             self.diag.set_value('root_depth_m', f'{frame.depth:.2f}')
 
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = LifterNode()
-        rclpy.spin(node)
-        return 0
-    except (FileNotFoundError, ValueError) as exc:
-        print(f'lifter: error: {exc}', file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    return spin_node(LifterNode, args, 'lifter')
 
 
 if __name__ == '__main__':
