@@ -117,12 +117,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    parser = argparse.ArgumentParser(prog='python -m mocap_lifter.cli')
-    sub = parser.add_subparsers(dest='command', required=True)
-    add_train_parser(sub.add_parser('train').add_subparsers(dest='what', required=True))
-    add_eval_parser(sub.add_parser('eval').add_subparsers(dest='what', required=True))
-    args = parser.parse_args(argv)
-    return args.func(args)
+    from mocap_core.cli.mocap import run_model_cli
+    return run_model_cli(sys.modules[__name__], 'python -m mocap_lifter.cli', argv)
 
 
 if __name__ == '__main__':

@@ -250,6 +250,17 @@ def cmd_plot_motion(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_model_cli(commands, prog: str, argv: Optional[List[str]] = None) -> int:
+    """``python -m <package>.cli train|eval ...`` for one model package: the same commands as
+    ``mocap train|eval`` built from its ``add_train_parser`` / ``add_eval_parser``."""
+    parser = argparse.ArgumentParser(prog=prog)
+    sub = parser.add_subparsers(dest='command', required=True)
+    commands.add_train_parser(sub.add_parser('train').add_subparsers(dest='what', required=True))
+    commands.add_eval_parser(sub.add_parser('eval').add_subparsers(dest='what', required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='mocap', description='Monocular motion capture pipeline: tools.')
