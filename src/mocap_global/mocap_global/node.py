@@ -28,6 +28,7 @@ once).
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from pathlib import Path
@@ -100,6 +101,14 @@ def parse_up(text: str) -> Optional[np.ndarray]:
 def main(args: Optional[List[str]] = None) -> int:
     if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
+    return spin_node(node_class(), args, 'gmr')
+
+
+@functools.lru_cache(maxsize=None)
+def node_class():
+    """The node class (``GMRNode``; rclpy is imported here, not at module import, so
+    ``--help`` stays fast). Keyword arguments of the constructor go to
+    ``rclpy.node.Node`` (``context``, ``parameter_overrides``, ...)."""
     import os
     os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')   # see mocap_global.cli
 
@@ -118,8 +127,8 @@ def main(args: Optional[List[str]] = None) -> int:
     from .online import OnlineGMR, StaticCameraFusion
 
     class GMRNode(Node):
-        def __init__(self) -> None:
-            super().__init__('gmr')
+        def __init__(self, **kwargs) -> None:
+            super().__init__('gmr', **kwargs)
             self.p = p = declare_parameters(self, PARAMETERS)
             torch.set_num_threads(int(p['threads']))
             path = Path(p['weights']) if p['weights'] else default_weights()
@@ -271,6 +280,12 @@ def main(args: Optional[List[str]] = None) -> int:
                     time.monotonic() - self.last_input > self.p['flush_after_s']:
                 self._publish(self.online.flush())
 
+        def flush(self) -> None:
+            """End of the input (offline processing): emit the frames waiting for
+            look-ahead."""
+            if self.online is not None and self.online.pending():
+                self._publish(self.online.flush())
+
         def _publish(self, frames) -> None:
             for f in frames:
                 pose = f.pose
@@ -300,7 +315,7 @@ def main(args: Optional[List[str]] = None) -> int:
                 if fusion is not None:
                     self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
 
-    return spin_node(GMRNode, args, 'gmr')
+    return GMRNode
 
 
 if __name__ == '__main__':

@@ -35,6 +35,7 @@ Exit status: 0 at the end of a file source or on Ctrl-C; 2 when the source canno
 from __future__ import annotations
 
 import collections
+import functools
 import re
 import sys
 import threading
@@ -104,6 +105,9 @@ PARAMETERS = (
               read_only=True),
     ParamSpec('annotated_max_fps', 0.0, 'Highest rate of the annotated images (wall '
               'clock; 0 = every frame)', min_value=0.0, read_only=True),
+    ParamSpec('synchronous', False, 'Image topic: detect in the subscription callback instead '
+              'of the worker thread (offline replay: no frame dropped, the callback blocks)',
+              read_only=True),
     ParamSpec('wait_for_subscribers', 0, 'Before the first frame, wait until this many '
               'subscribers listen on /mocap/keypoints2d (e.g. 1 for a recorder); 0 = start at once',
               min_value=0),
@@ -137,9 +141,53 @@ def main(args: Optional[List[str]] = None) -> int:
         return 0
 
     import rclpy
-    from rclpy.event_handler import SubscriptionEventCallbacks
     from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = node_class()()
+        except (SourceError, FileNotFoundError, ValueError, ParameterException) as exc:
+            print(f'keypoints: error: {exc}', file=sys.stderr)
+            return 2
+        while rclpy.ok() and not node.done:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        node._drain()
+        reason, error = node.source_end or ('stopped', None)
+        # Let the last messages leave before the publishers go away.
+        for _ in range(5):
+            if not rclpy.ok():
+                break
+            rclpy.spin_once(node, timeout_sec=0.1)
+        if error is not None:
+            node.get_logger().error(f'source failed: {reason} ({node.summary()})')
+            return 1
+        node.get_logger().info(f'finished ({reason}): {node.summary()}')
+        return 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        if node is not None:  # the context is gone: no /rosout, plain stderr
+            print(f'[keypoints] stopped: {node.summary()}', file=sys.stderr)
+        return 0
+    finally:
+        if node is not None:
+            node.shutdown()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+
+
+@functools.lru_cache(maxsize=None)
+def node_class():
+    """The node class (``KeypointsNode``; rclpy is imported here, not at module import, so
+    ``--help`` stays fast). Keyword arguments of the constructor go to
+    ``rclpy.node.Node`` (``context``, ``parameter_overrides``, ...)."""
+
+    import rclpy
+    from rclpy.event_handler import SubscriptionEventCallbacks
     from rclpy.node import Node
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
@@ -181,8 +229,8 @@ def main(args: Optional[List[str]] = None) -> int:
         return rclpy.create_node(name, context=context)
 
     class KeypointsNode(Node):
-        def __init__(self) -> None:
-            super().__init__('keypoints')
+        def __init__(self, **kwargs) -> None:
+            super().__init__('keypoints', **kwargs)
             # 'device' accepts an index (an integer to ROS: device:=1) or a path/URL string.
             self.p = p = declare_parameters(self, [s for s in PARAMETERS if s.name != 'device'])
             spec = next(s for s in PARAMETERS if s.name == 'device')
@@ -232,7 +280,8 @@ def main(args: Optional[List[str]] = None) -> int:
             self.pub_annotated = None
             self._annotated_node = None
             if p['publish_annotated']:
-                self._annotated_node = _side_node(self.get_name() + '_annotated', args)
+                self._annotated_node = _side_node(self.get_name() + '_annotated',
+                                                 kwargs.get('cli_args'))
                 # Reliable (serves reliable and best-effort subscribers): large best-effort
                 # samples are often lost over UDP; keep-last 2 never queues stale images.
                 self.pub_annotated = self._annotated_node.create_publisher(
@@ -342,11 +391,24 @@ def main(args: Optional[List[str]] = None) -> int:
                 return
             self.last_input_stamp = stamp
             convert = compressed_image_to_bgr if self.compressed else image_to_bgr
-            self.worker.submit(Frame(stamp, None, self.topic_index,
-                                     f"{self.p['image_topic']} image {self.topic_index}",
-                                     decode=lambda m=msg: convert(m),
-                                     frame_id=msg.header.frame_id))
+            frame = Frame(stamp, None, self.topic_index,
+                          f"{self.p['image_topic']} image {self.topic_index}",
+                          decode=lambda m=msg: convert(m), frame_id=msg.header.frame_id)
             self.topic_index += 1
+            if self.p['synchronous']:
+                self.process_now(frame)
+            else:
+                self.worker.submit(frame)
+
+        def process_now(self, frame) -> None:
+            """Detect and publish one frame in the calling thread (offline processing:
+            ``synchronous`` images and ``mocap process`` on a video; nothing is dropped)."""
+            t0 = time.perf_counter()
+            try:
+                result, error = self.processor.process(frame), None
+            except Exception as exc:  # noqa: BLE001 - reported per frame, as the worker does
+                result, error = None, exc
+            self._handle(frame, result, error, time.perf_counter() - t0)
 
         def _subscribe_images(self) -> None:
             """(Re)create the image subscription with the reliability ``image_qos`` asks for
@@ -490,38 +552,7 @@ def main(args: Optional[List[str]] = None) -> int:
                 self._annotated_node.destroy_node()
                 context.try_shutdown()
 
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = KeypointsNode()
-        except (SourceError, FileNotFoundError, ValueError, ParameterException) as exc:
-            print(f'keypoints: error: {exc}', file=sys.stderr)
-            return 2
-        while rclpy.ok() and not node.done:
-            rclpy.spin_once(node, timeout_sec=0.1)
-        node._drain()
-        reason, error = node.source_end or ('stopped', None)
-        # Let the last messages leave before the publishers go away.
-        for _ in range(5):
-            if not rclpy.ok():
-                break
-            rclpy.spin_once(node, timeout_sec=0.1)
-        if error is not None:
-            node.get_logger().error(f'source failed: {reason} ({node.summary()})')
-            return 1
-        node.get_logger().info(f'finished ({reason}): {node.summary()}')
-        return 0
-    except (KeyboardInterrupt, ExternalShutdownException):
-        if node is not None:  # the context is gone: no /rosout, plain stderr
-            print(f'[keypoints] stopped: {node.summary()}', file=sys.stderr)
-        return 0
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    return KeypointsNode
 
 
 if __name__ == '__main__':

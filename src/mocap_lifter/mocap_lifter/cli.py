@@ -33,6 +33,10 @@ def add_train_parser(sub) -> None:
                    'a machine busy with other work)')
     p.add_argument('--no-resume', action='store_true', help='start over even if a checkpoint '
                    'exists')
+    p.add_argument('--init', help='start from these weights (fine-tuning; same network '
+                   'configuration) instead of a random initialisation')
+    p.add_argument('--clean-fraction', type=float, help='share of training windows with clean '
+                   'keypoints (confidence 1, no displacement); default 0.25')
     p.add_argument('--install', action='store_true', help='copy the final weights to the '
                    'package (weights/motionet_<mode>.pt)')
     p.set_defaults(func=cmd_train)
@@ -63,6 +67,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         cfg.steps = args.steps
     if args.threads:
         cfg.threads = args.threads
+    if args.init:
+        cfg.init = str(Path(args.init).resolve())
+    if args.clean_fraction is not None:
+        cfg.clean_fraction = args.clean_fraction
     run_dir = Path(args.run_dir or f'runs/lifter_{args.mode}')
     print(f'loading the dataset (train and validation splits) ...', flush=True)
     t0 = time.time()

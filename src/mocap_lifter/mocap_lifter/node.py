@@ -11,6 +11,7 @@ skeleton estimate changes by more than ``skeleton_tolerance``) and ``/diagnostic
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from pathlib import Path
@@ -35,6 +36,9 @@ PARAMETERS = (
               'the skeleton', min_value=0.0),
     ParamSpec('flush_after_s', 0.3, 'Windowed mode: when no keypoints arrive for this long, '
               'emit the frames still waiting for look-ahead', min_value=0.0),
+    ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
+              'effort: older ones are lost when the queue is full)', min_value=1,
+              read_only=True),
     ParamSpec('person', 0, 'Row of the keypoint cloud (person) to track', min_value=0),
     ParamSpec('body_mass', 70.0, 'Body mass for the URDF inertias (kg)', min_value=1.0),
     ParamSpec('horizontal_fov_deg', 60.0, 'Field of view used when no camera_info arrived '
@@ -63,6 +67,14 @@ def default_weights(mode: str) -> Path:
 def main(args: Optional[List[str]] = None) -> int:
     if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
+    return spin_node(node_class(), args, 'lifter')
+
+
+@functools.lru_cache(maxsize=None)
+def node_class():
+    """The node class (``LifterNode``; rclpy is imported here, not at module import, so
+    ``--help`` stays fast). Keyword arguments of the constructor go to
+    ``rclpy.node.Node`` (``context``, ``parameter_overrides``, ...)."""
 
     from rclpy.node import Node
     from sensor_msgs.msg import CameraInfo, JointState, PointCloud2
@@ -73,15 +85,15 @@ def main(args: Optional[List[str]] = None) -> int:
     from mocap_core import ros_conversions as rc
     from mocap_core.camera import CameraIntrinsics
     from mocap_core.diagnostics import NodeDiagnostics
-    from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS
+    from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS, input_qos
     from mocap_core.urdf import skeleton_to_urdf
 
     from .online import OnlineLifter
     from .train import load_weights
 
     class LifterNode(Node):
-        def __init__(self) -> None:
-            super().__init__('lifter')
+        def __init__(self, **kwargs) -> None:
+            super().__init__('lifter', **kwargs)
             self.p = declare_parameters(self, PARAMETERS)
             mode = self.p['mode']
             if mode not in ('causal', 'windowed'):
@@ -119,7 +131,7 @@ def main(args: Optional[List[str]] = None) -> int:
             self.create_timer(0.1, self.on_idle)
             self.create_subscription(CameraInfo, '/mocap/camera_info', self.on_info, STREAM_QOS)
             self.create_subscription(PointCloud2, '/mocap/keypoints2d', self.on_keypoints,
-                                     SENSOR_QOS)
+                                     input_qos(SENSOR_QOS, self.p['queue_depth']))
             self.get_logger().info(f'lifter ready: {path} ({mode}, receptive field '
                                    f'{model.cfg.receptive_field()} frames, latency '
                                    f'{self.lifter.latency} frames)')
@@ -181,6 +193,12 @@ def main(args: Optional[List[str]] = None) -> int:
                 for frame in self.lifter.flush():
                     self.publish(frame)
 
+        def flush(self) -> None:
+            """End of the input (offline processing): emit every frame still waiting for
+            look-ahead, with the future frames that exist."""
+            for frame in self.lifter.flush():
+                self.publish(frame)
+
         def _approximate_intrinsics(self, kp: np.ndarray) -> CameraIntrinsics:
             seen = kp[:, 2] > 0
             w = int(max(640, np.ceil(kp[seen, 0].max() * 1.1)))
@@ -215,7 +233,7 @@ def main(args: Optional[List[str]] = None) -> int:
             self.diag.set_value('skeleton', 'held' if frame.skeleton_fixed else 'estimating')
             self.diag.set_value('root_depth_m', f'{frame.depth:.2f}')
 
-    return spin_node(LifterNode, args, 'lifter')
+    return LifterNode
 
 
 if __name__ == '__main__':

@@ -37,6 +37,7 @@ class Augmentation:
     global_scale: float = 0.10     # whole body, uniform +-
     camera: CameraSampling = field(default_factory=CameraSampling)
     corruption: Optional[Corruption] = field(default_factory=Corruption)  # None = clean
+    clean_prob: float = 0.0        # share of windows left uncorrupted (confidence 1)
 
 
 def scaled_skeleton(skeleton: Skeleton, rng: np.random.Generator, aug: Augmentation,
@@ -69,7 +70,7 @@ def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generato
     forward = _facing(rot[:, 0])
     camera = sample_camera(pts, rng, aug.camera, facing=forward)
     kp = project(camera, pts)
-    if aug.corruption is not None:
+    if aug.corruption is not None and rng.random() >= aug.clean_prob:
         kp = corrupt_keypoints(kp, rng, _confidence_model(), aug.corruption)
     features, root_2d, scale, _ = lifter_features(kp, camera.intrinsics)
     crot, croot = motion_to_camera(rot, root, camera)

@@ -59,6 +59,8 @@ class TrainConfig:
     w_rotation: float = 0.0
     w_adversarial: float = 0.0
     end_effector_weight: float = 2.0
+    clean_fraction: float = 0.25   # share of training windows with clean keypoints
+    init: Optional[str] = None     # weights to start from (fine-tuning) instead of random
     validate_every: int = 500
     checkpoint_every: int = 250
     threads: int = 2
@@ -128,7 +130,8 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / 'config.json').write_text(json.dumps(asdict(cfg), indent=1))
-    sampler = WindowSampler(train_motions, cfg.window, seed=cfg.seed, aug=Augmentation())
+    sampler = WindowSampler(train_motions, cfg.window, seed=cfg.seed,
+                            aug=Augmentation(clean_prob=cfg.clean_fraction))
     val_sampler = WindowSampler(val_motions, cfg.window, seed=12345, aug=Augmentation())
     val_batches = [val_sampler.batch(cfg.batch) for _ in range(4)]
 
@@ -147,6 +150,12 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
             opt_d.load_state_dict(state['optimizer_d'])
         step = state['step']
         sampler.rng = np.random.default_rng(cfg.seed + step)
+    elif cfg.init:
+        init = load_weights(Path(cfg.init), device, causal=cfg.model.causal)
+        if asdict(init.cfg) != asdict(model.cfg):
+            raise ValueError(f'--init weights {cfg.init} have another network configuration: '
+                             f'{asdict(init.cfg)} vs {asdict(model.cfg)}')
+        model.load_state_dict(init.state_dict())
     else:
         mean, std = feature_statistics(sampler)
         model.set_normalisation(mean, std)

@@ -60,6 +60,7 @@ the simulation; all are counted on /diagnostics.
 from __future__ import annotations
 
 import collections
+import functools
 import os
 import sys
 import time
@@ -67,7 +68,7 @@ from typing import Deque, List, Optional, Tuple
 
 import numpy as np
 
-from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
+from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 
 from .cycle import PhysicsParams
 from .floor import FloorTrackerParams
@@ -156,10 +157,16 @@ OUT = '/mocap/physics'
 def main(args: Optional[List[str]] = None) -> int:
     if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
+    return spin_node(node_class(), args, 'physics')
 
-    import rclpy
+
+@functools.lru_cache(maxsize=None)
+def node_class():
+    """The node class (``PhysicsNode``; rclpy is imported here, not at module import, so
+    ``--help`` stays fast). Keyword arguments of the constructor go to
+    ``rclpy.node.Node`` (``context``, ``parameter_overrides``, ...)."""
+
     from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
-    from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
     from sensor_msgs.msg import JointState, PointCloud2
     from trajectory_msgs.msg import MultiDOFJointTrajectory
@@ -178,8 +185,8 @@ def main(args: Optional[List[str]] = None) -> int:
     from .model import SkeletonError, revolute_efforts
 
     class PhysicsNode(Node):
-        def __init__(self) -> None:
-            super().__init__('physics')
+        def __init__(self, **kwargs) -> None:
+            super().__init__('physics', **kwargs)
             self.p = p = declare_parameters(self, PARAMETERS)
             weights = p['dynet_weights']
             if p['gains_mode'] == 'learned' and not weights:
@@ -303,14 +310,20 @@ def main(args: Optional[List[str]] = None) -> int:
                 return True, self.contacts[max(older)]
             return True, None
 
-        def _process(self) -> None:
+        def _process(self, wait: bool = True) -> None:
             while self.pending:
                 stamp, pose, frame_id, t_in = self.pending[0]
-                ready, probs = self._contacts_for(stamp, time.monotonic() - t_in)
+                waited = time.monotonic() - t_in if wait else float('inf')
+                ready, probs = self._contacts_for(stamp, waited)
                 if not ready:
                     return
                 self.pending.popleft()
                 self._step(stamp, pose, frame_id, probs)
+
+        def flush(self) -> None:
+            """End of the input (offline processing): step every waiting frame now, with
+            the contacts that arrived (no more waiting for late ones)."""
+            self._process(wait=False)
 
         # -- the cycle -----------------------------------------------------------------------
         def _step(self, stamp: int, pose, frame_id: str, probs) -> None:
@@ -436,22 +449,7 @@ def main(args: Optional[List[str]] = None) -> int:
             if r is not None and r.status == 'ok' and not self.pending:
                 d.warn(None)
 
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PhysicsNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:   # bad parameters
-        print(f'physics: {exc}', file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return PhysicsNode
 
 
 if __name__ == '__main__':

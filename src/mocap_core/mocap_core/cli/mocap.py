@@ -215,41 +215,6 @@ def cmd_plot_motion(args: argparse.Namespace) -> int:
 MODEL_COMMANDS = ('mocap_lifter.cli', 'mocap_physics.cli', 'mocap_global.cli')
 
 
-#: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
-MODEL_COMMANDS = ('mocap_lifter.cli', 'mocap_physics.cli', 'mocap_global.cli')
-
-
-def cmd_plot_motion(args: argparse.Namespace) -> int:
-    """Plot the skeleton of a motion topic (MultiDOFJointTrajectory) at a few frames."""
-    from ..bag_io import BagError, BagReader, deserialize
-    from ..plots import plot_motion_frames
-    from ..ros_conversions import MessageError, motion_to_pose, stamp_to_ns
-
-    times, frames, parents = [], [], None
-    try:
-        with BagReader(args.bag) as reader:
-            for m in reader.messages(topics=[args.topic]):
-                try:
-                    msg = deserialize(m.data, m.msgtype)
-                    pose = motion_to_pose(msg)
-                except MessageError as exc:
-                    print(f'skipping a message: {exc}', file=sys.stderr)
-                    continue
-                times.append(stamp_to_ns(msg.header.stamp) * 1e-9)
-                frames.append(pose.joint_positions())
-                parents = pose.skeleton.parents
-    except BagError as exc:
-        print(f'mocap plot motion: error: {exc}', file=sys.stderr)
-        return 1
-    if not frames:
-        print(f'mocap plot motion: error: no motion on {args.topic}', file=sys.stderr)
-        return 1
-    out = plot_motion_frames(times, np.stack(frames), parents, args.output, frame=args.frame,
-                             title=f'{args.topic} ({len(frames)} frames)')
-    print(f'wrote {out}')
-    return 0
-
-
 def run_model_cli(commands, prog: str, argv: Optional[List[str]] = None) -> int:
     """``python -m <package>.cli train|eval ...`` for one model package: the same commands as
     ``mocap train|eval`` built from its ``add_train_parser`` / ``add_eval_parser``."""
@@ -300,6 +265,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .mocap_data import add_data_parser
     add_data_parser(sub)
+
+    from .process import add_parser as add_process_parser
+    add_process_parser(sub)
 
     p = sub.add_parser('export', help='export motion to other formats')
     export_sub = p.add_subparsers(dest='export_command', metavar='FORMAT')

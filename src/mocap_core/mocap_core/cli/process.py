@@ -1,0 +1,388 @@
+"""``mocap process INPUT -o OUT``: the whole pipeline offline, in one process.
+
+INPUT is a rosbag2 folder with MCAP storage (as ``ros2 bag record`` writes it), a single
+``.mcap`` file, or a video file. The pipeline starts from what the input holds:
+
+===========  ==================================================  ============================
+start        input topic (first one found, in this order)         nodes run
+===========  ==================================================  ============================
+images       an Image/CompressedImage topic (``--image-topic``)  keypoints, lifter, physics,
+             or a video file                                      gmr
+keypoints    ``/mocap/keypoints2d`` (+ ``/mocap/camera_info``)     lifter, physics, gmr
+lifter       ``/mocap/lifter/motion`` (+ ``/mocap/lifter/contacts``) physics, gmr
+physics      ``/mocap/physics/motion``                            gmr
+===========  ==================================================  ============================
+
+The nodes are the pipeline's own node classes (the ones ``ros2 run`` starts), wired with
+:class:`mocap_core.inprocess.InProcessGraph`: every message is delivered synchronously, in
+order, so the run is deterministic, as fast as the machine allows and drops nothing. The output
+bag holds the input bag's topics (those the pipeline re-computes excepted) and every topic the
+nodes publish (``/diagnostics``: one final status per node). Messages are written with their
+header stamp as the bag time (messages without a header: the time of the input message that
+caused them).
+
+Node parameters: ``--param NODE.NAME=VALUE`` (NODE = keypoints, lifter, physics, gmr; VALUE in
+YAML, e.g. ``--param lifter.mode=causal --param physics.gains_mode=learned``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Tuple
+
+STAGES = ('images', 'keypoints', 'lifter', 'physics')
+NODES = ('keypoints', 'lifter', 'physics', 'gmr')
+NODE_MODULES = {'keypoints': 'mocap_keypoints.node', 'lifter': 'mocap_lifter.node',
+                'physics': 'mocap_physics.node', 'gmr': 'mocap_global.node'}
+VIDEO_SUFFIXES = {'.mp4', '.avi', '.mov', '.mkv', '.webm', '.m4v', '.mpg', '.mpeg'}
+IMAGE_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'}
+#: Topics each stage's node produces (an input bag's copy of them is not kept).
+PRODUCED = {
+    'keypoints': ('/mocap/keypoints2d', '/mocap/camera_info'),
+    'lifter': ('/mocap/lifter/', '/mocap/skeleton/urdf'),
+    'physics': ('/mocap/physics/',),
+    'gmr': ('/mocap/world/',),
+}
+#: Parameters the offline run sets (overridable with --param).
+OFFLINE_DEFAULTS: Dict[str, Dict[str, Any]] = {
+    'keypoints': {'synchronous': True, 'realtime': False},
+    # a motion frame waits for its contacts by message order, not by wall-clock time
+    'physics': {'contacts_wait_s': 5.0},
+}
+
+
+class ProcessError(Exception):
+    """A problem with the input or the options: one line for the user."""
+
+
+@dataclass
+class Plan:
+    """What to run on an input."""
+
+    start: str                       # one of STAGES
+    nodes: List[str]                 # node names, upstream first
+    feed_topics: List[str]           # input topics delivered to the nodes
+    video: Optional[Path] = None
+    image_topic: str = ''
+    dropped_topics: List[str] = field(default_factory=list)
+
+
+def is_video(path: Path) -> bool:
+    return path.is_file() and path.suffix.lower() in VIDEO_SUFFIXES
+
+
+def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
+             video: Optional[Path] = None) -> Plan:
+    """Choose the first stage from the input's topics (name -> type) or a video file.
+
+    Raises ProcessError when the input holds nothing the pipeline can start from."""
+    if video is not None:
+        if start not in ('auto', 'images'):
+            raise ProcessError(f'a video input starts at images, not {start}')
+        return Plan('images', list(NODES), [], video=video)
+    images = [t for t, ty in sorted(topics.items()) if ty in IMAGE_TYPES]
+    if image_topic:
+        if image_topic not in topics:
+            raise ProcessError(f'--image-topic {image_topic} is not in the input')
+        images = [image_topic]
+    elif '/camera/image_raw' in images:
+        images = ['/camera/image_raw']
+    available = {
+        'images': bool(images),
+        'keypoints': '/mocap/keypoints2d' in topics,
+        'lifter': '/mocap/lifter/motion' in topics,
+        'physics': '/mocap/physics/motion' in topics,
+    }
+    if start == 'auto':
+        start = next((s for s in STAGES if available[s]), '')
+        if not start:
+            raise ProcessError(
+                'nothing to start from: the input has no image topic, /mocap/keypoints2d, '
+                f"/mocap/lifter/motion or /mocap/physics/motion (topics: "
+                f"{', '.join(sorted(topics)) or 'none'})")
+    elif start not in STAGES:
+        raise ProcessError(f'unknown start stage {start!r} (use auto or {", ".join(STAGES)})')
+    elif not available[start]:
+        raise ProcessError(f'--start {start}: the input lacks its topic')
+    if start == 'images' and len(images) > 1:
+        raise ProcessError(f"several image topics ({', '.join(images)}): choose one with "
+                           '--image-topic')
+    nodes = list(NODES[STAGES.index(start):])
+    feed = {
+        'images': images[:1] + [t for t in ('/camera/camera_info',) if t in topics],
+        'keypoints': ['/mocap/keypoints2d'] + [t for t in ('/mocap/camera_info',)
+                                              if t in topics],
+        'lifter': ['/mocap/lifter/motion'] + [t for t in ('/mocap/lifter/contacts',)
+                                              if t in topics],
+        'physics': ['/mocap/physics/motion'],
+    }[start]
+    produced = [p for n in nodes for p in PRODUCED[n]]
+    dropped = [t for t in sorted(topics) if t not in feed and any(
+        t == p or (p.endswith('/') and t.startswith(p)) for p in produced)]
+    return Plan(start, nodes, feed, image_topic=images[0] if start == 'images' else '',
+                dropped_topics=dropped)
+
+
+def parse_params(items: List[str]) -> Dict[str, Dict[str, Any]]:
+    """``NODE.NAME=VALUE`` strings -> {node: {name: value}} (VALUE parsed as YAML)."""
+    import yaml
+
+    out: Dict[str, Dict[str, Any]] = {n: {} for n in NODES}
+    for item in items:
+        key, sep, value = item.partition('=')
+        node, dot, name = key.partition('.')
+        if not sep or not dot or node not in NODES or not name:
+            raise ProcessError(f'--param {item!r}: expected NODE.NAME=VALUE with NODE one of '
+                               f'{", ".join(NODES)}')
+        try:
+            out[node][name] = yaml.safe_load(value) if value != '' else ''
+        except yaml.YAMLError as exc:
+            raise ProcessError(f'--param {item!r}: bad value ({exc})') from None
+    return out
+
+
+def _overrides(values: Dict[str, Any]) -> List[Any]:
+    from rclpy.parameter import Parameter
+
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+class Recorder:
+    """Writes every message the graph sees to the output bag (see the module doc)."""
+
+    def __init__(self, writer, exclude: Tuple[str, ...] = ()) -> None:
+        self.writer = writer
+        self.now_ns = 0
+        self.counts: Dict[str, int] = {}
+        self.exclude = set(exclude)
+
+    def __call__(self, topic: str, msg: Any, qos: Any) -> None:
+        if topic in self.exclude:
+            return
+        header = getattr(msg, 'header', None)
+        stamp = getattr(header, 'stamp', None)
+        ts = self.now_ns
+        if stamp is not None and topic != '/diagnostics':
+            ts = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec) or self.now_ns
+        self.writer.write_msg(topic, ts, msg, qos)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+
+def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic: str = '',
+            params: Optional[Dict[str, Dict[str, Any]]] = None, overwrite: bool = False,
+            record_images: bool = False, progress: bool = True, log=print) -> Dict[str, Any]:
+    """Run the pipeline on ``input_path`` and write ``output``; returns a summary dict
+    (plan, frames, seconds, per-topic counts of the output, problems)."""
+    import rclpy
+    from rclpy.context import Context
+
+    from ..bag_io import BagError, BagReader, BagWriter
+    from ..inprocess import InProcessGraph
+    from ..ros_msgs import deserialize, get_message_class
+
+    params = params or {n: {} for n in NODES}
+    video = input_path if is_video(input_path) else None
+    reader = None
+    topics: Dict[str, str] = {}
+    infos = {}
+    if video is None:
+        if not input_path.exists():
+            raise ProcessError(f'input {input_path} does not exist')
+        try:
+            reader = BagReader(input_path)
+        except BagError as exc:
+            raise ProcessError(f'cannot read the input bag: {exc}') from None
+        infos = reader.topics
+        topics = {t: i.msgtype for t, i in infos.items()}
+    plan = plan_for(topics, start, image_topic, video)
+    log(f'mocap process: {input_path} -> {output}; start: {plan.start}; nodes: '
+        f"{', '.join(plan.nodes)}" + (f"; feeding {', '.join(plan.feed_topics)}"
+                                     if plan.feed_topics else ''))
+    for t in plan.dropped_topics:
+        log(f'  input topic {t} is re-computed by the pipeline: its input copy is not kept')
+
+    # A private context: the nodes' DDS participant is local to this process.
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    context = Context()
+    rclpy.init(args=[], context=context)
+    nodes: Dict[str, Any] = {}
+    problems: List[str] = []
+    summary: Dict[str, Any] = {'input': str(input_path), 'output': str(output),
+                               'start': plan.start, 'nodes': plan.nodes}
+    try:
+        writer = BagWriter(output, overwrite=overwrite)
+    except BagError as exc:
+        context.try_shutdown()
+        raise ProcessError(str(exc)) from None
+    try:
+        recorder = Recorder(writer, exclude=tuple(plan.feed_topics))
+
+        def on_error(node: str, topic: str, exc: BaseException) -> None:
+            text = f'{node} failed on a {topic} message: {type(exc).__name__}: {exc}'
+            problems.append(text)
+            log(f'  warning: {text}')
+
+        graph = InProcessGraph(record=recorder, on_error=on_error)
+        driver = rclpy.create_node('mocap_process', context=context)
+        feeders = {}
+        for t in plan.feed_topics:
+            feeders[t] = driver.create_publisher(get_message_class(topics[t]), t, 10)
+        graph.add(driver)
+        for name in plan.nodes:
+            values = dict(OFFLINE_DEFAULTS.get(name, {}))
+            if name == 'keypoints':
+                if video is not None:
+                    values.update(source='video', path=str(video))
+                else:
+                    values.update(source='topic', image_topic=plan.image_topic)
+            values.update(params.get(name, {}))
+            cls = importlib.import_module(NODE_MODULES[name]).node_class()
+            try:
+                nodes[name] = graph.add(cls(context=context,
+                                            parameter_overrides=_overrides(values)))
+            except Exception as exc:  # noqa: BLE001 - e.g. a bad parameter value
+                raise ProcessError(f'cannot start the {name} node: {type(exc).__name__}: '
+                                   f'{exc}') from None
+        t0 = time.perf_counter()
+        frames = 0
+        if video is not None:
+            frames = _run_video(nodes['keypoints'], graph, recorder, writer, record_images,
+                                progress)
+        else:
+            frames = _run_bag(reader, infos, plan, feeders, graph, recorder, writer, problems,
+                              progress, log, deserialize)
+        graph.flush()
+        for node in nodes.values():
+            diag = getattr(node, 'diag', None)
+            if diag is not None:
+                diag.publish()
+        seconds = time.perf_counter() - t0
+        summary.update(frames=frames, seconds=seconds,
+                       fps=frames / seconds if seconds > 0 else float('nan'),
+                       topics=dict(sorted(recorder.counts.items())), problems=problems)
+    finally:
+        writer.close()
+        if reader is not None:
+            reader.close()
+        for node in nodes.values():
+            shutdown = getattr(node, 'shutdown', None)
+            if shutdown is not None:
+                shutdown()
+            node.destroy_node()
+        context.try_shutdown()
+    return summary
+
+
+def _run_bag(reader, infos, plan: Plan, feeders, graph, recorder, writer, problems,
+             progress: bool, log, deserialize) -> int:
+    from tqdm import tqdm
+
+    from ..bag_io import BagError
+
+    keep = [t for t in infos if t not in plan.dropped_topics]
+    for t in keep:
+        i = infos[t]
+        writer.add_topic(t, i.msgtype, i.qos, msgdef=i.msgdef, type_hash=i.type_hash)
+    first = plan.feed_topics[0]
+    total = infos[first].count
+    frames = 0
+    bad = 0
+    bar = tqdm(total=total, desc='mocap process', unit='frame', disable=not progress)
+    try:
+        for m in reader.messages(topics=keep):
+            recorder.now_ns = m.timestamp_ns
+            writer.write(m.topic, m.timestamp_ns, m.data)
+            if m.topic not in feeders:
+                continue
+            try:
+                msg = deserialize(m.data, m.msgtype)
+            except Exception as exc:  # noqa: BLE001 - a corrupt message is skipped, counted
+                bad += 1
+                if bad <= 5:
+                    log(f'  warning: cannot decode a {m.topic} message at '
+                        f'{m.timestamp_ns} ns ({type(exc).__name__}: {exc}); skipped')
+                continue
+            feeders[m.topic].publish(msg)
+            if m.topic == first:
+                frames += 1
+                bar.update(1)
+    except BagError as exc:
+        text = f'the input bag ends early: {exc} (processed what came before)'
+        problems.append(text)
+        log(f'  warning: {text}')
+    finally:
+        bar.close()
+    if bad:
+        problems.append(f'{bad} input messages could not be decoded')
+    return frames
+
+
+def _run_video(node, graph, recorder, writer, record_images: bool, progress: bool) -> int:
+    from tqdm import tqdm
+
+    from ..ros_conversions import bgr_to_image, make_header
+
+    source = node.source
+    total = int(getattr(source, 'frame_count', 0) or 0) or None
+    frames = 0
+    with tqdm(total=total, desc='mocap process', unit='frame', disable=not progress) as bar:
+        for frame in source:
+            recorder.now_ns = frame.stamp_ns
+            if record_images:
+                image = frame.image if frame.image is not None else frame.decode()
+                frame.image = image
+                header = make_header(frame.stamp_ns, node.p['frame_id'])
+                writer.write_msg('/camera/image_raw', frame.stamp_ns, bgr_to_image(image, header))
+            node.process_now(frame)
+            frames += 1
+            bar.update(1)
+    return frames
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser('process', help='run the whole pipeline offline on a bag or a video',
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('input', help='rosbag2 folder (MCAP), .mcap file or video file')
+    p.add_argument('-o', '--output', required=True, help='output bag folder')
+    p.add_argument('--start', default='auto', choices=('auto',) + STAGES,
+                   help='first stage (default: from the input topics)')
+    p.add_argument('--image-topic', default='', help='image topic of the input bag')
+    p.add_argument('--param', action='append', default=[], metavar='NODE.NAME=VALUE',
+                   help='node parameter (repeatable)')
+    p.add_argument('--record-images', action='store_true',
+                   help='video input: also write the frames to /camera/image_raw')
+    p.add_argument('--overwrite', action='store_true', help='replace an existing output')
+    p.add_argument('--summary', help='also write the summary as JSON to this file')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.set_defaults(func=cmd_process)
+
+
+def cmd_process(args: argparse.Namespace) -> int:
+    import json
+
+    try:
+        params = parse_params(args.param)
+        summary = process(Path(args.input), Path(args.output), start=args.start,
+                          image_topic=args.image_topic, params=params,
+                          overwrite=args.overwrite, record_images=args.record_images,
+                          progress=not args.no_progress)
+    except ProcessError as exc:
+        print(f'mocap process: error: {exc}', file=sys.stderr)
+        return 2
+    print(f"processed {summary['frames']} frames in {summary['seconds']:.1f} s "
+          f"({summary['fps']:.1f} frames/s) -> {summary['output']}")
+    for topic, n in summary['topics'].items():
+        print(f'  {topic}: {n}')
+    if args.summary:
+        Path(args.summary).write_text(json.dumps(summary, indent=1))
+    if summary['problems']:
+        print(f"{len(summary['problems'])} problem(s): " + '; '.join(summary['problems']),
+              file=sys.stderr)
+        return 1
+    return 0
