@@ -1,14 +1,20 @@
 #!/usr/bin/env bash
 # The demo on real data shipped in the repository: a real 4 s video clip
-# (data/video_example/taiji_640x360.mp4, a person doing tai chi) goes through the pipeline's
-# nodes, each started with `ros2 run` in its own process, and everything is recorded with
-# `ros2 bag record`:
+# (data/video_example/taiji_640x360.mp4, a person doing tai chi) goes through the four nodes of
+# the pipeline, each started with `ros2 run` in its own process, at the video's frame rate, and
+# everything is recorded with `ros2 bag record`:
 #
-#   keypoints (MediaPipe BlazePose on the video) -> lifter (MotioNet, shipped weights)
+#   keypoints (MediaPipe BlazePose) -> lifter (MotioNet) -> physics (PD + GRF + no penetration,
+#   Pinocchio) -> gmr (world-frame motion, bidirectional GRU)
 #
-# Output: out/demo/ (or $1): the MCAP bag, its info and validation, keypoints.png (2D
-# skeletons over time) and motion.png (the lifted 3D skeleton, front and side views).
-# Later stages (physics, world frame) join this script as they land.
+# Then the same video goes through `mocap process` (the same node classes in one process, no
+# frame dropped, as fast as possible) for comparison.
+#
+# Output: out/demo/ (or $1): the recorded bag (demo_bag/), report.md (frames, rates, per-node
+# processing time, plausibility), pipeline.mp4 (video frames with 2D keypoints beside the world
+# skeleton from the side and the front, with foot contacts and ground reaction forces),
+# pipeline_frames.png (a few of those frames), root_trajectory.png, grf.png, torques.png,
+# lifter.bvh and world.bvh; process_bag/ and process_report/ for the offline run; logs.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -19,7 +25,7 @@ export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 1 ))}"
 out="${1:-out/demo}"
 video="${DEMO_VIDEO:-data/video_example/taiji_640x360.mp4}"
 rm -rf "$out"
-mkdir -p "$out"
+mkdir -p "$out/logs"
 bag="$out/demo_bag"
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; done; }
@@ -30,35 +36,79 @@ wait_for() {  # wait_for FILE TEXT SECONDS
   echo "[demo] timed out waiting for '$2' in $1" >&2; cat "$1" >&2; return 1
 }
 
+topics=(/mocap/keypoints2d /mocap/camera_info /mocap/skeleton/urdf /diagnostics
+        /mocap/lifter/contacts /mocap/physics/grf/left /mocap/physics/grf/right
+        /mocap/physics/com /mocap/physics/floor /mocap/world/odom /mocap/world/path)
+for stage in lifter physics world; do
+  for leaf in motion joints3d joint_states markers; do topics+=("/mocap/$stage/$leaf"); done
+done
 echo "[demo] ros2 bag record -> $bag"
-ros2 bag record -o "$bag" /mocap/keypoints2d /mocap/camera_info /mocap/lifter/motion \
-  /mocap/lifter/joints3d /mocap/lifter/joint_states /mocap/lifter/contacts \
-  /mocap/lifter/markers /mocap/skeleton/urdf /diagnostics > "$out/record.log" 2>&1 &
+ros2 bag record -o "$bag" "${topics[@]}" > "$out/logs/record.log" 2>&1 &
 rec=$!
 pids+=("$rec")
 
-echo "[demo] ros2 run mocap_lifter lifter (windowed MotioNet)"
-ros2 run mocap_lifter lifter > "$out/lifter.log" 2>&1 &
-lifter=$!
-pids+=("$lifter")
-wait_for "$out/lifter.log" 'lifter ready' 120
+start_node() {  # start_node PACKAGE EXECUTABLE READY_TEXT
+  echo "[demo] ros2 run $1 $2"
+  ros2 run "$1" "$2" > "$out/logs/$2.log" 2>&1 &
+  pids+=("$!")
+  eval "pid_$2=$!"
+}
+start_node mocap_lifter lifter 'lifter ready'
+start_node mocap_physics physics 'physics on'
+start_node mocap_global gmr 'gmr ready'
+wait_for "$out/logs/lifter.log" 'lifter ready' 120
+wait_for "$out/logs/physics.log" 'physics on' 120
+wait_for "$out/logs/gmr.log" 'gmr ready' 120
+wait_for "$out/logs/record.log" 'Recording' 60
+# Every stage subscribed to the one before (DDS discovery between processes can take a few
+# seconds on a loaded machine): otherwise the first frames would leave before anyone listens.
+python3 - <<'PY'
+import time
+import rclpy
+rclpy.init()
+node = rclpy.create_node('demo_graph_check')
+need = {'/mocap/lifter/motion': 2, '/mocap/lifter/contacts': 2,
+        '/mocap/physics/motion': 2}
+deadline = time.monotonic() + 30
+while time.monotonic() < deadline:
+    missing = {t: n for t, n in need.items() if node.count_subscribers(t) < n}
+    if not missing:
+        break
+    time.sleep(0.2)
+print('[demo] subscribers matched' if not missing else f'[demo] still waiting for {missing}')
+node.destroy_node()
+rclpy.shutdown()
+PY
+sleep 1
 
-echo "[demo] ros2 run mocap_keypoints keypoints on $video"
+echo "[demo] ros2 run mocap_keypoints keypoints on $video (at its frame rate)"
+t0=$(date +%s.%N)
 ros2 run mocap_keypoints keypoints --ros-args -p path:="$video" -p realtime:=true \
-  -p wait_for_subscribers:=2 -p wait_timeout_s:=30.0 2>&1 | tee "$out/keypoints.log"
+  -p wait_for_subscribers:=2 -p wait_timeout_s:=30.0 2>&1 | tee "$out/logs/keypoints.log"
+t1=$(date +%s.%N)
 
-sleep 3   # the lifter emits the frames that waited for look-ahead, the recorder writes them
-kill -INT "$lifter" 2>/dev/null || true
-wait "$lifter" 2>/dev/null || true
+sleep 4   # frames held for look-ahead leave the lifter and GMR; the recorder writes them
+for p in "$pid_lifter" "$pid_physics" "$pid_gmr"; do kill -INT "$p" 2>/dev/null || true; done
+for p in "$pid_lifter" "$pid_physics" "$pid_gmr"; do wait "$p" 2>/dev/null || true; done
 kill -INT "$rec"
 wait "$rec" || true
 trap - EXIT
 
 echo "[demo] ros2 bag info $bag"
 ros2 bag info "$bag" | tee "$out/bag_info.txt"
-echo "[demo] mocap bag check $bag"
-mocap bag check "$bag" | tee "$out/bag_check.txt"
-mocap plot keypoints "$bag" -o "$out/keypoints.png"
-mocap plot motion "$bag" --topic /mocap/lifter/motion -o "$out/motion.png"
+mocap bag check "$bag" > "$out/bag_check.txt"
+wall=$(python3 -c "print(f'{$t1 - $t0:.2f}')")
+mocap report "$bag" -o "$out" --video "$video" --wall-seconds "$wall" \
+  --title "Demo: $(basename "$video"), four nodes live (ros2 run), recorded with ros2 bag record" \
+  --note "keypoints at the video's frame rate (realtime), BlazePose; lifter: windowed MotioNet; physics: fixed gains; GMR: look-ahead per its defaults"
 mocap export bvh "$bag" --topic /mocap/lifter/motion -o "$out/lifter.bvh"
-echo "[demo] done: results in $out/"
+mocap export bvh "$bag" --topic /mocap/world/motion --frame world -o "$out/world.bvh"
+
+echo "[demo] mocap process $video (the same nodes in one process, offline)"
+mocap process "$video" -o "$out/process_bag" --no-progress --summary "$out/process_summary.json" \
+  > "$out/logs/process.log" 2>&1
+tail -n 1 "$out/logs/process.log" || true
+grep '^processed' "$out/logs/process.log" || true
+mocap report "$out/process_bag" -o "$out/process_report" \
+  --title "Offline: mocap process $(basename "$video")" > /dev/null
+echo "[demo] done: results in $out/ (start with $out/report.md and $out/pipeline.mp4)"

@@ -18,6 +18,7 @@ import argparse
 import importlib
 import os
 import platform
+from pathlib import Path
 import sys
 from typing import Callable, Dict, List, Optional
 
@@ -211,6 +212,42 @@ def cmd_plot_motion(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    """Figures, plots, the side-by-side video and a Markdown report of a pipeline run."""
+    import json
+
+    from ..bag_io import BagError
+    from ..demo_render import plot_run, render_video, report_markdown
+    from ..run_report import accuracy, load_run, plausibility
+
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        run = load_run(args.bag)
+    except BagError as exc:
+        raise CommandError(str(exc)) from None
+    if not run.stages:
+        raise CommandError(f'{args.bag} has no /mocap/<stage>/motion topic: not a pipeline run')
+    plaus, acc = plausibility(run), accuracy(run)
+    (out / 'report.json').write_text(json.dumps({'plausibility': plaus, 'accuracy': acc,
+                                                 'diagnostics': run.diagnostics}, indent=1))
+    written = {k: str(v) for k, v in plot_run(run, out).items()}
+    notes = list(args.note)
+    if args.video:
+        if 'world' not in run.stages:
+            raise CommandError('--video needs the world stage (/mocap/world/motion)')
+        n = render_video(run, Path(args.video), out / 'pipeline.mp4', out / 'pipeline_frames.png')
+        written.update(video=str(out / 'pipeline.mp4'), frames=str(out / 'pipeline_frames.png'))
+        notes.append(f'video: `pipeline.mp4` ({n} frames), a few of them in '
+                     '`pipeline_frames.png`')
+    (out / 'report.md').write_text(report_markdown(run, plaus, acc, args.title, notes,
+                                                   args.wall_seconds))
+    for key, path in sorted(written.items()):
+        print(f'wrote {path}')
+    print(f"wrote {out / 'report.md'}")
+    return 0
+
+
 #: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
 MODEL_COMMANDS = ('mocap_lifter.cli', 'mocap_physics.cli', 'mocap_global.cli')
 
@@ -268,6 +305,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .process import add_parser as add_process_parser
     add_process_parser(sub)
+
+    p = sub.add_parser('report', help='report, plots and video of a pipeline run (output bag)')
+    p.add_argument('bag', help='output bag of mocap process or a recording of the nodes')
+    p.add_argument('-o', '--output', default='report', help='output folder')
+    p.add_argument('--video', help='the input video: also write pipeline.mp4 (frames with '
+                   'keypoints beside the world skeleton) and pipeline_frames.png')
+    p.add_argument('--title', default='Pipeline run', help='report title')
+    p.add_argument('--note', action='append', default=[], help='a line for the report')
+    p.add_argument('--wall-seconds', type=float, help='wall time of the run, for the rate')
+    p.set_defaults(func=cmd_report)
 
     p = sub.add_parser('export', help='export motion to other formats')
     export_sub = p.add_subparsers(dest='export_command', metavar='FORMAT')

@@ -339,6 +339,7 @@ def _run_video(node, graph, recorder, writer, record_images: bool, progress: boo
                 frame.image = image
                 header = make_header(frame.stamp_ns, node.p['frame_id'])
                 writer.write_msg('/camera/image_raw', frame.stamp_ns, bgr_to_image(image, header))
+            node.diag.input.tick()
             node.process_now(frame)
             frames += 1
             bar.update(1)
