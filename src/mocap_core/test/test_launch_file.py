@@ -1,0 +1,47 @@
+"""The launch file (for full ROS 2 installs; `launch` is not installable here): it parses,
+starts executables that exist, with parameters the nodes declare, and records every topic the
+demo records."""
+
+import ast
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[3]
+LAUNCH = ROOT / 'src' / 'mocap_core' / 'launch' / 'pipeline.launch.py'
+
+
+def _calls(tree, name):
+    return [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(
+        n.func, 'id', getattr(n.func, 'attr', None)) == name]
+
+
+def test_launch_file_starts_the_four_nodes_with_declared_parameters():
+    import importlib
+
+    tree = ast.parse(LAUNCH.read_text())
+    nodes = {}
+    for call in _calls(tree, 'Node'):
+        kw = {k.arg: k.value for k in call.keywords}
+        pkg, exe = ast.literal_eval(kw['package']), ast.literal_eval(kw['executable'])
+        params = [k.value for k in kw['parameters'].elts[0].keys]
+        nodes[(pkg, exe)] = params
+    assert set(nodes) == {('mocap_keypoints', 'keypoints'), ('mocap_lifter', 'lifter'),
+                          ('mocap_physics', 'physics'), ('mocap_global', 'gmr')}
+    for (pkg, exe), params in nodes.items():
+        setup = (ROOT / 'src' / pkg / 'setup.py').read_text()
+        assert re.search(rf"'{exe} = {pkg}\.node:main'", setup), (pkg, exe)
+        declared = {s.name for s in importlib.import_module(f'{pkg}.node').PARAMETERS}
+        assert set(params) <= declared, (pkg, set(params) - declared)
+
+
+def test_launch_file_records_the_demo_topics():
+    tree = ast.parse(LAUNCH.read_text())
+    assign = next(n for n in ast.walk(tree) if isinstance(n, ast.Assign)
+                  and getattr(n.targets[0], 'id', '') == 'TOPICS')
+    namespace = {}
+    exec(compile(ast.Module([assign], []), str(LAUNCH), 'exec'), namespace)  # noqa: S102
+    demo = (ROOT / 'scripts' / 'demo.sh').read_text()
+    fixed = re.search(r'topics=\(([^)]*)\)', demo).group(1).split()
+    expected = set(fixed) | {f'/mocap/{s}/{leaf}' for s in ('lifter', 'physics', 'world')
+                             for leaf in ('motion', 'joints3d', 'joint_states', 'markers')}
+    assert set(namespace['TOPICS']) == expected
