@@ -68,12 +68,12 @@ class Pose:
         return self.skeleton.joint_names
 
     def joint_positions(self) -> np.ndarray:
-        """(J, 3) joint positions in the pose's frame, metres."""
-        return self._fk().positions
+        """(J, 3) joint positions in the pose's frame, metres (a new array)."""
+        return self._fk().positions.copy()
 
     def global_rotations(self) -> np.ndarray:
-        """(J, 3, 3) joint orientations in the pose's frame."""
-        return self._fk().global_rotations
+        """(J, 3, 3) joint orientations in the pose's frame (a new array)."""
+        return self._fk().global_rotations.copy()
 
     def contact_positions(self) -> Dict[str, np.ndarray]:
         """Foot contact points (heel, toe; left, right) -> (3,) position in the pose's frame."""
@@ -82,8 +82,13 @@ class Pose:
                 for name, (j, p) in self.skeleton.contact_points().items()}
 
     def _fk(self):
-        return forward_kinematics(self.skeleton.parents, self.skeleton.offsets,
-                                  self.rotations, self.root_position)
+        """Forward kinematics, computed once per pose (the pose is immutable)."""
+        fk = self.__dict__.get('_fk_cache')
+        if fk is None:
+            fk = forward_kinematics(self.skeleton.parents, self.skeleton.offsets,
+                                    self.rotations, self.root_position)
+            object.__setattr__(self, '_fk_cache', fk)
+        return fk
 
     def revolute_angles(self) -> np.ndarray:
         """(J-1, 3) angles (rad) of the z, y, x revolute joints standing for each non-root

@@ -306,6 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .process import add_parser as add_process_parser
     add_process_parser(sub)
 
+    from .bench import add_parser as add_bench_parser
+    add_bench_parser(sub)
+
     p = sub.add_parser('report', help='report, plots and video of a pipeline run (output bag)')
     p.add_argument('bag', help='output bag of mocap process or a recording of the nodes')
     p.add_argument('-o', '--output', default='report', help='output folder')

@@ -1,0 +1,329 @@
+"""``mocap bench``: benchmarks that print figures and write a report (never timed tests).
+
+    mocap bench pipeline [--seconds 20] [--output docs/benchmarks/pipeline.md]
+    mocap bench keypoints|lifter|physics|gmr [ARGS...]   (the per-node benchmarks)
+
+``pipeline`` measures:
+
+* **offline** (``mocap process`` in this process, keypoints -> world motion, on a committed
+  ground-truth bag, ``--repeat`` passes): frames/s, median of the passes, and each node's
+  processing time per frame (median, p95) from its final /diagnostics;
+* **live** (the four nodes as separate ``ros2 run`` processes, the keypoint node reading the
+  shipped video in a loop, paced at 30 fps; a listener in this process): per stage the latency
+  from the image stamp (the frame's capture time on this machine's clock) to the arrival of
+  that frame's output, median and p95; the latency beyond the configured look-ahead (lifter
+  window + GMR look-ahead frames); whether a queue grows (median latency of the last quarter
+  minus the first, after a warm-up); output rate; CPU use (% of one core) and peak memory
+  (VmHWM) of each node process. Two configurations: the defaults (windowed lifter, GMR
+  look-ahead 15 frames) and the low-latency one (causal lifter, GMR look-ahead 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Dict, List, Optional
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[4]
+NODE_BENCHES = {'keypoints': 'mocap_keypoints.bench', 'lifter': 'mocap_lifter.bench',
+                'physics': 'mocap_physics.bench', 'gmr': 'mocap_global.bench'}
+STAGE_TOPICS = {'keypoints': '/mocap/keypoints2d', 'lifter': '/mocap/lifter/motion',
+                'physics': '/mocap/physics/motion', 'world': '/mocap/world/motion'}
+
+
+def _proc_stats(pid: int) -> Optional[Dict[str, float]]:
+    """CPU seconds (user + system) and peak resident memory (MiB) of a live process."""
+    try:
+        stat = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        ticks = os.sysconf('SC_CLK_TCK')
+        cpu = (int(stat[11]) + int(stat[12])) / ticks
+        hwm = next(int(line.split()[1]) for line in
+                   Path(f'/proc/{pid}/status').read_text().splitlines()
+                   if line.startswith('VmHWM'))
+        return {'cpu_s': cpu, 'peak_mib': hwm / 1024}
+    except (OSError, StopIteration, IndexError, ValueError):
+        return None
+
+
+def _summary(values: List[float]) -> Dict[str, float]:
+    if not values:
+        return {'median': float('nan'), 'p95': float('nan'), 'n': 0}
+    a = np.asarray(values)
+    return {'median': float(np.median(a)), 'p95': float(np.percentile(a, 95)), 'n': len(a)}
+
+
+def bench_offline(bag: Path, repeat: int, work: Path) -> Dict:
+    from .process import process
+    from ..run_report import load_run
+
+    fps, per_node = [], {}
+    for k in range(repeat):
+        out = work / f'offline_{k}'
+        s = process(bag, out, overwrite=True, progress=False, log=lambda *a: None)
+        fps.append(s['fps'])
+        run = load_run(out)
+        for name, d in run.diagnostics.items():
+            per_node.setdefault(name.split(':')[0], []).append(
+                (float(d['processing_ms_median']), float(d['processing_ms_p95'])))
+        print(f"  offline pass {k + 1}: {s['frames']} frames in {s['seconds']:.2f} s "
+              f"({s['fps']:.1f} frames/s)", flush=True)
+    return {'bag': str(bag.relative_to(ROOT) if bag.is_relative_to(ROOT) else bag),
+            'frames': s['frames'], 'fps_passes': fps, 'fps_median': float(np.median(fps)),
+            'node_ms': {n: {'median': float(np.median([v[0] for v in vals])),
+                            'p95': float(np.median([v[1] for v in vals]))}
+                        for n, vals in per_node.items()}}
+
+
+class _Listener:
+    """Receive times of every stage's output, keyed by header stamp."""
+
+    def __init__(self, domain_id: int) -> None:
+        import rclpy
+        from sensor_msgs.msg import PointCloud2
+        from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+        from ..qos import SENSOR_QOS, STREAM_QOS
+
+        self.context = rclpy.Context()
+        rclpy.init(args=[], context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node('bench_listener', context=self.context)
+        self.samples: Dict[str, List[tuple]] = {s: [] for s in STAGE_TOPICS}
+        for stage, topic in STAGE_TOPICS.items():
+            cls = PointCloud2 if stage == 'keypoints' else MultiDOFJointTrajectory
+            qos = SENSOR_QOS if stage == 'keypoints' else STREAM_QOS
+            self.node.create_subscription(cls, topic, self._callback(stage), qos)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _callback(self, stage):
+        def on_msg(msg) -> None:
+            now = time.time_ns()
+            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            self.samples[stage].append((stamp, now))
+        return on_msg
+
+    def _spin(self) -> None:
+        while not self.stop.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(5)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict) -> Dict:
+    ros2 = [sys.executable, '-m', 'mocap_core.cli.ros2', 'run']
+    procs: Dict[str, subprocess.Popen] = {}
+    logs: Dict[str, Path] = {}
+
+    def start(name: str, pkg: str, params: Dict[str, object]) -> None:
+        cmd = ros2 + [pkg, name, '--ros-args']
+        for k, v in params.items():
+            cmd += ['-p', f'{k}:={v}']
+        logs[name] = work / f"{config['name']}_{name}.log"
+        with logs[name].open('wb') as f:
+            procs[name] = subprocess.Popen(cmd, env=env, stdout=f, stderr=subprocess.STDOUT,
+                                           stdin=subprocess.DEVNULL)
+
+    def wait_for(name: str, text: str, timeout: float = 120) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in logs[name].read_text(errors='replace'):
+                return
+            if procs[name].poll() is not None:
+                break
+            time.sleep(0.1)
+        raise RuntimeError(f'{name} did not start:\n{logs[name].read_text(errors="replace")}')
+
+    listener = _Listener(int(env['ROS_DOMAIN_ID']))
+    stats: Dict[str, Dict[str, float]] = {}
+    cpu0: Dict[str, float] = {}
+    try:
+        start('lifter', 'mocap_lifter', {'mode': config['lifter_mode']})
+        start('physics', 'mocap_physics', {})
+        start('gmr', 'mocap_global', {'lookahead': config['lookahead']})
+        for name, text in (('lifter', 'lifter ready'), ('physics', 'physics on'),
+                           ('gmr', 'gmr ready')):
+            wait_for(name, text)
+        time.sleep(3.0)                                   # discovery between the processes
+        start('keypoints', 'mocap_keypoints', {'path': str(video), 'realtime': True,
+                                               'loop': True, 'fps': 30.0,
+                                               'wait_for_subscribers': 2})
+        wait_for('keypoints', 'detector')
+        for name, p in procs.items():
+            s = _proc_stats(p.pid)
+            cpu0[name] = s['cpu_s'] if s else 0.0
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < seconds:
+            time.sleep(0.5)
+            for name, p in procs.items():
+                s = _proc_stats(p.pid)
+                if s:
+                    stats[name] = s
+        elapsed = time.monotonic() - t0
+        procs['keypoints'].send_signal(signal.SIGINT)
+        procs['keypoints'].wait(15)
+        time.sleep(2.0)
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p in procs.values():
+            try:
+                p.wait(15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        listener.close()
+    lifter_latency = 0 if config['lifter_mode'] == 'causal' else 14
+    result = {'config': config, 'seconds': elapsed, 'stages': {}, 'nodes': {},
+              'lookahead_frames': lifter_latency + config['lookahead']}
+    warm = 2.0
+    for stage, samples in listener.samples.items():
+        if not samples:
+            result['stages'][stage] = {'frames': 0}
+            continue
+        stamps = np.array([s for s, _ in samples], dtype=np.int64)
+        lat = (np.array([r for _, r in samples], dtype=np.int64) - stamps) * 1e-6
+        keep = (stamps - stamps[0]) * 1e-9 > warm
+        lat_k = lat[keep] if keep.sum() > 8 else lat
+        q = max(len(lat_k) // 4, 1)
+        span = (stamps[-1] - stamps[0]) * 1e-9
+        result['stages'][stage] = {
+            'frames': len(samples), 'rate_hz': (len(samples) - 1) / span if span > 0 else 0.0,
+            'latency_ms': _summary(lat_k.tolist()),
+            'latency_growth_ms': float(np.median(lat_k[-q:]) - np.median(lat_k[:q])),
+        }
+    # Look-ahead is counted in frames: at the rate the frames actually arrive (the keypoint
+    # node drops frames its detector cannot keep up with) it lasts frames / rate.
+    world = result['stages'].get('world', {})
+    rate = result['stages'].get('keypoints', {}).get('rate_hz') or 30.0
+    budget_s = result['lookahead_frames'] / rate
+    result['lookahead_budget_ms'] = 1000 * budget_s
+    if world.get('frames'):
+        world['beyond_lookahead_ms'] = {k: world['latency_ms'][k] - 1000 * budget_s
+                                        for k in ('median', 'p95')}
+    for name, s in stats.items():
+        result['nodes'][name] = {'cpu_percent': 100 * (s['cpu_s'] - cpu0.get(name, 0.0)) /
+                                 max(elapsed, 1e-9), 'peak_mib': s['peak_mib']}
+    return result
+
+
+def _git_commit() -> str:
+    try:
+        return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, text=True,
+                              capture_output=True, timeout=10).stdout.strip() or 'unknown'
+    except OSError:
+        return 'unknown'
+
+
+def write_report(res: Dict, out: Path) -> None:
+    off = res['offline']
+    lines = [
+        '# Pipeline benchmark', '',
+        f"{res['date']}, commit `{res['commit']}`, {res['machine']}. Command: "
+        '`mocap bench pipeline` (see `mocap_core/cli/bench.py`).', '',
+        '## Offline: `mocap process`, keypoints -> world motion', '',
+        f"Bag `{off['bag']}` ({off['frames']} frames), {len(off['fps_passes'])} passes: "
+        f"**{off['fps_median']:.1f} frames/s** (median; passes: "
+        + ', '.join(f'{v:.1f}' for v in off['fps_passes']) + '). Goal: >= 100 frames/s.', '',
+        '| node | processing per frame, median (ms) | p95 (ms) |', '|---|---|---|']
+    for n, v in sorted(off['node_ms'].items()):
+        lines.append(f"| {n} | {v['median']:.2f} | {v['p95']:.2f} |")
+    for live in res['live']:
+        c = live['config']
+        lines += ['', f"## Live, {c['name']}: lifter {c['lifter_mode']}, GMR look-ahead "
+                  f"{c['lookahead']} frames", '',
+                  f"Four `ros2 run` processes, the video looped at 30 fps for "
+                  f"{live['seconds']:.0f} s; latency = arrival time - image stamp, after a "
+                  f"2 s warm-up. Look-ahead: {live['lookahead_frames']} frames = "
+                  f"{live['lookahead_budget_ms']:.0f} ms at the rate the keypoints arrived.",
+                  '',
+                  '| stage topic | frames | rate (Hz) | latency median (ms) | p95 (ms) | '
+                  'growth last-first quarter (ms) |', '|---|---|---|---|---|---|']
+        for stage, s in live['stages'].items():
+            if not s.get('frames'):
+                lines.append(f'| {STAGE_TOPICS[stage]} | 0 | | | | |')
+                continue
+            lines.append(f"| {STAGE_TOPICS[stage]} | {s['frames']} | {s['rate_hz']:.1f} | "
+                         f"{s['latency_ms']['median']:.0f} | {s['latency_ms']['p95']:.0f} | "
+                         f"{s['latency_growth_ms']:+.0f} |")
+        w = live['stages'].get('world', {})
+        if 'beyond_lookahead_ms' in w:
+            lines += ['', f"End to end beyond the look-ahead: median "
+                      f"**{w['beyond_lookahead_ms']['median']:.0f} ms**, p95 "
+                      f"{w['beyond_lookahead_ms']['p95']:.0f} ms (goal <= 100 ms)."]
+        lines += ['', '| node process | CPU (% of one core) | peak memory (MiB) |',
+                  '|---|---|---|']
+        for n, v in live['nodes'].items():
+            lines.append(f"| {n} | {v['cpu_percent']:.0f} | {v['peak_mib']:.0f} |")
+    lines.append('')
+    out.write_text('\n'.join(lines))
+
+
+def cmd_pipeline(args: argparse.Namespace) -> int:
+    import platform
+    import random
+    import tempfile
+
+    work = Path(tempfile.mkdtemp(prefix='mocap_bench_'))
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env['ROS_DOMAIN_ID'] = env.get('ROS_DOMAIN_ID') or str(random.randint(1, 200))
+    env['PYTHONUNBUFFERED'] = '1'
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
+    res = {'date': datetime.date.today().isoformat(), 'commit': _git_commit(),
+           'machine': f'{platform.machine()}, {os.cpu_count()} CPU cores (shared)'}
+    print('offline (mocap process) ...', flush=True)
+    res['offline'] = bench_offline(Path(args.bag), args.repeat, work)
+    res['live'] = []
+    configs = [{'name': 'defaults', 'lifter_mode': 'windowed', 'lookahead': 15},
+               {'name': 'low latency', 'lifter_mode': 'causal', 'lookahead': 0}]
+    for c in configs[:args.configs]:
+        print(f"live, {c['name']} ({args.seconds:.0f} s) ...", flush=True)
+        res['live'].append(bench_live(c, args.seconds, Path(args.video), work, env))
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_report(res, out)
+    out.with_suffix('.json').write_text(json.dumps(res, indent=1, default=str))
+    print(out.read_text())
+    print(f'wrote {out} and {out.with_suffix(".json")}')
+    return 0
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser('bench', help='benchmarks (print figures, write a report)')
+    bench_sub = p.add_subparsers(dest='bench_command', metavar='BENCH')
+    pp = bench_sub.add_parser('pipeline', help='offline throughput, live latency, CPU and '
+                              'memory of the whole pipeline')
+    pp.add_argument('--bag', default=str(ROOT / 'bags' / 'gt_cmu_walk_12_02'))
+    pp.add_argument('--video', default=str(ROOT / 'data' / 'video_example' /
+                                           'taiji_640x360.mp4'))
+    pp.add_argument('--repeat', type=int, default=3, help='offline passes')
+    pp.add_argument('--seconds', type=float, default=20.0, help='live run per configuration')
+    pp.add_argument('--configs', type=int, default=2, choices=(0, 1, 2),
+                    help='live configurations to run (defaults, then low latency)')
+    pp.add_argument('--output', default=str(ROOT / 'docs' / 'benchmarks' / 'pipeline.md'))
+    pp.set_defaults(func=cmd_pipeline)
+    for name, module in NODE_BENCHES.items():
+        pn = bench_sub.add_parser(name, help=f'the {name} benchmark (python -m {module})',
+                                  add_help=False)
+        pn.add_argument('rest', nargs=argparse.REMAINDER)
+        pn.set_defaults(func=lambda a, m=module: int(importlib.import_module(m).main(a.rest)
+                                                     or 0))
