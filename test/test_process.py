@@ -244,6 +244,21 @@ def test_process_video_file(tmp_path):
     for stage in ('lifter', 'physics', 'world'):
         np.testing.assert_array_equal(run.stages[stage].stamps, run.keypoint_stamps)
 
+    # the demo's rendering of the run: report, plots, side-by-side video of every frame
+    report = tmp_path / 'report'
+    res = _mocap('report', out, '-o', report, '--video', VIDEO, '--title', 'test run')
+    assert res.returncode == 0, res.stdout + res.stderr
+    for name in ('report.md', 'report.json', 'pipeline.mp4', 'pipeline_frames.png',
+                 'root_trajectory.png', 'grf.png', 'torques.png'):
+        assert (report / name).stat().st_size > 1000, name
+    cap = cv2.VideoCapture(str(report / 'pipeline.mp4'))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == frames
+    ok, img = cap.read()
+    cap.release()
+    assert ok and img.shape[1] > img.shape[0] * 2          # video frame + two skeleton views
+    text = (report / 'report.md').read_text()
+    assert '# test run' in text and '| physics |' in text and 'keypoints: keypoints' in text
+
 
 # --- bad input -----------------------------------------------------------------------------
 
