@@ -220,6 +220,12 @@ def node_class():
                                             throttle_duration_sec=2.0)
                 return
             stamp = rc.stamp_to_ns(msg.header.stamp)
+            if self.last_stamp - stamp > self.p['max_gap_s'] * 1e9:
+                # a new stream (e.g. a bag played again): the accumulation restarts below
+                self.get_logger().warn(
+                    f'motion stamps jumped back by {(self.last_stamp - stamp) * 1e-9:.1f} s '
+                    '(a bag restarted?): starting a new stream')
+                self.last_stamp = -1
             if stamp <= self.last_stamp:
                 self.diag.dropped += 1
                 self.get_logger().warn('motion stamp did not advance; frame dropped',

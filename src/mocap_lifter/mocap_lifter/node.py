@@ -152,6 +152,13 @@ def node_class():
                 self.get_logger().warn(f'dropping keypoints: {exc}', throttle_duration_sec=2.0)
                 return
             stamp = rc.stamp_to_ns(msg.header.stamp)
+            if self.last_stamp - stamp > self.p['max_gap_s'] * 1e9:
+                # a new stream (a bag played again, a restarted camera driver): the frames of
+                # the old one still waiting are emitted, then buffer and skeleton restart
+                self.get_logger().warn(
+                    f'keypoint stamps jumped back by {(self.last_stamp - stamp) * 1e-9:.1f} s '
+                    '(a bag restarted?): starting a new stream')
+                self.last_stamp = -1
             if stamp <= self.last_stamp:
                 self.diag.dropped += 1
                 self.get_logger().warn('keypoint stamp did not advance; frame dropped',

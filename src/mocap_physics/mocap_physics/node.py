@@ -282,6 +282,17 @@ def node_class():
         def _on_motion(self, msg: MultiDOFJointTrajectory) -> None:
             self.diag.input.tick()
             stamp = stamp_to_ns(msg.header.stamp)
+            newest = self.pending[-1][0] if self.pending else self.last_stamp
+            if newest - stamp > max(self.p['max_frame_gap_s'], 1.0) * 1e9:
+                # a new stream (e.g. a bag played again): finish the old one, then the cycle
+                # re-initialises at the time jump
+                self._process(wait=False)
+                for old in [s for s in self.contacts if s > stamp + 1_000_000_000]:
+                    del self.contacts[old]
+                self.last_stamp = -1
+                self.get_logger().warn(
+                    f'motion stamps jumped back by {(newest - stamp) * 1e-9:.1f} s (a bag '
+                    'restarted?): starting a new stream')
             if stamp <= self.last_stamp or (self.pending and stamp <= self.pending[-1][0]):
                 self.diag.dropped += 1
                 self._problem('order', f'motion stamp {stamp} ns is not after the previous '
