@@ -1,6 +1,7 @@
 """``mocap bench``: benchmarks that print figures and write a report (never timed tests).
 
     mocap bench pipeline [--seconds 20] [--output docs/benchmarks/pipeline.md]
+    mocap bench soak [--minutes 10] [--output docs/benchmarks/soak.md]
     mocap bench keypoints|lifter|physics|gmr [ARGS...]   (the per-node benchmarks)
 
 ``pipeline`` measures:
@@ -16,6 +17,10 @@
   minus the first, after a warm-up); output rate; CPU use (% of one core) and peak memory
   (VmHWM) of each node process. Two configurations: the defaults (windowed lifter, GMR
   look-ahead 15 frames) and the low-latency one (causal lifter, GMR look-ahead 0).
+
+``soak`` feeds the lifter, physics and GMR processes a bag played in a loop (the stamps jump
+back at every repetition: each node starts a new stream) for ``--minutes`` and fits the trend
+of each node's resident memory after a warm-up (flat = no leak).
 """
 
 from __future__ import annotations
@@ -53,6 +58,16 @@ def _proc_stats(pid: int) -> Optional[Dict[str, float]]:
                    if line.startswith('VmHWM'))
         return {'cpu_s': cpu, 'peak_mib': hwm / 1024}
     except (OSError, StopIteration, IndexError, ValueError):
+        return None
+
+
+def _rss_mib(pid: int) -> Optional[float]:
+    """Current resident memory (MiB) of a live process."""
+    try:
+        return next(int(line.split()[1]) for line in
+                    Path(f'/proc/{pid}/status').read_text().splitlines()
+                    if line.startswith('VmRSS')) / 1024
+    except (OSError, StopIteration, ValueError):
         return None
 
 
@@ -225,6 +240,80 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
     return result
 
 
+def cmd_soak(args: argparse.Namespace) -> int:
+    """Lifter, physics and GMR (``ros2 run``) fed a bag played in a loop for ``--minutes``;
+    resident memory of each node sampled every 2 s; the trend after a warm-up is fitted."""
+    import random
+    import tempfile
+
+    work = Path(tempfile.mkdtemp(prefix='mocap_soak_'))
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env['ROS_DOMAIN_ID'] = env.get('ROS_DOMAIN_ID') or str(random.randint(1, 200))
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
+    ros2 = [sys.executable, '-m', 'mocap_core.cli.ros2']
+    procs: Dict[str, subprocess.Popen] = {}
+    for pkg, exe in (('mocap_lifter', 'lifter'), ('mocap_physics', 'physics'),
+                     ('mocap_global', 'gmr')):
+        with (work / f'{exe}.log').open('wb') as f:
+            procs[exe] = subprocess.Popen(ros2 + ['run', pkg, exe], env=env, stdout=f,
+                                          stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    listener = _Listener(int(env['ROS_DOMAIN_ID']))
+    samples: Dict[str, List[tuple]] = {n: [] for n in procs}
+    try:
+        time.sleep(15.0)
+        with (work / 'play.log').open('wb') as f:
+            player = subprocess.Popen(ros2 + ['bag', 'play', str(args.bag), '--loop',
+                                              '--topics', '/mocap/camera_info',
+                                              '/mocap/keypoints2d'], env=env, stdout=f,
+                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < args.minutes * 60:
+            time.sleep(2.0)
+            for n, p in procs.items():
+                rss = _rss_mib(p.pid)
+                if rss is not None:
+                    samples[n].append((time.monotonic() - t0, rss))
+        player.send_signal(signal.SIGINT)
+        player.wait(15)
+    finally:
+        for p in procs.values():
+            p.send_signal(signal.SIGINT)
+        for p in procs.values():
+            try:
+                p.wait(15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        listener.close()
+    frames = len(listener.samples['world'])
+    lines = ['# Soak run', '', f"{datetime.date.today().isoformat()}, commit `{_git_commit()}`: "
+             f"`mocap bench soak --minutes {args.minutes:g}`; bag `{Path(args.bag).name}` "
+             f'played in a loop into lifter, physics and GMR (`ros2 run`); {frames} world '
+             'frames came out.', '',
+             '| node | alive at the end | RSS after warm-up (MiB) | RSS at the end (MiB) | '
+             'trend after warm-up (MiB/min) |', '|---|---|---|---|---|']
+    result = {'minutes': args.minutes, 'world_frames': frames, 'nodes': {}}
+    for n, vals in samples.items():
+        t = np.array([v[0] for v in vals])
+        m = np.array([v[1] for v in vals])
+        keep = t > 0.2 * t.max() if len(t) else t.astype(bool)
+        slope = float(np.polyfit(t[keep] / 60, m[keep], 1)[0]) if keep.sum() > 3 else \
+            float('nan')
+        alive = procs[n].returncode in (0, -2) or procs[n].returncode is None
+        result['nodes'][n] = {'rss_start_mib': float(m[keep][0]) if keep.any() else None,
+                              'rss_end_mib': float(m[-1]) if len(m) else None,
+                              'trend_mib_per_min': slope}
+        lines.append(f"| {n} | {'yes' if alive else 'no'} | "
+                     f"{m[keep][0] if keep.any() else float('nan'):.0f} | "
+                     f"{m[-1] if len(m) else float('nan'):.0f} | {slope:+.2f} |")
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text('\n'.join(lines) + '\n')
+    out.with_suffix('.json').write_text(json.dumps(result, indent=1))
+    print(out.read_text())
+    return 0
+
+
 def _git_commit() -> str:
     try:
         return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT, text=True,
@@ -321,6 +410,11 @@ def add_parser(sub) -> None:
                     help='live configurations to run (defaults, then low latency)')
     pp.add_argument('--output', default=str(ROOT / 'docs' / 'benchmarks' / 'pipeline.md'))
     pp.set_defaults(func=cmd_pipeline)
+    ps = bench_sub.add_parser('soak', help='nodes fed a looped bag for a while: memory trend')
+    ps.add_argument('--bag', default=str(ROOT / 'bags' / 'gt_cmu_walk_12_02'))
+    ps.add_argument('--minutes', type=float, default=10.0)
+    ps.add_argument('--output', default=str(ROOT / 'docs' / 'benchmarks' / 'soak.md'))
+    ps.set_defaults(func=cmd_soak)
     for name, module in NODE_BENCHES.items():
         pn = bench_sub.add_parser(name, help=f'the {name} benchmark (python -m {module})',
                                   add_help=False)
