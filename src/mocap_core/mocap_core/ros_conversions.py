@@ -155,11 +155,21 @@ def cloud_to_keypoints(msg: PointCloud2) -> np.ndarray:
     return sanitize_keypoints(cloud_to_array(msg, KEYPOINT_FIELDS, width=NUM_KEYPOINTS))
 
 
+#: Positions (m) beyond this magnitude are not a person's pose: the message is rejected.
+MAX_POSITION = 1e4
+
+#: Pixel coordinates beyond this magnitude are not from any camera: the keypoint is unseen.
+MAX_PIXEL_COORDINATE = 1e5
+
+
 def sanitize_keypoints(kp: np.ndarray) -> np.ndarray:
     """Copy of (..., 3) keypoints with confidence clipped to [0, 1] and every keypoint that has
-    a non-finite value set to (0, 0, 0)."""
+    a non-finite value or a coordinate beyond +-:data:`MAX_PIXEL_COORDINATE` px set to
+    (0, 0, 0) (not seen)."""
     kp = np.array(kp, dtype=np.float64)
-    bad = ~np.all(np.isfinite(kp), axis=-1)
+    with np.errstate(invalid='ignore'):
+        bad = ~np.all(np.isfinite(kp), axis=-1) | np.any(
+            np.abs(kp[..., :2]) > MAX_PIXEL_COORDINATE, axis=-1)
     kp[bad] = 0.0
     kp[..., 2] = np.clip(kp[..., 2], 0.0, 1.0)
     return kp
@@ -232,6 +242,10 @@ def motion_to_pose(msg: MultiDOFJointTrajectory,
                       for n in joint_names])
     offsets = trans.copy()
     offsets[0] = 0.0
+    with np.errstate(invalid='ignore'):
+        far = np.abs(trans) > MAX_POSITION
+    if np.any(far):
+        raise MessageError(f'invalid motion message: a translation beyond +-{MAX_POSITION:g} m')
     try:
         return Pose(Skeleton(offsets=offsets), quats, trans[0])
     except ValueError as exc:

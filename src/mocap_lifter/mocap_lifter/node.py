@@ -140,6 +140,7 @@ def node_class():
             try:
                 self.intrinsics = rc.camera_info_to_intrinsics(msg)
             except rc.MessageError as exc:
+                self.diag.errors += 1
                 self.get_logger().warn(f'ignoring camera_info: {exc}',
                                        throttle_duration_sec=5.0)
 
