@@ -100,3 +100,43 @@ def test_physics_killed_and_restarted_mid_stream(processes, ros2_cmd, ros_env):
         assert 'restarted' in gmr_log.read_text(), gmr_log.read_text()[-3000:]
     finally:
         counter.close()
+
+
+def test_a_publisher_of_the_wrong_type_on_an_input_topic(processes, ros2_cmd, ros_env):
+    """A std_msgs/String publisher on /mocap/keypoints2d next to the real keypoints: DDS does
+    not match the types, the lifter lifts every real frame and stays up."""
+    import os
+
+    import rclpy
+    from std_msgs.msg import String
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+    from mocap_core.qos import STREAM_QOS
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    lifter, log = processes.start([*ros2_cmd, 'run', 'mocap_lifter', 'lifter'], 'lifter')
+    processes.wait_for_text(log, 'lifter ready', 120, lifter)
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
+    try:
+        node = rclpy.create_node('wrong_type', context=context)
+        wrong = node.create_publisher(String, '/mocap/keypoints2d', 10)
+        got = []
+        node.create_subscription(MultiDOFJointTrajectory, '/mocap/lifter/motion', got.append,
+                                 STREAM_QOS)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        player, play_log = processes.start(
+            [*ros2_cmd, 'bag', 'play', str(GT_BAG), '--delay', '3', '--topics',
+             '/mocap/camera_info', '/mocap/keypoints2d'], 'play')
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (player.poll() is None or len(got) < 168):
+            wrong.publish(String(data='not keypoints'))
+            executor.spin_once(timeout_sec=0.02)
+        executor.shutdown()
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+    assert player.returncode == 0, play_log.read_text()
+    assert len(got) >= 160, len(got)            # best effort: a frame may be lost under load
+    assert lifter.poll() is None and 'Traceback' not in log.read_text(), log.read_text()
