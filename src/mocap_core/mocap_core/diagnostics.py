@@ -67,6 +67,7 @@ class NodeDiagnostics:
             'input_rate_hz': f'{self.input.rate():.2f}',
             'output_rate_hz': f'{self.output.rate():.2f}',
             'processing_ms_median': _ms(lat['median']),
+            'processing_ms_mean': _ms(lat['mean']),
             'processing_ms_p95': _ms(lat['p95']),
             'frames_in': str(self.input.total),
             'frames_out': str(self.output.total),

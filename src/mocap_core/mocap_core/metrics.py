@@ -47,7 +47,7 @@ class RateMeter:
 
 
 class LatencyStats:
-    """Median / 95th percentile / max of the last ``size`` durations (seconds)."""
+    """Median / mean / 95th percentile / max of the last ``size`` durations (seconds)."""
 
     def __init__(self, size: int = 200) -> None:
         self._values: Deque[float] = collections.deque(maxlen=size)
@@ -59,12 +59,13 @@ class LatencyStats:
         return len(self._values)
 
     def summary(self) -> Dict[str, float]:
-        """{'median', 'p95', 'max'} in seconds (NaN when empty)."""
+        """{'median', 'mean', 'p95', 'max'} in seconds (NaN when empty)."""
         if not self._values:
-            return {'median': float('nan'), 'p95': float('nan'), 'max': float('nan')}
+            return {'median': float('nan'), 'mean': float('nan'), 'p95': float('nan'),
+                    'max': float('nan')}
         v = np.fromiter(self._values, dtype=np.float64)
-        return {'median': float(np.median(v)), 'p95': float(np.percentile(v, 95)),
-                'max': float(v.max())}
+        return {'median': float(np.median(v)), 'mean': float(v.mean()),
+                'p95': float(np.percentile(v, 95)), 'max': float(v.max())}
 
 
 class Stopwatch:

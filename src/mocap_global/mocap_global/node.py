@@ -54,6 +54,9 @@ PARAMETERS = (
               'orientation\'s pitch and roll are pulled towards the network\'s tilt estimate '
               '(removes the tilt drift; 0 = the paper\'s pure accumulation)', min_value=0.0,
               max_value=1.0),
+    ParamSpec('chunk', 1, 'Frames emitted per network pass: 1 for live use; more (offline, '
+              'e.g. mocap process) is faster per frame and adds chunk - 1 frames of delay',
+              min_value=1, max_value=64, read_only=True),
     ParamSpec('static_camera', False, 'The camera does not move: fuse GMR with the input\'s '
               'root trajectory (removes drift)', read_only=True),
     ParamSpec('input_up', 'auto', "Up direction of the input frame for the fusion: 'auto' "
@@ -141,9 +144,9 @@ def node_class():
             if p['input_up'] not in ('auto', 'estimate'):
                 parse_up(p['input_up'])              # fail early on a malformed vector
             window = p['window'] or cfg.window
-            if p['lookahead'] > window - 2:
-                raise ValueError(f"lookahead ({p['lookahead']}) must be at most window - 2 "
-                                 f'({window - 2})')
+            if p['lookahead'] + p['chunk'] > window - 1:
+                raise ValueError(f"lookahead + chunk ({p['lookahead']} + {p['chunk']}) must be "
+                                 f'at most window - 1 ({window - 1})')
             self.online: Optional[OnlineGMR] = None   # built at the first frame (frame_id)
             self.last_stamp = -1
             self.last_input = time.monotonic()
@@ -200,7 +203,8 @@ def node_class():
             if self.model.cfg.root_input == 'up':
                 model_up = up if up is not None else np.array([0.0, -1.0, 0.0])
             return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
-                             p['tilt_correction'], fusion, model_up, p['device'])
+                             p['tilt_correction'], fusion, model_up, p['device'],
+                             chunk=p['chunk'])
 
         def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
             self.diag.input.tick()

@@ -148,19 +148,27 @@ class OnlineGMR:
             estimated tilt (0 = the paper's pure accumulation).
         fusion: a :class:`StaticCameraFusion` when the camera is static, else None.
         input_up: up direction of the input frame, for models with ``root_input='up'``.
+        chunk: frames emitted per network pass (1 = each frame as soon as its look-ahead has
+            arrived); more is faster per frame offline, and the earlier frames of a chunk see
+            more than ``lookahead`` future frames.
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
                  max_gap_s: float = 0.25, tilt_correction: float = 0.0,
                  fusion: Optional[StaticCameraFusion] = None,
-                 input_up: Optional[np.ndarray] = None, device: str = 'cpu') -> None:
+                 input_up: Optional[np.ndarray] = None, device: str = 'cpu',
+                 chunk: int = 1) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
         self.lookahead = int(lookahead)
-        if not 0 <= self.lookahead <= self.window - 2:
-            raise ValueError(f'lookahead must be in [0, {self.window - 2}] for a window of '
-                             f'{self.window} frames, got {lookahead}')
+        self.chunk = int(chunk)
+        if self.chunk < 1:
+            raise ValueError(f'chunk must be >= 1, got {chunk}')
+        if not 0 <= self.lookahead <= self.window - 1 - self.chunk:
+            raise ValueError(f'lookahead must be in [0, {self.window - 1 - self.chunk}] for a '
+                             f'window of {self.window} frames and chunks of {self.chunk}, '
+                             f'got {lookahead}')
         self.max_gap_ns = int(max_gap_s * 1e9)
         self.tilt_correction = float(tilt_correction)
         self.fusion = fusion
@@ -236,8 +244,9 @@ class OnlineGMR:
         self._stamps.append(int(stamp_ns))
         self._received += 1
         self._cache = None
-        while self._emitted + self.lookahead < self._received:
-            frames.append(self._emit())
+        if self.pending() >= self.lookahead + self.chunk:
+            # one network pass (cached) serves the whole chunk
+            frames.extend(self._emit() for _ in range(self.chunk))
         return frames, event
 
     def flush(self) -> List[WorldFrame]:

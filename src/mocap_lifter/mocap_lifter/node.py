@@ -36,6 +36,9 @@ PARAMETERS = (
               'the skeleton', min_value=0.0),
     ParamSpec('flush_after_s', 0.3, 'Windowed mode: when no keypoints arrive for this long, '
               'emit the frames still waiting for look-ahead', min_value=0.0),
+    ParamSpec('chunk', 1, 'Frames lifted per network pass: 1 for live use; more (offline, '
+              'e.g. mocap process) is faster per frame and adds chunk - 1 frames of delay',
+              min_value=1, max_value=256, read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,
               read_only=True),
@@ -106,7 +109,8 @@ def node_class():
             model = load_weights(path, self.p['device'], causal=(mode == 'causal'))
             self.lifter = OnlineLifter(
                 model, mode, None if self.p['latency'] < 0 else self.p['latency'],
-                self.p['skeleton_frames'], self.p['max_gap_s'], self.p['device'])
+                self.p['skeleton_frames'], self.p['max_gap_s'], self.p['device'],
+                chunk=self.p['chunk'])
             self.intrinsics: Optional[CameraIntrinsics] = None
             self.published_lengths: Optional[np.ndarray] = None
             self.last_stamp = -1

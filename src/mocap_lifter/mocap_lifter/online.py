@@ -8,6 +8,10 @@ frame, runs the network over the buffer and returns one lifted frame:
 * ``windowed`` mode: the output for the frame ``latency`` frames back, which sees ``latency``
   future frames (better accuracy, bounded delay of latency / fps seconds).
 
+``chunk`` > 1 (offline processing) waits for that many frames more and lifts them in one
+network pass: the same outputs (the network is purely convolutional, every output's receptive
+field lies inside the pass) for a fraction of the time per frame, ``chunk - 1`` frames later.
+
 The skeleton (bone lengths) is estimated by E_S over the growing buffer until
 ``skeleton_frames`` frames were seen, then held for this person. A gap longer than
 ``max_gap_s``, a stamp going backwards or a change of camera intrinsics resets the buffer
@@ -18,7 +22,7 @@ from __future__ import annotations
 
 import collections
 from dataclasses import dataclass
-from typing import Deque, List, Optional, Tuple
+from typing import Deque, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -51,11 +55,12 @@ class OnlineLifter:
         latency: frames of look-ahead in windowed mode (default: half the receptive field).
         skeleton_frames: frames used to estimate the skeleton before it is held.
         max_gap_s: a larger gap between stamps resets the buffer.
+        chunk: frames lifted per network pass (1 = every frame as soon as it can be).
     """
 
     def __init__(self, model: MotioNet, mode: str = 'causal', latency: Optional[int] = None,
                  skeleton_frames: int = 90, max_gap_s: float = 1.0,
-                 device: str = 'cpu') -> None:
+                 device: str = 'cpu', chunk: int = 1) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -68,18 +73,24 @@ class OnlineLifter:
         self.skeleton_frames = max(int(skeleton_frames), 1)
         self.max_gap_ns = int(max_gap_s * 1e9)
         self.device = device
+        if int(chunk) < 1:
+            raise ValueError(f'chunk must be >= 1, got {chunk}')
+        self.chunk = int(chunk)
         self.reset()
 
     def reset(self) -> None:
         """Forget the buffer and the skeleton."""
         # one frame more than the context: the root velocity of the oldest frame needs it
-        size = max(self.context + 1, self.skeleton_frames)
+        size = max(self.context + self.chunk, self.skeleton_frames)
         self._kp: Deque[np.ndarray] = collections.deque(maxlen=size)
         self._stamps: Deque[int] = collections.deque(maxlen=size)
         self._intr: Optional[CameraIntrinsics] = None
         self.lengths: Optional[torch.Tensor] = None
         self.frames_seen = 0
         self._last_emitted = -1
+        # chunk > 1: the skeleton estimate after each push (frames_seen -> lengths), so that
+        # every frame gets the skeleton it would have got frame by frame
+        self._lengths_at: Dict[int, torch.Tensor] = {}
 
     def push(self, stamp_ns: int, keypoints: np.ndarray, intrinsics: CameraIntrinsics,
              ) -> Tuple[List[LiftedFrame], str]:
@@ -109,8 +120,15 @@ class OnlineLifter:
         self._kp.append(kp)
         self._stamps.append(int(stamp_ns))
         self.frames_seen += 1
-        if len(self._kp) > self.latency:
-            frames.append(self._infer())
+        if self.chunk > 1 and self.lengths is None and self.pending() > self.latency:
+            # where frame-by-frame lifting would emit a frame (and update the skeleton)
+            with torch.no_grad():
+                lengths = self._estimate_lengths(self._features()[0])
+            self._lengths_at[self.frames_seen] = lengths
+            if self.frames_seen >= self.skeleton_frames:
+                self.lengths = lengths
+        if self.pending() >= self.latency + self.chunk:
+            frames.extend(self._infer([-self.pending() + j for j in range(self.chunk)]))
         return frames, event
 
     def pending(self) -> int:
@@ -120,35 +138,70 @@ class OnlineLifter:
     def flush(self) -> List[LiftedFrame]:
         """Return the frames still waiting for look-ahead, computed with the future frames
         that exist (the end of a stream, or before a long pause)."""
-        frames = []
-        while self.pending() > 0:
-            offset = self.pending() - 1  # frames after the one to emit
-            frames.append(self._infer(index=-1 - offset))
-        return frames
+        n = self.pending()
+        return self._infer([-n + j for j in range(n)]) if n else []
 
     @torch.no_grad()
-    def _infer(self, index: Optional[int] = None) -> LiftedFrame:
-        kp = np.stack(self._kp)
-        feats, root_2d, scale, _ = lifter_features(kp, self._intr)
-        x = torch.as_tensor(feats[None], device=self.device)
-        r = torch.as_tensor(root_2d[None].astype(np.float32), device=self.device)
-        sc = torch.as_tensor(scale[None].astype(np.float32), device=self.device)
+    def _infer(self, indices: List[int]) -> List[LiftedFrame]:
+        """Lift the buffered frames at ``indices`` (negative, from the end, ascending) in one
+        network pass over the context they need."""
+        x, r, sc = self._features()
         fixed = self.lengths is not None
-        if not fixed:
-            lengths = self.model.e_s(((x - self.model.feature_mean) / self.model.feature_std)
-                                     .transpose(1, 2))
-            if self.frames_seen >= self.skeleton_frames:
-                self.lengths = lengths
+        if self.chunk > 1:
+            per_frame = [self._lengths_for(self.frames_seen + i) for i in indices]
+            lengths = per_frame[-1][0]
         else:
-            lengths = self.lengths
-        ctx = slice(-self.context, None)
+            if not fixed:
+                lengths = self._estimate_lengths(x)
+                if self.frames_seen >= self.skeleton_frames:
+                    self.lengths = lengths
+            else:
+                lengths = self.lengths
+            per_frame = [(lengths, fixed)] * len(indices)
+        # the oldest frame to emit needs the context the newest-possible one would
+        extra = max(0, -indices[0] - (1 + self.latency))
+        ctx = slice(-(self.context + extra), None)
         out = self.model(x[:, ctx], r[:, ctx], sc[:, ctx], lengths=lengths)
-        i = -1 - self.latency if index is None else index
-        rot = out['rotations'][0, i].cpu().numpy().astype(np.float64)
-        root = out['root'][0, i].cpu().numpy().astype(np.float64)
-        contacts = torch.sigmoid(out['contacts'][0, i]).cpu().numpy().astype(np.float64)
-        skeleton = Skeleton.from_group_lengths(lengths[0].cpu().numpy().astype(np.float64))
-        stamp = list(self._stamps)[i]
-        self._last_emitted = stamp
-        return LiftedFrame(stamp, Pose(skeleton, rot, root), contacts, fixed,
-                           float(out['depth'][0, i]))
+        skeletons: Dict[int, Skeleton] = {}
+        rot = out['rotations'][0].cpu().numpy().astype(np.float64)
+        root = out['root'][0].cpu().numpy().astype(np.float64)
+        contacts = torch.sigmoid(out['contacts'][0]).cpu().numpy().astype(np.float64)
+        depth = out['depth'][0].cpu().numpy()
+        stamps = list(self._stamps)
+        frames = []
+        for i, (lengths_i, fixed_i) in zip(indices, per_frame):
+            key = id(lengths_i)
+            if key not in skeletons:
+                skeletons[key] = Skeleton.from_group_lengths(
+                    lengths_i[0].cpu().numpy().astype(np.float64))
+            self._last_emitted = stamps[i]
+            frames.append(LiftedFrame(stamps[i], Pose(skeletons[key], rot[i], root[i]),
+                                      contacts[i], fixed_i, float(depth[i])))
+        return frames
+
+    def _features(self):
+        """Network inputs over the buffer: features (1, T, C), root keypoint (1, T, 2),
+        scale (1, T)."""
+        feats, root_2d, scale, _ = lifter_features(np.stack(self._kp), self._intr)
+        return (torch.as_tensor(feats[None], device=self.device),
+                torch.as_tensor(root_2d[None].astype(np.float32), device=self.device),
+                torch.as_tensor(scale[None].astype(np.float32), device=self.device))
+
+    def _estimate_lengths(self, x: torch.Tensor) -> torch.Tensor:
+        """E_S over the buffer's features (1, T, C) -> (1, G) bone-group lengths."""
+        return self.model.e_s(((x - self.model.feature_mean) / self.model.feature_std)
+                              .transpose(1, 2))
+
+    def _lengths_for(self, frame: int) -> Tuple[torch.Tensor, bool]:
+        """chunk > 1: (lengths, held) frame number ``frame`` (0-based, this segment) gets: the
+        estimate after the push at which frame-by-frame lifting would have emitted it."""
+        push = min(frame + self.latency + 1, self.frames_seen)
+        if push in self._lengths_at:
+            return self._lengths_at[push], False
+        if self.lengths is not None:
+            return self.lengths, True
+        # a segment shorter than the look-ahead, flushed: the estimate over what exists
+        with torch.no_grad():
+            lengths = self._estimate_lengths(self._features()[0])
+        self._lengths_at[push] = lengths
+        return lengths, False

@@ -145,3 +145,34 @@ def test_online_lifter_windowed_emits_every_frame_once_in_order():
     assert online.pending() == 5
     got += online.flush()
     assert [f.stamp_ns for f in got] == stamps and online.pending() == 0
+
+
+@pytest.mark.parametrize('mode', ['windowed', 'causal'])
+def test_online_lifter_chunks_give_the_same_frames_later(mode):
+    """chunk = 8 lifts eight frames per network pass: the same poses as frame by frame (the
+    network is convolutional), emitted in groups, every frame once."""
+    model = MotioNet(LifterConfig(**SMALL, causal=mode == 'causal')).eval()
+    intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+    rng = np.random.default_rng(5)
+    kp = np.concatenate([rng.uniform(200, 400, (50, 23, 2)), np.ones((50, 23, 1))], -1)
+    stamps = [33_000_000 * i for i in range(50)]
+    runs = {}
+    for chunk in (1, 8):
+        # the skeleton is estimated over 30 frames (changing every frame), then held
+        online = OnlineLifter(model, mode, skeleton_frames=30, chunk=chunk)
+        got, sizes = [], []
+        for i in range(50):
+            frames, _ = online.push(stamps[i], kp[i], intr)
+            got += frames
+            sizes.append(len(frames))
+        got += online.flush()
+        assert [f.stamp_ns for f in got] == stamps
+        assert set(sizes) <= {0, chunk}
+        runs[chunk] = got
+    for a, b in zip(runs[1], runs[8]):
+        np.testing.assert_allclose(a.pose.joint_positions(), b.pose.joint_positions(),
+                                   atol=1e-5)
+        assert a.skeleton_fixed == b.skeleton_fixed
+    assert runs[8][-1].skeleton_fixed and not runs[8][0].skeleton_fixed
+    with pytest.raises(ValueError, match='chunk'):
+        OnlineLifter(model, mode, chunk=0)

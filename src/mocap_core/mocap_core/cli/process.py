@@ -52,6 +52,10 @@ PRODUCED = {
 #: Parameters the offline run sets (overridable with --param).
 OFFLINE_DEFAULTS: Dict[str, Dict[str, Any]] = {
     'keypoints': {'synchronous': True, 'realtime': False},
+    # several frames per network pass: the lifter's output is the same as frame by frame,
+    # GMR's earlier frames of a chunk see more future frames than the look-ahead
+    'lifter': {'chunk': 16},
+    'gmr': {'chunk': 16},
     # a motion frame waits for its contacts by message order, not by wall-clock time
     'physics': {'contacts_wait_s': 5.0},
 }
