@@ -17,8 +17,8 @@ GT_BAG = ROOT / 'bags' / 'gt_cmu_walk_12_02'
 OUTPUTS = [f'/mocap/{stage}/{leaf}' for stage in ('lifter', 'physics', 'world')
            for leaf in ('motion', 'joints3d', 'joint_states', 'markers')] + [
     '/mocap/lifter/contacts', '/mocap/physics/grf/left', '/mocap/physics/grf/right',
-    '/mocap/physics/com', '/mocap/physics/floor', '/mocap/world/odom', '/mocap/world/path', '/mocap/skeleton/urdf',
-    '/diagnostics']
+    '/mocap/physics/com', '/mocap/physics/floor', '/mocap/world/odom', '/mocap/world/path',
+    '/mocap/skeleton/urdf', '/diagnostics']
 
 
 def _late_joiner_urdf(env: dict) -> str:

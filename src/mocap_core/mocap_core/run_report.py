@@ -162,13 +162,13 @@ def _jitter_mm_per_s2(joints: np.ndarray, dt: float) -> float:
 
 
 def plausibility(run: PipelineRun, contact_threshold: float = 0.5) -> Dict[str, Dict[str, float]]:
-    """Per stage: frames, bone-length spread (mm: of the skeleton over the run, which the
-    lifter refines during its first ``skeleton_frames`` frames, then holds; the number of
-    skeleton changes and the frame of the last one; the spread of the bone lengths measured on
-    the joint positions from then on), jitter (mm/s^2), foot skating (mm per frame of a contact point in
-    contact, horizontal), and for the physics stage: floor penetration (mm, deepest contact
-    point below z = 0) and the mean total vertical GRF over body weight on frames with
-    force."""
+    """Per stage: frames; bone-length spread (mm) of the skeleton over the run (the lifter
+    refines it during its first ``skeleton_frames`` frames, then holds it), the number of
+    skeleton changes, the frame of the last one, and the spread of the bone lengths measured
+    on the joint positions from then on; jitter (mm/s^2); foot skating (mm per frame of a
+    contact point in contact, horizontal); for the physics stage: floor penetration (mm,
+    deepest contact point below z = 0) and the mean total vertical GRF over body weight on
+    frames with force."""
     out: Dict[str, Dict[str, float]] = {}
     for name, s in run.stages.items():
         dt = float(np.median(np.diff(s.stamps))) * 1e-9 if len(s.stamps) > 1 else 1 / 30

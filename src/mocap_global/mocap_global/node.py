@@ -54,6 +54,8 @@ PARAMETERS = (
               'orientation\'s pitch and roll are pulled towards the network\'s tilt estimate '
               '(removes the tilt drift; 0 = the paper\'s pure accumulation)', min_value=0.0,
               max_value=1.0),
+    ParamSpec('queue_depth', 100, 'Input messages queued while a frame is processed (older '
+              'ones are lost when the queue is full)', min_value=1, read_only=True),
     ParamSpec('chunk', 1, 'Frames emitted per network pass: 1 for live use; more (offline, '
               'e.g. mocap process) is faster per frame and adds chunk - 1 frames of delay',
               min_value=1, max_value=64, read_only=True),
@@ -124,7 +126,7 @@ def node_class():
 
     from mocap_core import ros_conversions as rc
     from mocap_core.diagnostics import NodeDiagnostics
-    from mocap_core.qos import STREAM_QOS
+    from mocap_core.qos import STREAM_QOS, input_qos
 
     from .model import load_weights
     from .online import OnlineGMR, StaticCameraFusion
@@ -175,7 +177,7 @@ def node_class():
             self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
             self.diag.set_value('static_camera', p['static_camera'])
             self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'],
-                                     self.on_motion, STREAM_QOS)
+                                     self.on_motion, input_qos(STREAM_QOS, p['queue_depth']))
             self.create_timer(0.1, self.on_idle)
             self.get_logger().info(
                 f"gmr ready: {path} ({cfg.layers}x{cfg.hidden} GRU at {cfg.fps:g} fps), input "

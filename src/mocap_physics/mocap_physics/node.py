@@ -85,6 +85,8 @@ PARAMETERS = (
               'contacts with its stamp', min_value=0.0, max_value=5.0),
     ParamSpec('contacts_max_age_s', 0.1, 'Otherwise use the newest older contacts if at most '
               'this old (stamp time), else none', min_value=0.0),
+    ParamSpec('queue_depth', 100, 'Input messages queued while a frame is processed (older '
+              'ones are lost when the queue is full)', min_value=1, read_only=True),
     ParamSpec('body_mass', _D.body_mass, 'Body mass, kg (segment masses: de Leva 1996)',
               min_value=1.0, max_value=500.0, read_only=True),
     ParamSpec('gains_mode', 'fixed', 'PD gains: fixed (kp/kd below) or learned (DyNet, '
@@ -173,7 +175,7 @@ def node_class():
     from visualization_msgs.msg import MarkerArray
 
     from mocap_core.diagnostics import NodeDiagnostics
-    from mocap_core.qos import STREAM_QOS
+    from mocap_core.qos import STREAM_QOS, input_qos
     from mocap_core.ros_conversions import (MessageError, make_header, motion_to_pose,
                                             msg_to_contacts, pose_to_joint_state,
                                             pose_to_markers, pose_to_motion,
@@ -243,11 +245,12 @@ def node_class():
             self.last_result = None
             self._limited = {}
             self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'], self._on_motion,
-                                     STREAM_QOS)
+                                     input_qos(STREAM_QOS, p['queue_depth']))
             self.contacts_sub = None
             if p['contacts_topic']:
                 self.contacts_sub = self.create_subscription(
-                    JointState, p['contacts_topic'], self._on_contacts, STREAM_QOS)
+                    JointState, p['contacts_topic'], self._on_contacts,
+                    input_qos(STREAM_QOS, p['queue_depth']))
             self.create_timer(0.01, self._process)
             self.create_timer(1.0, self._refresh_diagnostics)
             self.get_logger().info(
