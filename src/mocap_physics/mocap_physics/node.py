@@ -362,7 +362,8 @@ def node_class():
                     self.get_logger().info(
                         'floor re-estimated: camera height %.3f m, normal %s (%d inliers of '
                         '%d points)' % (new.height, np.round(new.normal, 4).tolist(),
-                                        self.tracker.fit.inliers, self.tracker.fit.points))
+                                        self.tracker.fit.inliers, self.tracker.fit.points),
+                        throttle_duration_sec=5.0)
                 self.floor = new
             if self.floor is not None:
                 pose = self.floor.transform_pose(pose)

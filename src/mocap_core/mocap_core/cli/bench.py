@@ -109,7 +109,8 @@ def bench_offline(bag: Path, repeat: int, work: Path, times: int = 5) -> Dict:
     long_bag = repeated_bag(bag, work / 'offline_input', times)
     for k in range(repeat):
         out = work / f'offline_{k}'
-        s = process(long_bag, out, overwrite=True, progress=False, log=lambda *a: None)
+        s = process(long_bag, out, overwrite=True, progress=False, log=lambda *a: None,
+                    log_level='error')
         fps.append(s['fps'])
         run = load_run(out)
         for name, d in run.diagnostics.items():

@@ -180,7 +180,8 @@ class Recorder:
 
 def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic: str = '',
             params: Optional[Dict[str, Dict[str, Any]]] = None, overwrite: bool = False,
-            record_images: bool = False, progress: bool = True, log=print) -> Dict[str, Any]:
+            record_images: bool = False, progress: bool = True, log=print,
+            log_level: str = 'info') -> Dict[str, Any]:
     """Run the pipeline on ``input_path`` and write ``output``; returns a summary dict
     (plan, frames, seconds, per-topic counts of the output, problems)."""
     import rclpy
@@ -214,7 +215,7 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
     # A private context: the nodes' DDS participant is local to this process.
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     context = Context()
-    rclpy.init(args=[], context=context)
+    rclpy.init(args=['--ros-args', '--log-level', log_level], context=context)
     nodes: Dict[str, Any] = {}
     problems: List[str] = []
     summary: Dict[str, Any] = {'input': str(input_path), 'output': str(output),
@@ -365,6 +366,8 @@ def add_parser(sub) -> None:
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     p.add_argument('--summary', help='also write the summary as JSON to this file')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.add_argument('--log-level', default='info', choices=('debug', 'info', 'warn', 'error'),
+                   help="the nodes' log level (default info)")
     p.set_defaults(func=cmd_process)
 
 
@@ -376,7 +379,7 @@ def cmd_process(args: argparse.Namespace) -> int:
         summary = process(Path(args.input), Path(args.output), start=args.start,
                           image_topic=args.image_topic, params=params,
                           overwrite=args.overwrite, record_images=args.record_images,
-                          progress=not args.no_progress)
+                          progress=not args.no_progress, log_level=args.log_level)
     except ProcessError as exc:
         print(f'mocap process: error: {exc}', file=sys.stderr)
         return 2
