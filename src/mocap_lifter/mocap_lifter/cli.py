@@ -49,6 +49,10 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--noise', choices=('none', 'motionet', 'both'), default='both')
     p.add_argument('--out', help='report directory (default: next to the weights)')
     p.add_argument('--device', default='cpu')
+    p.add_argument('--real', nargs='*', default=None, metavar='DIR',
+                   help='OpenPose JSON folders lifted without ground truth (jitter, skating); '
+                   'default: the sequences of ../shared/data/keypoints_real/motionet_openpose '
+                   'if present, else data/openpose_example/seq1')
     p.set_defaults(func=cmd_eval)
 
 
@@ -93,10 +97,21 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def default_real_sequences() -> List[str]:
+    """The real OpenPose sequences of the shared data, or the committed example."""
+    repo = Path(__file__).resolve().parents[3]
+    shared = repo.parent / 'shared' / 'data' / 'keypoints_real' / 'motionet_openpose'
+    if shared.is_dir():
+        return [str(d) for d in sorted(shared.iterdir()) if d.is_dir()]
+    example = repo / 'data' / 'openpose_example' / 'seq1'
+    return [str(example)] if example.is_dir() else []
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from mocap_core.data.dataset import load_dataset
 
-    from .evaluate import baseline_mean_pose, evaluate, write_report
+    from .evaluate import (baseline_mean_pose, evaluate, evaluate_real,
+                           groundtruth_plausibility, write_report)
     from .train import load_weights
 
     weights = Path(args.weights) if args.weights else WEIGHTS_DIR / f'motionet_{args.mode}.pt'
@@ -111,9 +126,20 @@ def cmd_eval(args: argparse.Namespace) -> int:
     seconds = time.time() - t0
     baseline = {n: baseline_mean_pose(load_dataset('train'), val, n) for n in noises}
     out = Path(args.out) if args.out else weights.parent / f'{weights.stem}_eval'
+    real_dirs = args.real if args.real is not None else default_real_sequences()
+    real = None
+    if real_dirs:
+        real = evaluate_real(model, [Path(d) for d in real_dirs], device=args.device)
+        real['groundtruth'] = groundtruth_plausibility(val)
+        s = real['summary']
+        print(f"real OpenPose ({real['sequences']} sequences, {real['frames']} frames): jitter "
+              f"{s['jitter_mm_s2'] / 1000:.2f} m/s^2 (ground truth "
+              f"{real['groundtruth']['jitter_mm_s2'] / 1000:.2f}), skating "
+              f"{s['skating_mm']:.1f} mm/frame (ground truth "
+              f"{real['groundtruth']['skating_mm']:.1f})")
     path = write_report(results, out, f'MotioNet lifter ({weights.name}) on the validation '
                         'split', {'baseline_mean_pose': baseline, 'weights': str(weights),
-                                  'eval_seconds': round(seconds, 1)})
+                                  'eval_seconds': round(seconds, 1)}, real=real)
     for r in results:
         s = r['summary']
         print(f"{r['noise']:9s} MPJPE {s['mpjpe_mm']:.1f} mm  PA-MPJPE {s['pa_mpjpe_mm']:.1f} mm"

@@ -5,6 +5,10 @@ name (the same cameras for every model and run), without flip or bone-length aug
 and lifted in one pass over the whole clip (the networks are fully convolutional; E_S sees the
 whole clip). Two input conditions: ``none`` (clean projected keypoints) and ``motionet``
 (the MotioNet-style confidence and displacement corruption used in training).
+
+:func:`evaluate_real` lifts real OpenPose detections (no ground truth): only what needs none
+is measured, jitter (joint acceleration), foot skating during predicted contacts and the
+bone-length spread, next to the same figures of the ground-truth validation motion.
 """
 
 from __future__ import annotations
@@ -109,13 +113,76 @@ def baseline_mean_pose(train: Sequence[Motion], motions: Sequence[Motion],
             'pa_mpjpe_mm': float(np.dot(pa, w) / w.sum())}
 
 
+def _largest_person(people: np.ndarray) -> np.ndarray:
+    """(P, 23, 3) -> (23, 3): the person with the largest summed confidence (zeros if none)."""
+    if len(people) == 0:
+        return np.zeros(people.shape[1:])
+    return people[int(np.argmax(people[..., 2].sum(axis=-1)))]
+
+
+def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.0,
+                  fov: float = 60.0, device: str = 'cpu') -> Dict:
+    """Lift OpenPose JSON folders (one sequence each; the most confident person per frame;
+    intrinsics from ``fov`` over the inferred image size, as ``mocap data from-openpose``)
+    and measure jitter (mm/s^2), foot skating (mm per frame, camera frame, during predicted
+    contact) and bone-length spread (mm)."""
+    from mocap_core.camera import CameraIntrinsics
+    from mocap_keypoints.openpose import (OpenPoseError, infer_image_size,
+                                          list_openpose_files, read_openpose_file)
+
+    from .features import lifter_features
+
+    rows = []
+    for d in directories:
+        files = list_openpose_files(d)
+        kps = []
+        for _, f in files:
+            try:
+                kps.append(_largest_person(read_openpose_file(f)))
+            except OpenPoseError:
+                kps.append(np.zeros((23, 3)))
+        kp = np.stack(kps)
+        w, h = infer_image_size(files)
+        feats, root_2d, scale, _ = lifter_features(kp, CameraIntrinsics.from_fov(w, h, fov))
+        out = lift(model, feats, root_2d.astype(np.float32), scale.astype(np.float32), device)
+        p = out['positions']
+        rows.append({'sequence': Path(d).name, 'frames': len(kp),
+                     'jitter_mm_s2': M.jitter_mm(p) * fps ** 2,
+                     'skating_mm': M.foot_skating_mm(p[:, _FEET], out['contacts'] >= 0.5, 1),
+                     'bone_spread_mm': M.bone_length_spread_mm(p),
+                     'mean_confidence': float(kp[..., 2].mean())})
+    frames = np.array([r['frames'] for r in rows], dtype=np.float64)
+    summary = {k: _weighted_mean([r[k] for r in rows], frames)
+               for k in ('jitter_mm_s2', 'skating_mm', 'bone_spread_mm')}
+    return {'sequences': len(rows), 'frames': int(frames.sum()), 'summary': summary,
+            'per_sequence': rows}
+
+
+def groundtruth_plausibility(motions: Sequence[Motion], fps: float = 30.0,
+                             max_frames: int = 900) -> Dict[str, float]:
+    """Jitter (mm/s^2) and contact-foot skating (mm per frame) of real motion capture, the
+    reference for :func:`evaluate_real`."""
+    from mocap_core.kinematics import forward_kinematics
+
+    jit, skate, n = [], [], []
+    for m in motions:
+        k = min(m.num_frames, max_frames)
+        p = forward_kinematics(m.skeleton.parents, m.skeleton.offsets, m.rotations[:k],
+                               m.root_positions[:k]).positions
+        jit.append(M.jitter_mm(p) * fps ** 2)
+        skate.append(M.foot_skating_mm(p[:, _FEET], m.contacts[:k].astype(bool), 2))
+        n.append(k)
+    w = np.array(n, dtype=np.float64)
+    return {'jitter_mm_s2': _weighted_mean(jit, w), 'skating_mm': _weighted_mean(skate, w)}
+
+
 def write_report(results: Sequence[Dict], out_dir: Path, title: str,
-                 extra: Dict | None = None) -> Path:
+                 extra: Dict | None = None, real: Dict | None = None) -> Path:
     """JSON + Markdown report of :func:`evaluate` results."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / 'eval.json').write_text(json.dumps(
-        {'results': list(results), **(extra or {})}, indent=1))
+        {'results': list(results), 'real': real, **(extra or {})}, indent=1))
     keys = ['mpjpe_mm', 'n_mpjpe_mm', 'pa_mpjpe_mm', 'mrpe_mm', 'mble_mm', 'bone_spread_mm',
             'contact_accuracy', 'accel_error_mm', 'skating_mm', 'skating_gt_mm']
     lines = [f'# {title}', '', '| input | clips | frames | ' + ' | '.join(keys) + ' |',
@@ -125,6 +192,22 @@ def write_report(results: Sequence[Dict], out_dir: Path, title: str,
         lines.append(f"| {r['noise']} | {r['clips']} | {r['frames']} | "
                      + ' | '.join(f'{s[k]:.3f}' if 'accuracy' in k else f'{s[k]:.1f}'
                                   for k in keys) + ' |')
+    if real:
+        ref = real.get('groundtruth', {})
+        lines += ['', f"## Real OpenPose sequences (no ground truth): {real['sequences']} "
+                  f"sequences, {real['frames']} frames", '',
+                  '| sequence | frames | mean confidence | jitter (m/s²) | foot skating (mm/frame) '
+                  '| bone-length spread (mm) |', '|---|---|---|---|---|---|']
+        total = {'sequence': 'all (frame-weighted)', 'frames': real['frames'],
+                 'mean_confidence': float('nan'), **real['summary']}
+        for r in real['per_sequence'] + [total]:
+            lines.append(f"| {r['sequence']} | {r['frames']} | {r['mean_confidence']:.2f} | "
+                         f"{r['jitter_mm_s2'] / 1000:.2f} | {r['skating_mm']:.1f} | "
+                         f"{r['bone_spread_mm']:.1f} |")
+        if ref:
+            lines += ['', f"Reference, the ground-truth validation motion: jitter "
+                      f"{ref['jitter_mm_s2'] / 1000:.2f} m/s², foot skating "
+                      f"{ref['skating_mm']:.1f} mm/frame."]
     for k, v in (extra or {}).items():
         lines += ['', f'**{k}**: `{json.dumps(v)}`']
     path = out_dir / 'eval.md'

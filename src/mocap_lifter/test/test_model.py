@@ -176,3 +176,20 @@ def test_online_lifter_chunks_give_the_same_frames_later(mode):
     assert runs[8][-1].skeleton_fixed and not runs[8][0].skeleton_fixed
     with pytest.raises(ValueError, match='chunk'):
         OnlineLifter(model, mode, chunk=0)
+
+
+def test_evaluate_real_openpose_sequence_measures_plausibility():
+    """The real-detection evaluation (no ground truth) on the committed OpenPose example."""
+    from pathlib import Path
+
+    from mocap_lifter.evaluate import evaluate_real
+
+    seq = Path(__file__).resolve().parents[3] / 'data' / 'openpose_example' / 'seq1'
+    model = MotioNet(LifterConfig(**SMALL, causal=False)).eval()
+    res = evaluate_real(model, [seq])
+    assert res['sequences'] == 1 and res['frames'] == 81
+    row = res['per_sequence'][0]
+    assert np.isfinite(row['jitter_mm_s2']) and row['jitter_mm_s2'] > 0
+    assert np.isnan(row['skating_mm']) or row['skating_mm'] >= 0   # nan: no contact predicted
+    assert row['bone_spread_mm'] < 1e-3                   # one skeleton per sequence
+    assert 0.3 < row['mean_confidence'] < 1.0
