@@ -45,6 +45,7 @@ import numpy as np
 
 from mocap_core.kinematics import forward_kinematics
 from mocap_core.pose import Pose
+from mocap_core.pose_metrics import procrustes_align
 from mocap_core.rotations import axis_angle_to_quat, quat_multiply, quat_to_matrix
 from mocap_core.skeleton import CONTACT_POINT_NAMES, Skeleton
 
@@ -286,16 +287,7 @@ def _contact_points(skeleton: Skeleton, rotations: np.ndarray, root: np.ndarray)
 
 def procrustes(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     """(F, J, 3) ``pred`` aligned to ``gt`` per frame by a similarity transform."""
-    mp, mg = pred.mean(axis=1, keepdims=True), gt.mean(axis=1, keepdims=True)
-    p, g = pred - mp, gt - mg
-    H = np.einsum('fji,fjk->fik', p, g)
-    U, S, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.einsum('fij,fjk->fik', U, Vt)))
-    D = np.ones_like(S)
-    D[:, -1] = d
-    R = np.einsum('fij,fj,fjk->fik', U, D, Vt)        # p @ R ~ g
-    scale = (S * D).sum(axis=1) / np.maximum((p ** 2).sum(axis=(1, 2)), 1e-12)
-    return scale[:, None, None] * np.einsum('fji,fik->fjk', p, R) + mg
+    return procrustes_align(pred, gt)
 
 
 def motion_metrics(skeleton: Skeleton, rotations: np.ndarray, root: np.ndarray,

@@ -71,6 +71,19 @@ def _rss_mib(pid: int) -> Optional[float]:
         return None
 
 
+def _stop(procs) -> None:
+    """SIGINT every process still running, wait up to 15 s each, then kill."""
+    procs = list(procs)
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+
+
 def _summary(values: List[float]) -> Dict[str, float]:
     if not values:
         return {'median': float('nan'), 'p95': float('nan'), 'n': 0}
@@ -223,14 +236,7 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
         procs['keypoints'].wait(15)
         time.sleep(2.0)
     finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for p in procs.values():
-            try:
-                p.wait(15)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        _stop(procs.values())
         listener.close()
     lifter_latency = 0 if config['lifter_mode'] == 'causal' else 14
     result = {'config': config, 'seconds': elapsed, 'stages': {}, 'nodes': {},
@@ -303,13 +309,7 @@ def cmd_soak(args: argparse.Namespace) -> int:
         player.send_signal(signal.SIGINT)
         player.wait(15)
     finally:
-        for p in procs.values():
-            p.send_signal(signal.SIGINT)
-        for p in procs.values():
-            try:
-                p.wait(15)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        _stop(procs.values())
         listener.close()
     frames = len(listener.samples['world'])
     lines = ['# Soak run', '', f"{datetime.date.today().isoformat()}, commit `{_git_commit()}`: "
