@@ -38,6 +38,7 @@ class Augmentation:
     camera: CameraSampling = field(default_factory=CameraSampling)
     corruption: Optional[Corruption] = field(default_factory=Corruption)  # None = clean
     clean_prob: float = 0.0        # share of windows left uncorrupted (confidence 1)
+    tpose_prob: float = 0.0        # share of windows replaced by the character's T-pose
 
 
 def scaled_skeleton(skeleton: Skeleton, rng: np.random.Generator, aug: Augmentation,
@@ -53,7 +54,8 @@ def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generato
     """One window as arrays: ``features`` (T, 72), ``root_2d`` (T, 2), ``scale`` (T,), and
     targets in the
     camera frame: ``positions`` (T, J, 3), ``rotations`` (T, J, 4), ``root`` (T, 3),
-    ``lengths`` (G,), ``contacts`` (T, 4) float; plus ``keypoints`` (T, 23, 3) pixels."""
+    ``lengths`` (G,), ``contacts`` (T, 4) float; plus ``keypoints`` (T, 23, 3) pixels and
+    ``tpose`` (1.0 for a T-pose window, see :func:`tpose_window`)."""
     rot = motion.rotations[start:start + length]
     root = motion.root_positions[start:start + length]
     contacts = motion.contacts[start:start + length].astype(np.float32)
@@ -66,6 +68,9 @@ def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generato
         leg = new.bone_lengths()[_LEG].sum() / skeleton.bone_lengths()[_LEG].sum()
         root = root * leg  # the stride and the pelvis height follow the legs
         skeleton = new
+    tpose = aug.tpose_prob > 0 and rng.random() < aug.tpose_prob
+    if tpose:
+        rot, root, contacts = tpose_window(skeleton, rot, root)
     pts = keypoints_3d(skeleton, rot, root)
     forward = _facing(rot[:, 0])
     camera = sample_camera(pts, rng, aug.camera, facing=forward)
@@ -80,7 +85,22 @@ def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generato
             'positions': positions.astype(np.float32), 'rotations': crot.astype(np.float32),
             'root': croot.astype(np.float32),
             'lengths': skeleton.group_lengths().astype(np.float32), 'contacts': contacts,
-            'keypoints': kp.astype(np.float32)}
+            'keypoints': kp.astype(np.float32), 'tpose': np.float32(tpose)}
+
+
+def tpose_window(skeleton: Skeleton, rot: np.ndarray, root: np.ndarray):
+    """The character standing still in its T-pose (MotioNet's reference T-pose, §3.2): every
+    joint rotation identity, the root turned about the vertical only (the window's first
+    facing), feet on the floor; all heel/toe points in contact. Returns (rot, root,
+    contacts) shaped like the window's (T, J, 4), (T, 3), (T, 4)."""
+    t = len(rot)
+    fwd = _facing(rot[:1, 0])
+    yaw = np.arctan2(fwd[1], fwd[0])
+    q = np.zeros((t, rot.shape[1], 4))
+    q[..., 3] = 1.0
+    q[:, 0] = [0.0, 0.0, np.sin(yaw / 2), np.cos(yaw / 2)]
+    r = np.repeat(np.array([[root[0, 0], root[0, 1], skeleton.rest_root_height()]]), t, axis=0)
+    return q, r, np.ones((t, 4), dtype=np.float32)
 
 
 def _facing(root_quats: np.ndarray) -> np.ndarray:

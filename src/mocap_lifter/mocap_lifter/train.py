@@ -11,7 +11,10 @@ Losses (MotioNet §3.2, eq. 5-12, weights in :class:`TrainConfig`):
 * ``rotation`` (optional, the ablation the issue asks for): ``1 - |<q, q_gt>|`` per joint,
   possible because the data pipeline expresses all rotations against one rest pose;
 * ``adversarial`` (optional): least-squares GAN on rotation velocities with per-joint
-  discriminators (eq. 7).
+  discriminators (eq. 7);
+* ``tpose`` (optional): MotioNet's reference T-pose: a share ``tpose_fraction`` of the
+  windows shows the character standing in its T-pose, whose rotations must come out as the
+  identity (``1 - |<q, q_T>|`` on those windows only).
 
 Checkpoints (``last.pt``, resumable) and a CSV log are written to the run directory; a loss
 curve PNG is drawn at the end (and on every validation).
@@ -60,6 +63,8 @@ class TrainConfig:
     w_adversarial: float = 0.0
     end_effector_weight: float = 2.0
     clean_fraction: float = 0.25   # share of training windows with clean keypoints
+    tpose_fraction: float = 0.0    # share of T-pose windows (reference T-pose loss)
+    w_tpose: float = 0.0           # weight of the T-pose loss (identity rotations)
     init: Optional[str] = None     # weights to start from (fine-tuning) instead of random
     validate_every: int = 500
     checkpoint_every: int = 250
@@ -98,6 +103,9 @@ def losses(out: Dict[str, torch.Tensor], gt: Dict[str, torch.Tensor], cfg: Train
              'contact_velocity': contact_velocity}
     dot = (out['rotations'] * gt['rotations']).sum(dim=-1).abs()
     terms['rotation'] = (1.0 - dot).mean()
+    if 'tpose' in gt:   # T-pose windows: their rotations must come out as the T-pose's
+        mask = gt['tpose'].to(dot.dtype)
+        terms['tpose'] = ((1.0 - dot).mean(dim=(1, 2)) * mask).sum() / mask.sum().clamp_min(1.0)
     if disc is not None:
         dq = out['rotations'][:, 1:] - out['rotations'][:, :-1]
         terms['adversarial'] = ((1.0 - disc(dq)) ** 2).mean()
@@ -109,6 +117,7 @@ def total_loss(terms: Dict[str, torch.Tensor], cfg: TrainConfig) -> torch.Tensor
             + cfg.w_skeleton * terms['skeleton'] + cfg.w_contact * terms['contact']
             + cfg.w_contact_velocity * terms['contact_velocity']
             + cfg.w_rotation * terms['rotation']
+            + cfg.w_tpose * terms.get('tpose', torch.zeros(()))
             + cfg.w_adversarial * terms.get('adversarial', torch.zeros(())))
 
 
@@ -131,7 +140,8 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / 'config.json').write_text(json.dumps(asdict(cfg), indent=1))
     sampler = WindowSampler(train_motions, cfg.window, seed=cfg.seed,
-                            aug=Augmentation(clean_prob=cfg.clean_fraction))
+                            aug=Augmentation(clean_prob=cfg.clean_fraction,
+                                             tpose_prob=cfg.tpose_fraction))
     val_sampler = WindowSampler(val_motions, cfg.window, seed=12345, aug=Augmentation())
     val_batches = [val_sampler.batch(cfg.batch) for _ in range(4)]
 

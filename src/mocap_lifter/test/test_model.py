@@ -193,3 +193,41 @@ def test_evaluate_real_openpose_sequence_measures_plausibility():
     assert np.isnan(row['skating_mm']) or row['skating_mm'] >= 0   # nan: no contact predicted
     assert row['bone_spread_mm'] < 1e-3                   # one skeleton per sequence
     assert 0.3 < row['mean_confidence'] < 1.0
+
+
+def test_tpose_windows_and_their_loss():
+    """MotioNet's reference T-pose: a T-pose window has identity joint rotations (camera frame
+    too: only the root changes), a yaw-only root, both feet in contact; the T-pose loss is
+    zero for the exact rotations, positive otherwise, and only counts T-pose windows."""
+    from mocap_core.data.motion import Motion
+    from mocap_core.rotations import axis_angle_to_quat as quat_from_axis_angle
+    from mocap_lifter.samples import Augmentation, make_sample
+    from mocap_lifter.train import TrainConfig, losses
+
+    rng = np.random.default_rng(0)
+    sk = Skeleton.default()
+    frames = 20
+    rot = np.zeros((frames, NUM_JOINTS, 4))
+    rot[..., 3] = 1.0
+    rot[:, 0] = quat_from_axis_angle(np.array([0.0, 0.0, 0.7]))
+    rot[:, 3] = quat_from_axis_angle(np.array([0.0, 0.5, 0.0]))           # a bent knee
+    root = np.column_stack([np.linspace(0, 1, frames), np.zeros(frames),
+                            np.full(frames, 0.9)])
+    motion = Motion('walk', 30.0, sk, rot, root, np.zeros((frames, 4), bool))
+    aug = Augmentation(flip_prob=0.0, corruption=None, tpose_prob=1.0)
+    s = make_sample(motion, 0, frames, rng, aug)
+    assert s['tpose'] == 1.0 and s['contacts'].min() == 1.0
+    np.testing.assert_allclose(np.abs(s['rotations'][:, 1:, 3]), 1.0, atol=1e-9)
+    assert np.ptp(s['positions'], axis=0).max() < 1e-9                   # standing still
+    plain = make_sample(motion, 0, frames, rng, Augmentation(flip_prob=0.0, corruption=None))
+    assert plain['tpose'] == 0.0
+
+    gt = {k: torch.as_tensor(np.stack([s[k], plain[k]])) for k in s}
+    out = {'positions': gt['positions'], 'rotations': gt['rotations'].clone(),
+           'depth': gt['root'][..., 2], 'root': gt['root'], 'lengths': gt['lengths'],
+           'contacts': torch.zeros(2, frames, 4)}
+    assert float(losses(out, gt, TrainConfig())['tpose']) < 1e-7
+    out['rotations'][1] = torch.roll(out['rotations'][1], 1, dims=-1)  # only the plain window
+    assert float(losses(out, gt, TrainConfig())['tpose']) < 1e-7
+    out['rotations'][0] = torch.roll(out['rotations'][0], 1, dims=-1)
+    assert float(losses(out, gt, TrainConfig())['tpose']) > 0.1
