@@ -205,6 +205,10 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
             raise ProcessError(f'cannot read the input bag: {exc}') from None
         infos = reader.topics
         topics = {t: i.msgtype for t, i in infos.items()}
+    problems: List[str] = []
+    for warning in (reader.warnings if reader is not None else []):
+        problems.append(warning)
+        log(f'  warning: {warning}')
     plan = plan_for(topics, start, image_topic, video)
     log(f'mocap process: {input_path} -> {output}; start: {plan.start}; nodes: '
         f"{', '.join(plan.nodes)}" + (f"; feeding {', '.join(plan.feed_topics)}"
@@ -217,7 +221,6 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
     context = Context()
     rclpy.init(args=['--ros-args', '--log-level', log_level], context=context)
     nodes: Dict[str, Any] = {}
-    problems: List[str] = []
     summary: Dict[str, Any] = {'input': str(input_path), 'output': str(output),
                                'start': plan.start, 'nodes': plan.nodes}
     try:
