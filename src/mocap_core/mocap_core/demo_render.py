@@ -134,7 +134,7 @@ def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path]
     forward = np.cross(left, [0.0, 0.0, 1.0])
     floor_z = float(np.percentile(world.contact_points[..., 2].min(axis=1), 5))
     side = SkeletonView(j, forward, panel, 'world, side view', floor_z)
-    front = SkeletonView(j, -left, panel, 'world, front view', floor_z)
+    front = SkeletonView(j, left, panel, 'world, front view', floor_z)  # as the camera sees it
     physics = run.stages.get('physics')
     grf_by_stamp = {}
     if physics is not None and run.grf is not None and len(run.grf) == len(physics.stamps):
