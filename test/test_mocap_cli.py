@@ -118,3 +118,12 @@ def test_export_bvh_reproduces_ground_truth_joints(tmp_path, ros_env):
     np.testing.assert_allclose(got, want, atol=1e-3)   # float32 joints in the bag
     r = run(['export', 'bvh', bag, '--topic', '/none', '-o', out], ros_env)
     assert r.returncode == 1 and 'Traceback' not in r.stderr
+
+
+def test_bench_commands_are_listed_and_node_benches_take_their_own_options(ros_env):
+    res = run(['bench', '--help'], ros_env)
+    assert res.returncode == 0 and all(n in res.stdout for n in
+                                       ('pipeline', 'soak', 'keypoints', 'lifter', 'physics',
+                                        'gmr'))
+    res = run(['bench', 'lifter', '--help'], ros_env)
+    assert res.returncode == 0 and '--repeat' in res.stdout, res.stderr

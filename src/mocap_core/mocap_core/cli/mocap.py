@@ -346,6 +346,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    from .bench import NODE_BENCHES
+    if len(argv) >= 2 and argv[0] == 'bench' and argv[1] in NODE_BENCHES:
+        # the per-node benchmarks parse their own options (--help included)
+        return int(importlib.import_module(NODE_BENCHES[argv[1]]).main(argv[2:]) or 0)
     parser = build_parser()
     args = parser.parse_args(argv)
     if not hasattr(args, 'func'):
