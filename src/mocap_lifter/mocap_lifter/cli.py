@@ -2,7 +2,9 @@
 
     mocap train lifter [--config cfg.json] [--mode windowed|causal] [--steps N]
                        [--run-dir runs/lifter_windowed] [--device cpu|cuda] [--no-resume]
-    mocap eval lifter [--weights FILE] [--noise none|motionet|both] [--out DIR]
+    mocap train vtm [--stage tpmae|tpve|both] [--steps N [N]] [--run-dir runs/vtm] [--install]
+    mocap eval lifter [--model motionet|vtm] [--weights FILE] [--noise none|motionet|both]
+                      [--out DIR]
 
 Training reads the train split of the processed dataset (``mocap data build``; built on
 first use), evaluation the validation split.
@@ -40,11 +42,87 @@ def add_train_parser(sub) -> None:
     p.add_argument('--install', action='store_true', help='copy the final weights to the '
                    'package (weights/motionet_<mode>.pt)')
     p.set_defaults(func=cmd_train)
+    _add_vtm_train_parser(sub)
+
+
+def _add_vtm_train_parser(sub) -> None:
+    p = sub.add_parser('vtm', help='train the VTM lifter (two stages: TPMAE, then TPVE)')
+    p.add_argument('--stage', choices=('tpmae', 'tpve', 'both'), default='both',
+                   help='stage 1 (motion auto-encoder), stage 2 (visual encoder, joint '
+                   'training from the stage-1 weights) or both in turn (default)')
+    p.add_argument('--config', help='JSON file with VTMTrainConfig fields applied to both '
+                   'stages (model: VTMConfig)')
+    p.add_argument('--steps', type=int, nargs='+', metavar='N',
+                   help='steps of the stage(s): one value, or two for --stage both '
+                   '(default 4000 and 5000)')
+    p.add_argument('--run-dir', default='runs/vtm', help='stage directories <run-dir>/tpmae, '
+                   '<run-dir>/tpve: checkpoints, log.csv, loss.png')
+    p.add_argument('--init', help='stage tpve: the stage-1 weights (default '
+                   '<run-dir>/tpmae/vtm_tpmae.pt)')
+    p.add_argument('--device', default='cpu', help="'cpu' or 'cuda'")
+    p.add_argument('--threads', type=int, help='torch CPU threads (default 1)')
+    p.add_argument('--no-resume', action='store_true', help='start over even if a checkpoint '
+                   'exists')
+    p.add_argument('--install', action='store_true', help='copy the final weights to the '
+                   'package (weights/vtm_windowed.pt, with the logs)')
+    p.set_defaults(func=cmd_train_vtm)
+
+
+def cmd_train_vtm(args: argparse.Namespace) -> int:
+    import shutil
+
+    from mocap_core.data.dataset import load_dataset
+
+    from .vtm_train import VTMTrainConfig, train_stage
+
+    stages = ('tpmae', 'tpve') if args.stage == 'both' else (args.stage,)
+    steps = {'tpmae': 4000, 'tpve': 5000}
+    if args.steps:
+        if len(args.steps) != len(stages):
+            print(f'mocap train vtm: error: --steps needs {len(stages)} value(s)',
+                  file=sys.stderr)
+            return 2
+        steps.update(zip(stages, args.steps))
+    base = json.loads(Path(args.config).read_text()) if args.config else {}
+    run_dir = Path(args.run_dir)
+    print('loading the dataset (train and validation splits) ...', flush=True)
+    train_motions = load_dataset('train')
+    val_motions = load_dataset('validation')
+    print(f'{len(train_motions)} training clips, {len(val_motions)} validation clips',
+          flush=True)
+    weights = None
+    for stage in stages:
+        cfg = VTMTrainConfig.from_dict({**base, 'stage': stage})
+        cfg.steps = steps[stage]
+        if args.threads:
+            cfg.threads = args.threads
+        if stage == 'tpve':
+            init = Path(args.init) if args.init else run_dir / 'tpmae' / 'vtm_tpmae.pt'
+            if not init.exists():
+                print(f'mocap train vtm: error: stage-1 weights not found: {init} (run '
+                      '--stage tpmae first)', file=sys.stderr)
+                return 1
+            cfg.init = str(init.resolve())
+        weights = train_stage(train_motions, val_motions, run_dir / stage, cfg,
+                              device=args.device, resume=not args.no_resume)
+        print(f'{stage} weights: {weights}', flush=True)
+    if args.install and weights is not None:
+        WEIGHTS_DIR.mkdir(exist_ok=True)
+        shutil.copy(weights, WEIGHTS_DIR / 'vtm_windowed.pt')
+        for stage in stages:
+            shutil.copy(run_dir / stage / 'log.csv', WEIGHTS_DIR / f'vtm_{stage}_log.csv')
+            shutil.copy(run_dir / stage / 'loss.png', WEIGHTS_DIR / f'vtm_{stage}_loss.png')
+        print(f"installed {WEIGHTS_DIR / 'vtm_windowed.pt'}")
+    return 0
 
 
 def add_eval_parser(sub) -> None:
     p = sub.add_parser('lifter', help='evaluate the lifter on the validation split')
-    p.add_argument('--weights', help='weights file (default: the shipped ones of --mode)')
+    p.add_argument('--model', choices=('motionet', 'vtm'), default='motionet',
+                   help='which shipped lifter to evaluate (default motionet); VTM adds its '
+                   'motion auto-encoder alone (the paper\'s Table 2 row)')
+    p.add_argument('--weights', help='weights file (default: the shipped ones of --model and '
+                   '--mode)')
     p.add_argument('--mode', choices=('windowed', 'causal'), default='windowed')
     p.add_argument('--noise', choices=('none', 'motionet', 'both'), default='both')
     p.add_argument('--out', help='report directory (default: next to the weights)')
@@ -114,11 +192,20 @@ def cmd_eval(args: argparse.Namespace) -> int:
                            groundtruth_plausibility, write_report)
     from .train import load_weights
 
-    weights = Path(args.weights) if args.weights else WEIGHTS_DIR / f'motionet_{args.mode}.pt'
+    if args.model == 'vtm' and args.mode == 'causal':
+        print('mocap eval lifter: error: VTM is windowed only', file=sys.stderr)
+        return 2
+    weights = Path(args.weights) if args.weights else \
+        WEIGHTS_DIR / f'{args.model}_{args.mode}.pt'
     if not weights.exists():
         print(f'mocap eval lifter: error: weights not found: {weights}', file=sys.stderr)
         return 1
     model = load_weights(weights, args.device)
+    is_vtm = type(model).__name__ == 'VTM'
+    if is_vtm != (args.model == 'vtm'):
+        print(f"mocap eval lifter: error: {weights} holds {'VTM' if is_vtm else 'MotioNet'} "
+              f'weights but --model {args.model}', file=sys.stderr)
+        return 2
     val = load_dataset('validation')
     noises = ('none', 'motionet') if args.noise == 'both' else (args.noise,)
     t0 = time.time()
@@ -137,9 +224,17 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"{real['groundtruth']['jitter_mm_s2'] / 1000:.2f}), skating "
               f"{s['skating_mm']:.1f} mm/frame (ground truth "
               f"{real['groundtruth']['skating_mm']:.1f})")
-    path = write_report(results, out, f'MotioNet lifter ({weights.name}) on the validation '
-                        'split', {'baseline_mean_pose': baseline, 'weights': str(weights),
-                                  'eval_seconds': round(seconds, 1)}, real=real)
+    extra = {'baseline_mean_pose': baseline, 'weights': str(weights),
+             'eval_seconds': round(seconds, 1)}
+    if is_vtm:
+        from .evaluate import evaluate_tpmae
+        extra['tpmae'] = evaluate_tpmae(model, val, args.device)['summary']
+        t = extra['tpmae']
+        print(f"TPMAE alone (true motion encoded and decoded): MPJPE {t['mpjpe_mm']:.1f} mm  "
+              f"PA-MPJPE {t['pa_mpjpe_mm']:.1f} mm  MRPE {t['mrpe_mm']:.1f} mm")
+    name = 'VTM' if is_vtm else 'MotioNet'
+    path = write_report(results, out, f'{name} lifter ({weights.name}) on the validation '
+                        'split', extra, real=real)
     for r in results:
         s = r['summary']
         print(f"{r['noise']:9s} MPJPE {s['mpjpe_mm']:.1f} mm  PA-MPJPE {s['pa_mpjpe_mm']:.1f} mm"

@@ -80,6 +80,40 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
             'summary': summary, 'per_clip': rows}
 
 
+@torch.no_grad()
+def evaluate_tpmae(model, motions: Sequence[Motion], device: str = 'cpu',
+                   max_frames: int = 900) -> Dict:
+    """VTM's motion auto-encoder alone (the paper's Table 2): each validation clip's true
+    motion (the camera of :func:`evaluate`) is encoded and decoded window by window; the
+    decoded rotations and root depth, with the true skeleton and root keypoint, give joint
+    positions by FK. Returns frame-weighted MPJPE, PA-MPJPE and MRPE (mm)."""
+    from .vtm import motion_representation
+
+    aug = Augmentation(flip_prob=0.0, bone_scale=0.0, global_scale=0.0, corruption=None)
+    rows: List[Dict] = []
+    for m in motions:
+        n = min(m.num_frames, max_frames)
+        s = make_sample(m, 0, n, np.random.default_rng(_clip_seed(m.name)), aug)
+        x = motion_representation(torch.as_tensor(s['rotations'][None], device=device),
+                                  torch.as_tensor(s['root'][None], device=device),
+                                  model.virtual_lengths)
+        wins, pick = model._windows(model.normalise_motion(x))
+        dec = model.decode(*model.encode_motion(wins))
+        wi = torch.tensor([p[0] for p in pick])
+        pi = torch.tensor([p[1] for p in pick])
+        dec = {k: v[wi, pi][None] for k, v in dec.items()}
+        out = model.outputs(dec, torch.as_tensor(s['root_2d'][None], device=device),
+                            torch.as_tensor(s['lengths'][None], device=device))
+        p, g = out['positions'][0].cpu().numpy(), s['positions']
+        rows.append({'clip': m.name, 'frames': n, 'mpjpe_mm': M.mpjpe_mm(p, g),
+                     'pa_mpjpe_mm': M.pa_mpjpe_mm(p, g),
+                     'mrpe_mm': M.mrpe_mm(out['root'][0].cpu().numpy(), s['root'])})
+    frames = np.array([r['frames'] for r in rows], dtype=np.float64)
+    return {'clips': len(rows), 'frames': int(frames.sum()),
+            'summary': {k: _weighted_mean([r[k] for r in rows], frames)
+                        for k in ('mpjpe_mm', 'pa_mpjpe_mm', 'mrpe_mm')}}
+
+
 def _weighted_mean(values: Sequence[float], weights: np.ndarray) -> float:
     v = np.asarray(values, dtype=np.float64)
     ok = np.isfinite(v)

@@ -179,6 +179,12 @@ class MotioNet(nn.Module):
         self.feature_mean.copy_(torch.as_tensor(mean, dtype=torch.float32))
         self.feature_std.copy_(torch.as_tensor(np.maximum(std, 1e-4), dtype=torch.float32))
 
+    def estimate_lengths(self, features: torch.Tensor, root_2d: torch.Tensor) -> torch.Tensor:
+        """E_S over a sequence: (B, T, C) features (and (B, T, 2) root keypoint, unused)
+        -> (B, G) bone-group lengths, m."""
+        del root_2d
+        return self.e_s(((features - self.feature_mean) / self.feature_std).transpose(1, 2))
+
     def forward(self, features: torch.Tensor, root_2d: torch.Tensor, scale: torch.Tensor,
                 lengths: torch.Tensor | None = None) -> Dict[str, torch.Tensor]:
         """Returns ``rotations`` (B, T, J, 4), ``depth`` (B, T) m, ``root`` (B, T, 3) camera

@@ -1,4 +1,5 @@
-"""``ros2 run mocap_lifter lifter``: MotioNet lifting of 2D keypoints to a 3D skeleton.
+"""``ros2 run mocap_lifter lifter``: lifting of 2D keypoints to a 3D skeleton with MotioNet
+(default) or VTM (``model:=vtm``).
 
 Subscribes ``/mocap/keypoints2d`` (PointCloud2) and ``/mocap/camera_info``; per keypoint
 frame publishes, stamped with that frame's stamp and in its camera optical frame:
@@ -21,13 +22,18 @@ import numpy as np
 
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 
+MODELS = ('motionet', 'vtm')
+
 PARAMETERS = (
+    ParamSpec('model', 'motionet', "Lifter network: 'motionet' (MotioNet, windowed or causal) "
+              "or 'vtm' (VTM, keypoints only; windowed only, window 32 frames)",
+              read_only=True),
     ParamSpec('mode', 'windowed', "'windowed' (centred window: delay of `latency` frames) or "
               "'causal' (only past frames; needs causal weights)", read_only=True),
-    ParamSpec('weights', '', 'Weights file; empty = the shipped weights of the mode '
-              '(share/mocap_lifter/weights/motionet_<mode>.pt)', read_only=True),
+    ParamSpec('weights', '', 'Weights file; empty = the shipped weights of the model and '
+              'mode (share/mocap_lifter/weights/<model>_<mode>.pt)', read_only=True),
     ParamSpec('latency', -1, 'Look-ahead frames in windowed mode (-1 = half the receptive '
-              'field)', read_only=True),
+              'field: 14 frames for MotioNet, 16 for VTM)', read_only=True),
     ParamSpec('skeleton_frames', 90, 'Frames used to estimate the skeleton before it is '
               'held for the person', min_value=1),
     ParamSpec('skeleton_tolerance', 0.01, 'Re-publish the URDF when a bone changes by more '
@@ -54,9 +60,10 @@ PARAMETERS = (
 )
 
 
-def default_weights(mode: str) -> Path:
-    """The shipped weights of a mode, from the package share directory (or the source tree)."""
-    name = f'motionet_{mode}.pt'
+def default_weights(mode: str, model: str = 'motionet') -> Path:
+    """The shipped weights of a model and mode, from the package share directory (or the
+    source tree)."""
+    name = f'{model}_{mode}.pt'
     try:
         from ament_index_python.packages import get_package_share_directory
         path = Path(get_package_share_directory('mocap_lifter')) / 'weights' / name
@@ -98,15 +105,24 @@ def node_class():
         def __init__(self, **kwargs) -> None:
             super().__init__('lifter', **kwargs)
             self.p = declare_parameters(self, PARAMETERS)
-            mode = self.p['mode']
+            mode, arch = self.p['mode'], self.p['model']
             if mode not in ('causal', 'windowed'):
                 raise ValueError(f"mode must be 'causal' or 'windowed', got {mode!r}")
+            if arch not in MODELS:
+                raise ValueError(f"model must be one of {MODELS}, got {arch!r}")
+            if arch == 'vtm' and mode == 'causal':
+                raise ValueError('VTM is windowed only (bounded look-ahead, `latency`): use '
+                                 'mode:=windowed, or model:=motionet for causal lifting')
             import torch
             torch.set_num_threads(self.p['threads'])
-            path = Path(self.p['weights']) if self.p['weights'] else default_weights(mode)
+            path = Path(self.p['weights']) if self.p['weights'] else \
+                default_weights(mode, arch)
             if not path.exists():
                 raise FileNotFoundError(f'weights not found: {path}')
             model = load_weights(path, self.p['device'], causal=(mode == 'causal'))
+            loaded = 'vtm' if type(model).__name__ == 'VTM' else 'motionet'
+            if loaded != arch:
+                raise ValueError(f'{path} holds {loaded} weights but model:={arch}')
             self.lifter = OnlineLifter(
                 model, mode, None if self.p['latency'] < 0 else self.p['latency'],
                 self.p['skeleton_frames'], self.p['max_gap_s'], self.p['device'],
@@ -128,7 +144,7 @@ def node_class():
                 'urdf': self.create_publisher(String, '/mocap/skeleton/urdf', LATCHED_QOS),
             }
             self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
-            self.diag.set_value('model', f'motionet ({mode})')
+            self.diag.set_value('model', f'{arch} ({mode})')
             self.diag.set_value('latency_frames', self.lifter.latency)
             self.frame_id = 'camera_optical_frame'
             self.last_input = time.monotonic()
@@ -136,7 +152,7 @@ def node_class():
             self.create_subscription(CameraInfo, '/mocap/camera_info', self.on_info, STREAM_QOS)
             self.create_subscription(PointCloud2, '/mocap/keypoints2d', self.on_keypoints,
                                      input_qos(SENSOR_QOS, self.p['queue_depth']))
-            self.get_logger().info(f'lifter ready: {path} ({mode}, receptive field '
+            self.get_logger().info(f'lifter ready: {arch} {path} ({mode}, receptive field '
                                    f'{model.cfg.receptive_field()} frames, latency '
                                    f'{self.lifter.latency} frames)')
 

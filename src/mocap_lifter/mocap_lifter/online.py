@@ -50,7 +50,8 @@ class OnlineLifter:
     """Ring-buffered inference (module docstring).
 
     Args:
-        model: the network (its ``cfg.causal`` must match ``mode``).
+        model: the network, MotioNet or VTM (its ``cfg.causal`` must match ``mode``; VTM is
+            windowed only, its receptive field is its window).
         mode: 'causal' or 'windowed'.
         latency: frames of look-ahead in windowed mode (default: half the receptive field).
         skeleton_frames: frames used to estimate the skeleton before it is held.
@@ -123,7 +124,7 @@ class OnlineLifter:
         if self.chunk > 1 and self.lengths is None and self.pending() > self.latency:
             # where frame-by-frame lifting would emit a frame (and update the skeleton)
             with torch.no_grad():
-                lengths = self._estimate_lengths(self._features()[0])
+                lengths = self._estimate_lengths(*self._features()[:2])
             self._lengths_at[self.frames_seen] = lengths
             if self.frames_seen >= self.skeleton_frames:
                 self.lengths = lengths
@@ -152,7 +153,7 @@ class OnlineLifter:
             lengths = per_frame[-1][0]
         else:
             if not fixed:
-                lengths = self._estimate_lengths(x)
+                lengths = self._estimate_lengths(x, r)
                 if self.frames_seen >= self.skeleton_frames:
                     self.lengths = lengths
             else:
@@ -187,10 +188,10 @@ class OnlineLifter:
                 torch.as_tensor(root_2d[None].astype(np.float32), device=self.device),
                 torch.as_tensor(scale[None].astype(np.float32), device=self.device))
 
-    def _estimate_lengths(self, x: torch.Tensor) -> torch.Tensor:
-        """E_S over the buffer's features (1, T, C) -> (1, G) bone-group lengths."""
-        return self.model.e_s(((x - self.model.feature_mean) / self.model.feature_std)
-                              .transpose(1, 2))
+    def _estimate_lengths(self, x: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
+        """The skeleton estimate over the buffer's features (1, T, C) and root keypoints
+        (1, T, 2) -> (1, G) bone-group lengths (E_S of MotioNet, E^B of VTM)."""
+        return self.model.estimate_lengths(x, r)
 
     def _lengths_for(self, frame: int) -> Tuple[torch.Tensor, bool]:
         """chunk > 1: (lengths, held) frame number ``frame`` (0-based, this segment) gets: the
@@ -202,6 +203,6 @@ class OnlineLifter:
             return self.lengths, True
         # a segment shorter than the look-ahead, flushed: the estimate over what exists
         with torch.no_grad():
-            lengths = self._estimate_lengths(self._features()[0])
+            lengths = self._estimate_lengths(*self._features()[:2])
         self._lengths_at[push] = lengths
         return lengths, False

@@ -276,10 +276,18 @@ def export_checkpoint(checkpoint: Path, out: Path) -> Path:
     return Path(out)
 
 
-def load_weights(path: Path, device: str = 'cpu', causal: Optional[bool] = None) -> MotioNet:
-    """Load weights written by :func:`save_weights` (``causal`` overrides the mode: the
-    padding changes, the weights are the same)."""
+def load_weights(path: Path, device: str = 'cpu', causal: Optional[bool] = None):
+    """Load lifter weights: MotioNet ones written by :func:`save_weights` (``causal``
+    overrides the mode: the padding changes, the weights are the same) or VTM ones
+    (:func:`mocap_lifter.vtm_train.save_vtm`; windowed only, ``causal=True`` is an error).
+    Returns the network in eval mode (:class:`MotioNet` or :class:`mocap_lifter.vtm.VTM`)."""
     state = torch.load(path, map_location=device, weights_only=False)
+    if state.get('arch') == 'vtm':
+        if causal:
+            raise ValueError(f'{path} holds VTM weights, which are windowed only '
+                             '(bounded look-ahead): use mode windowed')
+        from .vtm_train import load_vtm
+        return load_vtm(path, device)
     cfg = LifterConfig(**state['config'])
     if causal is not None:
         cfg.causal = causal
