@@ -1,4 +1,5 @@
-"""Shared fixtures of the integration tests: an isolated ROS environment for subprocesses.
+"""Shared fixtures of the integration tests: an isolated ROS environment for subprocesses,
+their processes, and an rclpy peer in the test process.
 
 Every test session picks its own random ``ROS_DOMAIN_ID`` and keeps discovery on this machine
 (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), so parallel runs and other ROS programs on the
@@ -39,6 +40,16 @@ def ros_env() -> dict[str, str]:
 def ros2_cmd() -> list[str]:
     """Command prefix that runs this project's ``ros2`` (independent of the PATH)."""
     return [sys.executable, '-m', 'mocap_core.cli.ros2']
+
+
+@pytest.fixture
+def peer(ros_env):
+    """An rclpy participant in this process on the test session's domain
+    (:class:`mocap_core.ros_peer.RosPeer`): subscribe, publish, spin; closed at teardown."""
+    from mocap_core.ros_peer import RosPeer
+    p = RosPeer('test_peer', int(ros_env['ROS_DOMAIN_ID']))
+    yield p
+    p.close()
 
 
 class Processes:

@@ -3,8 +3,6 @@ input, and the shipped weights against zero-motion and constant-velocity baselin
 
 from __future__ import annotations
 
-import os
-import time
 from pathlib import Path
 
 import numpy as np
@@ -82,39 +80,18 @@ def test_shipped_weights_beat_zero_motion_and_constant_velocity():
 
 
 @pytest.fixture
-def listener(ros_env):
-    import rclpy
+def listener(peer):
+    """The test's rclpy peer subscribed to every world output."""
     from nav_msgs.msg import Odometry, Path as PathMsg
     from sensor_msgs.msg import JointState, PointCloud2
     from trajectory_msgs.msg import MultiDOFJointTrajectory
     from visualization_msgs.msg import MarkerArray
 
-    from mocap_core.qos import STREAM_QOS
-
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
-    node = rclpy.create_node('gmr_test_listener', context=context)
-    got = {k: [] for k in OUTPUTS}
     types = {'motion': MultiDOFJointTrajectory, 'joints3d': PointCloud2,
              'joint_states': JointState, 'odom': Odometry, 'path': PathMsg,
              'markers': MarkerArray}
-    for name, cls in types.items():
-        node.create_subscription(cls, f'/mocap/world/{name}', got[name].append, STREAM_QOS)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield executor, node, got
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-
-
-def _spin(executor, seconds: float, until=None) -> None:
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-        if until is not None and until():
-            return
+    return peer, {name: peer.subscribe(cls, f'/mocap/world/{name}')
+                  for name, cls in types.items()}
 
 
 def _stamp(m):
@@ -126,7 +103,7 @@ def test_node_publishes_the_world_motion_of_a_played_bag(processes, ros2_cmd, li
                                                          tmp_path):
     from mocap_core.ros_conversions import cloud_to_positions, motion_to_pose, odometry_to_root
 
-    executor, _, got = listener
+    peer, got = listener
     b, Rw, Tw = _world_groundtruth()
     stamps = b['stamps']
     node, log = processes.start(ros2_cmd + [
@@ -137,9 +114,9 @@ def test_node_publishes_the_world_motion_of_a_played_bag(processes, ros2_cmd, li
     player, plog = processes.start(ros2_cmd + ['bag', 'play', str(BAG), '--delay', '3',
                                                '--topics', '/mocap/groundtruth/motion'],
                                    'play')
-    _spin(executor, 120, until=lambda: player.poll() is not None)
+    peer.spin(120, until=lambda: player.poll() is not None)
     assert player.returncode == 0, plog.read_text()
-    _spin(executor, 15, until=lambda: all(len(got[k]) >= len(stamps) for k in OUTPUTS))
+    peer.spin(15, until=lambda: all(len(got[k]) >= len(stamps) for k in OUTPUTS))
     text = log.read_text()
     assert 'Traceback' not in text, text
     assert 'waiting for 11 frames' in text
@@ -169,21 +146,21 @@ def test_node_survives_bad_input(processes, ros2_cmd, listener, tmp_path):
     from mocap_core.qos import STREAM_QOS
     from mocap_core.ros_conversions import make_header, pose_to_motion
 
-    executor, node, got = listener
+    peer, got = listener
     b, _, _ = _world_groundtruth()
-    pub = node.create_publisher(MultiDOFJointTrajectory, '/mocap/physics/motion', STREAM_QOS)
+    pub = peer.publisher(MultiDOFJointTrajectory, '/mocap/physics/motion', STREAM_QOS)
     proc, log = processes.start(ros2_cmd + [
         'run', 'mocap_global', 'gmr', '--ros-args', '-p', f'weights:={_weights(tmp_path)}',
         '-p', 'lookahead:=3', '-p', 'static_camera:=true', '-p', 'max_gap_s:=0.2'],
         'gmr_bad')
     processes.wait_for_text(log, 'gmr ready', 90, proc)
-    _spin(executor, 20, until=lambda: pub.get_subscription_count() > 0)
+    peer.spin(20, until=lambda: pub.get_subscription_count() > 0)
     t0 = 1_000_000_000
     dt = 33_333_333
 
     def send(i, pose, stamp):
         pub.publish(pose_to_motion(pose, make_header(stamp, 'floor')))
-        _spin(executor, 0.03)
+        peer.spin(0.03)
 
     poses = b['poses']
     # a joint set that does not match the model
@@ -195,13 +172,13 @@ def test_node_survives_bad_input(processes, ros2_cmd, listener, tmp_path):
     nan = pose_to_motion(poses[0], make_header(t0, 'floor'))
     nan.points[0].transforms[3].rotation.x = float('nan')
     pub.publish(nan)
-    _spin(executor, 0.2)
+    peer.spin(0.2)
     for i in range(10):                       # start-up: outputs wait for 3 future frames
         send(i, poses[i], t0 + i * dt)
     send(0, poses[9], t0 + 9 * dt)            # a stamp that does not advance
     for i in range(10, 20):                   # after a gap of 1 s: accumulation restarts
         send(i, poses[i], t0 + int(1e9) + i * dt)
-    _spin(executor, 5, until=lambda: all(len(got[k]) >= 20 for k in OUTPUTS))
+    peer.spin(5, until=lambda: all(len(got[k]) >= 20 for k in OUTPUTS))
     text = log.read_text()
     assert proc.poll() is None, text            # still running
     assert 'Traceback' not in text

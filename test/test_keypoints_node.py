@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 import time
 from pathlib import Path
 
@@ -16,36 +15,22 @@ ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / 'data' / 'openpose_example' / 'seq1'
 
 
+def _collect(peer, msg_type, topic: str, sensor: bool = True) -> list:
+    """Subscribe (best effort for sensor topics) with a deep reader queue, so that this
+    process, sharing two cores with the node, cannot lose messages while it is busy."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    qos = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT if sensor
+                     else ReliabilityPolicy.RELIABLE)
+    return peer.subscribe(msg_type, topic, qos)
+
+
 @pytest.fixture
-def listener(ros_env):
-    """An rclpy node in this process, on the test session's domain, collecting messages."""
-    import rclpy
+def listener(peer):
+    """The test's rclpy peer collecting keypoints and camera_info."""
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, PointCloud2
-
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
-    node = rclpy.create_node('test_listener', context=context)
-    got = {'kp': [], 'info': []}
-    node.create_subscription(PointCloud2, '/mocap/keypoints2d', got['kp'].append,
-                             qos_profile_sensor_data)
-    node.create_subscription(CameraInfo, '/mocap/camera_info', got['info'].append, 10)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield executor, got
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-
-
-def _spin_until_exit(executor, proc: subprocess.Popen, timeout: float) -> None:
-    deadline = time.monotonic() + timeout
-    while proc.poll() is None and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    for _ in range(20):  # drain what is still in flight
-        executor.spin_once(timeout_sec=0.02)
-    assert proc.poll() is not None, 'node did not exit in time'
+    return peer, {'kp': peer.subscribe(PointCloud2, '/mocap/keypoints2d', qos_profile_sensor_data),
+                  'info': peer.subscribe(CameraInfo, '/mocap/camera_info', 10)}
 
 
 def _run_node(processes, ros2_cmd, path: Path, *extra: str):
@@ -60,9 +45,9 @@ def test_node_publishes_every_frame_in_order(processes, ros2_cmd, listener):
                                             stamp_to_ns)
     from mocap_keypoints.openpose import list_openpose_files, read_openpose_file
 
-    executor, got = listener
+    peer, got = listener
     proc, log = _run_node(processes, ros2_cmd, EXAMPLE)
-    _spin_until_exit(executor, proc, timeout=90)
+    peer.spin_until_exit(proc, timeout=90)
     assert proc.returncode == 0, log.read_text()
     assert len(got['kp']) == 81, log.read_text()
     assert len(got['info']) == 81
@@ -78,7 +63,7 @@ def test_node_publishes_every_frame_in_order(processes, ros2_cmd, listener):
 
 
 def test_malformed_json_is_skipped_with_the_file_named(processes, ros2_cmd, listener, tmp_path):
-    executor, got = listener
+    peer, got = listener
     data = tmp_path / 'seq'
     shutil.copytree(EXAMPLE, data)
     files = sorted(data.glob('*.json'))
@@ -87,7 +72,7 @@ def test_malformed_json_is_skipped_with_the_file_named(processes, ros2_cmd, list
     files[3].write_text('{"people": [{"pose_keypoints_2d": [1, 2, 3')
     files[5].write_text(json.dumps({'people': []}))  # nobody: all confidences 0
     proc, log = _run_node(processes, ros2_cmd, data)
-    _spin_until_exit(executor, proc, timeout=60)
+    peer.spin_until_exit(proc, timeout=60)
     text = log.read_text()
     assert proc.returncode == 0, text
     assert files[3].name in text and 'skipping frame' in text
@@ -131,58 +116,6 @@ BODY = ('left_shoulder', 'right_shoulder', 'left_hip', 'right_hip', 'left_knee',
         'left_ankle', 'right_ankle')
 
 
-class Peer:
-    """An rclpy node in this process on the test's domain: subscribes, publishes, spins."""
-
-    def __init__(self, domain_id: int) -> None:
-        import rclpy
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        self.rclpy = rclpy
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node('test_peer', context=self.context)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def collect(self, msg_type, topic: str, sensor: bool = True) -> list:
-        """Subscribe (best effort for sensor topics) with a deep reader queue, so that this
-        process, sharing two cores with the node, cannot lose messages while it is busy."""
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-        got: list = []
-        qos = QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT if sensor
-                         else ReliabilityPolicy.RELIABLE)
-        self.node.create_subscription(msg_type, topic, got.append, qos)
-        return got
-
-    def spin_until(self, condition, timeout: float, proc=None) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if condition():
-                return True
-            if proc is not None and proc.poll() is not None:
-                break
-            self.executor.spin_once(timeout_sec=0.02)
-        return condition()
-
-    def spin_until_exit(self, proc, timeout: float) -> None:
-        self.spin_until(lambda: proc.poll() is not None, timeout)
-        for _ in range(20):  # drain what is still in flight
-            self.executor.spin_once(timeout_sec=0.02)
-        assert proc.poll() is not None, 'node did not exit in time'
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.rclpy.shutdown(context=self.context)
-
-
-@pytest.fixture
-def peer(ros_env):
-    p = Peer(int(ros_env['ROS_DOMAIN_ID']))
-    yield p
-    p.close()
-
-
 def _keypoints_node(processes, ros2_cmd, name: str, *params: str, remap: tuple = ()):
     args = []
     for p in params:
@@ -212,20 +145,19 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
         CameraIntrinsics(1280, 720, 1100.0, 1100.0, 639.5, 359.5)), calib)
     from diagnostic_msgs.msg import DiagnosticArray
 
-    info_msgs = peer.collect(CameraInfo, '/mocap/camera_info', sensor=False)
-    annotated = peer.collect(Image, '/mocap/keypoints2d/annotated', sensor=False)
-    diagnostics = peer.collect(DiagnosticArray, '/diagnostics', sensor=False)
+    info_msgs = _collect(peer, CameraInfo, '/mocap/camera_info', sensor=False)
+    annotated = _collect(peer, Image, '/mocap/keypoints2d/annotated', sensor=False)
+    diagnostics = _collect(peer, DiagnosticArray, '/diagnostics', sensor=False)
     proc, log = _keypoints_node(
         processes, ros2_cmd, 'keypoints_video', 'source:=video', f'path:={CLIP}',
         'realtime:=false', 'publish_annotated:=true', f'calibration_file:={calib}',
         'wait_for_subscribers:=1', 'wait_timeout_s:=30.0', 'frame_id:=taiji_camera')
     # The node starts when it sees the keypoint subscriber; subscribe to the keypoints only
     # once the debug-image publisher (its own participant) has been discovered too.
-    assert peer.spin_until(
-        lambda: peer.node.count_publishers('/mocap/keypoints2d/annotated') > 0, 60, proc), \
-        log.read_text()
-    peer.spin_until(lambda: False, 0.5)
-    kp_msgs = peer.collect(PointCloud2, '/mocap/keypoints2d')
+    assert peer.spin(60, until=lambda: peer.node.count_publishers(
+        '/mocap/keypoints2d/annotated') > 0, proc=proc), log.read_text()
+    peer.spin(0.5)
+    kp_msgs = _collect(peer, PointCloud2, '/mocap/keypoints2d')
     peer.spin_until_exit(proc, timeout=90)
     text = log.read_text()
     assert proc.returncode == 0, text
@@ -287,18 +219,18 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
         'image_topic:=/camera/image_raw/compressed',
         remap=('__node:=keypoints_compressed', '/mocap/keypoints2d:=/c/keypoints2d',
                '/mocap/camera_info:=/c/camera_info'))
-    kp_raw = peer.collect(PointCloud2, '/mocap/keypoints2d')
-    info_raw = peer.collect(CameraInfo, '/mocap/camera_info', sensor=False)
-    kp_comp = peer.collect(PointCloud2, '/c/keypoints2d')
+    kp_raw = _collect(peer, PointCloud2, '/mocap/keypoints2d')
+    info_raw = _collect(peer, CameraInfo, '/mocap/camera_info', sensor=False)
+    kp_comp = _collect(peer, PointCloud2, '/c/keypoints2d')
     pub_img = peer.node.create_publisher(Image, '/camera/image_raw', 10)
     pub_comp = peer.node.create_publisher(CompressedImage, '/camera/image_raw/compressed', 10)
     pub_info = peer.node.create_publisher(CameraInfo, '/camera/camera_info', 10)
     n = peer.node
-    assert peer.spin_until(lambda: pub_img.get_subscription_count() > 0
-                           and pub_comp.get_subscription_count() > 0
-                           and pub_info.get_subscription_count() > 1
-                           and n.count_publishers('/mocap/keypoints2d') > 0
-                           and n.count_publishers('/c/keypoints2d') > 0, 60), \
+    assert peer.spin(60, until=lambda: pub_img.get_subscription_count() > 0
+                     and pub_comp.get_subscription_count() > 0
+                     and pub_info.get_subscription_count() > 1
+                     and n.count_publishers('/mocap/keypoints2d') > 0
+                     and n.count_publishers('/c/keypoints2d') > 0), \
         raw_log.read_text() + comp_log.read_text()
 
     t0 = 1_700_000_000_000_000_000
@@ -307,10 +239,10 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
         """Publish until a cloud comes back (discovery has matched both ways), then forget it."""
         for k in range(60):
             pub.publish(make(t0 - 10**9 + k * 10**6))
-            if peer.spin_until(lambda: len(got) > 0, 0.5, proc):
+            if peer.spin(0.5, until=lambda: len(got) > 0, proc=proc):
                 break
         assert got, 'no cloud came back'
-        peer.spin_until(lambda: False, 0.3)
+        peer.spin(0.3)
         got.clear()
 
     warm_up(pub_img, kp_raw, lambda st: _image_msg(frames[0], st), raw)
@@ -326,7 +258,7 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
         count = len(got)
         pub.publish(msg)
         if expect_cloud:
-            assert peer.spin_until(lambda: len(got) > count, 20, raw), log.read_text()
+            assert peer.spin(20, until=lambda: len(got) > count, proc=raw), log.read_text()
             assert stamp_to_ns(got[-1].header.stamp) == stamp_to_ns(msg.header.stamp)
         else:
             deadline = time.monotonic() + 20
@@ -384,7 +316,7 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
 
     got = [stamp_to_ns(m.header.stamp) for m in kp_raw]
     assert got == good_stamps                    # one cloud per good image, with its stamp
-    peer.spin_until(lambda: len(info_raw) >= len(good_stamps), 10)
+    peer.spin(10, until=lambda: len(info_raw) >= len(good_stamps))
     assert [stamp_to_ns(m.header.stamp) for m in info_raw] == good_stamps
     assert all(m.header.frame_id == 'cam_optical' for m in kp_raw)
     intr = camera_info_to_intrinsics(info_raw[0])  # 1280x720 calibration scaled to 640x360
@@ -434,8 +366,8 @@ def test_image_directory_with_corrupt_empty_and_odd_sized_files(processes, ros2_
     (d / 'frame_007.jpg').write_bytes(b'\xff\xd8\xff\xe0' + bytes(300))     # corrupt
     (d / 'frame_008.png').write_bytes(b'')                                 # empty
     cv2.imwrite(str(d / 'frame_009.png'), np.zeros((5, 5, 3), np.uint8))    # tiny
-    kp_msgs = peer.collect(PointCloud2, '/mocap/keypoints2d')
-    info_msgs = peer.collect(CameraInfo, '/mocap/camera_info', sensor=False)
+    kp_msgs = _collect(peer, PointCloud2, '/mocap/keypoints2d')
+    info_msgs = _collect(peer, CameraInfo, '/mocap/camera_info', sensor=False)
     proc, log = _keypoints_node(processes, ros2_cmd, 'keypoints_images', f'path:={d}',
                                 'realtime:=false', 'fps:=10.0', 'wait_for_subscribers:=1',
                                 'wait_timeout_s:=30.0')

@@ -3,7 +3,6 @@ the shipped weights against a trivial baseline on the same bag."""
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -12,7 +11,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 BAG = ROOT / 'bags' / 'gt_cmu_walk_12_02'
-WEIGHTS = ROOT / 'src' / 'mocap_lifter' / 'weights' / 'motionet_windowed.pt'
+WEIGHTS_DIR = ROOT / 'src' / 'mocap_lifter' / 'weights'
 OUTPUTS = ('motion', 'joints3d', 'joint_states', 'contacts', 'markers')
 
 
@@ -36,7 +35,8 @@ def _bag_arrays():
     return np.stack(kp), intr, np.stack(gt), stamps
 
 
-def test_shipped_weights_beat_mean_pose_baseline():
+@pytest.mark.parametrize('weights', ['motionet_windowed.pt', 'vtm_windowed.pt'])
+def test_shipped_weights_beat_mean_pose_baseline(weights):
     import torch
 
     from mocap_lifter.features import lifter_features
@@ -44,7 +44,7 @@ def test_shipped_weights_beat_mean_pose_baseline():
     from mocap_lifter.train import load_weights
 
     kp, intr, gt, _ = _bag_arrays()
-    model = load_weights(WEIGHTS)
+    model = load_weights(WEIGHTS_DIR / weights)
     feats, root, scale, _ = lifter_features(kp, intr)
     with torch.no_grad():
         out = model(torch.as_tensor(feats[None]), torch.as_tensor(root[None]).float(),
@@ -53,7 +53,7 @@ def test_shipped_weights_beat_mean_pose_baseline():
     rel = gt - gt[:, :1]
     baseline = np.broadcast_to(rel.mean(axis=0), rel.shape)  # this clip's own mean pose
     model_err, base_err = mpjpe_mm(pred, gt), mpjpe_mm(baseline, rel)
-    print(f'MPJPE model {model_err:.1f} mm, mean-pose baseline {base_err:.1f} mm, '
+    print(f'{weights}: MPJPE model {model_err:.1f} mm, mean-pose baseline {base_err:.1f} mm, '
           f'PA-MPJPE {pa_mpjpe_mm(pred, gt):.1f} mm')
     assert model_err < 0.7 * base_err
     depth_err = np.abs(out['root'][0, :, 2].numpy() - gt[:, 0, 2]) / gt[:, 0, 2]
@@ -61,56 +61,43 @@ def test_shipped_weights_beat_mean_pose_baseline():
 
 
 @pytest.fixture
-def listener(ros_env):
-    import rclpy
+def listener(peer):
+    """The test's rclpy peer subscribed to every lifter output, the URDF and /diagnostics."""
+    from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState, PointCloud2
     from std_msgs.msg import String
     from trajectory_msgs.msg import MultiDOFJointTrajectory
     from visualization_msgs.msg import MarkerArray
 
-    from mocap_core.qos import LATCHED_QOS, STREAM_QOS
+    from mocap_core.qos import LATCHED_QOS
 
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
-    node = rclpy.create_node('lifter_test_listener', context=context)
-    got = {k: [] for k in OUTPUTS + ('urdf',)}
     types = {'motion': MultiDOFJointTrajectory, 'joints3d': PointCloud2,
              'joint_states': JointState, 'contacts': JointState, 'markers': MarkerArray}
-    for name, cls in types.items():
-        node.create_subscription(cls, f'/mocap/lifter/{name}', got[name].append, STREAM_QOS)
-    node.create_subscription(String, '/mocap/skeleton/urdf', got['urdf'].append, LATCHED_QOS)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield executor, node, got
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
+    got = {name: peer.subscribe(cls, f'/mocap/lifter/{name}') for name, cls in types.items()}
+    got['urdf'] = peer.subscribe(String, '/mocap/skeleton/urdf', LATCHED_QOS)
+    got['diagnostics'] = peer.subscribe(DiagnosticArray, '/diagnostics', 10)
+    return peer, got
 
 
-def _spin(executor, seconds: float, until=None) -> None:
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-        if until is not None and until():
-            return
-
-
-def test_node_lifts_a_played_bag(processes, ros2_cmd, listener):
+@pytest.mark.parametrize('model', ['motionet', 'vtm'])
+def test_node_lifts_a_played_bag(processes, ros2_cmd, listener, model):
+    """Every lifter topic, one message per keypoint frame with its stamp, no NaN; the
+    ``model`` parameter selects the network and /diagnostics says which."""
     from mocap_core.ros_conversions import (cloud_to_positions, motion_to_pose, msg_to_contacts,
                                             stamp_to_ns)
 
-    executor, _, got = listener
+    peer, got = listener
     _, _, _, stamps = _bag_arrays()
     node, log = processes.start(ros2_cmd + ['run', 'mocap_lifter', 'lifter', '--ros-args',
-                                            '-p', 'mode:=windowed'], 'lifter')
-    processes.wait_for_text(log, 'lifter ready', 90, node)
+                                            '-p', 'mode:=windowed', '-p', f'model:={model}'],
+                                f'lifter_{model}')
+    processes.wait_for_text(log, f'lifter ready: {model}', 90, node)
     player, plog = processes.start(ros2_cmd + ['bag', 'play', str(BAG), '--delay', '3',
                                                '--topics', '/mocap/camera_info',
                                                '/mocap/keypoints2d'], 'play')
-    _spin(executor, 120, until=lambda: player.poll() is not None)
+    peer.spin(120, until=lambda: player.poll() is not None)
     assert player.returncode == 0, plog.read_text()
-    _spin(executor, 15, until=lambda: len(got['motion']) >= len(stamps))
+    peer.spin(15, until=lambda: len(got['motion']) >= len(stamps))
     text = log.read_text()
     assert 'Traceback' not in text, text
     for name in OUTPUTS:
@@ -124,6 +111,22 @@ def test_node_lifts_a_played_bag(processes, ros2_cmd, listener):
     assert pose.skeleton.is_symmetric(atol=1e-6)
     assert np.all((msg_to_contacts(got['contacts'][0]) >= 0) &
                   (msg_to_contacts(got['contacts'][0]) <= 1))
+    peer.spin(3, until=lambda: any(s.name.startswith('lifter') for d in got['diagnostics']
+                                         for s in d.status))
+    values = {kv.key: kv.value for d in got['diagnostics'] for s in d.status
+              if s.name.startswith('lifter') for kv in s.values}
+    assert values.get('model') == f'{model} (windowed)', values
+
+
+def test_node_refuses_causal_vtm(processes, ros2_cmd):
+    """VTM is windowed only: asking for it causal is a clear error at start-up."""
+    node, log = processes.start(ros2_cmd + ['run', 'mocap_lifter', 'lifter', '--ros-args',
+                                            '-p', 'mode:=causal', '-p', 'model:=vtm'],
+                                'lifter_vtm_causal')
+    node.wait(timeout=90)
+    text = log.read_text()
+    assert node.returncode != 0
+    assert 'VTM is windowed only' in text, text
 
 
 def test_node_survives_bad_input(processes, ros2_cmd, listener):
@@ -132,13 +135,13 @@ def test_node_survives_bad_input(processes, ros2_cmd, listener):
     from mocap_core.qos import SENSOR_QOS
     from mocap_core.ros_conversions import array_to_cloud, keypoints_to_cloud, make_header
 
-    executor, node, got = listener
+    peer, got = listener
     kp, intr, _, _ = _bag_arrays()
-    pub = node.create_publisher(PointCloud2, '/mocap/keypoints2d', SENSOR_QOS)
+    pub = peer.publisher(PointCloud2, '/mocap/keypoints2d', SENSOR_QOS)
     proc, log = processes.start(ros2_cmd + ['run', 'mocap_lifter', 'lifter', '--ros-args',
                                             '-p', 'mode:=windowed'], 'lifter_bad')
     processes.wait_for_text(log, 'lifter ready', 90, proc)
-    _spin(executor, 20, until=lambda: pub.get_subscription_count() > 0)
+    peer.spin(20, until=lambda: pub.get_subscription_count() > 0)
     t0 = 1_000_000_000
 
     def publish_until(make, text: str, timeout: float = 20.0) -> None:
@@ -148,7 +151,7 @@ def test_node_survives_bad_input(processes, ros2_cmd, listener):
         while time.monotonic() < deadline:
             pub.publish(make(k))
             k += 1
-            _spin(executor, 0.3)
+            peer.spin(0.3)
             if text in log.read_text():
                 return
         raise AssertionError(f'{text!r} never logged:\n{log.read_text()}')
@@ -165,13 +168,13 @@ def test_node_survives_bad_input(processes, ros2_cmd, listener):
     values[0] = np.nan                      # the nose's u
     nan.data = values.tobytes()
     pub.publish(nan)
-    _spin(executor, 0.1)
+    peer.spin(0.1)
     # valid frames without camera_info (approximate intrinsics), then one going backwards
     for i in range(10):
         pub.publish(keypoints_to_cloud(kp[i], make_header(t0 + 100_000_000 * (i + 1), 'c')))
-        _spin(executor, 0.05)
+        peer.spin(0.05)
     pub.publish(keypoints_to_cloud(kp[0], make_header(t0 + 5, 'c')))
-    _spin(executor, 5, until=lambda: len(got['motion']) >= 11)
+    peer.spin(5, until=lambda: len(got['motion']) >= 11)
     text = log.read_text()
     assert proc.poll() is None, text            # still running
     assert 'Traceback' not in text

@@ -9,8 +9,6 @@ cones among the markers, and a floor transform close to the bag's true camera po
 
 from __future__ import annotations
 
-import os
-import time
 from pathlib import Path
 
 import numpy as np
@@ -21,43 +19,25 @@ MU = 0.8
 
 
 @pytest.fixture
-def graph(ros_env):
-    import rclpy
+def graph(peer):
+    """The test's rclpy peer collecting every physics output in deep reliable queues (the
+    test must see every frame even when this process is slow)."""
     from geometry_msgs.msg import TransformStamped, WrenchStamped
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import MultiDOFJointTrajectory
     from visualization_msgs.msg import MarkerArray
 
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    # a deep reliable queue: the test must see every frame even when this process is slow
     deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                       reliability=ReliabilityPolicy.RELIABLE)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
-    node = rclpy.create_node('test_physics_bag_driver', context=context)
-    got = {k: [] for k in ('motion', 'left', 'right', 'states', 'markers', 'floor')}
-    for key, typ, topic in (('motion', MultiDOFJointTrajectory, '/mocap/physics/motion'),
-                            ('left', WrenchStamped, '/mocap/physics/grf/left'),
-                            ('right', WrenchStamped, '/mocap/physics/grf/right'),
-                            ('states', JointState, '/mocap/physics/joint_states'),
-                            ('markers', MarkerArray, '/mocap/physics/markers'),
-                            ('floor', TransformStamped, '/mocap/physics/floor')):
-        node.create_subscription(typ, topic, got[key].append, deep)
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield executor, node, got
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-
-
-def _spin_until(executor, cond, timeout):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    return cond()
+    got = {key: peer.subscribe(typ, topic, deep) for key, typ, topic in (
+        ('motion', MultiDOFJointTrajectory, '/mocap/physics/motion'),
+        ('left', WrenchStamped, '/mocap/physics/grf/left'),
+        ('right', WrenchStamped, '/mocap/physics/grf/right'),
+        ('states', JointState, '/mocap/physics/joint_states'),
+        ('markers', MarkerArray, '/mocap/physics/markers'),
+        ('floor', TransformStamped, '/mocap/physics/floor'))}
+    return peer, got
 
 
 def test_physics_node_on_groundtruth_bag(processes, ros2_cmd, graph):
@@ -68,21 +48,20 @@ def test_physics_node_on_groundtruth_bag(processes, ros2_cmd, graph):
 
     clip = load_gt_bag(BAG)
     n = clip.num_frames
-    executor, node, got = graph
+    peer, got = graph
     proc, log = processes.start(ros2_cmd + ['run', 'mocap_physics', 'physics'], 'physics')
-    ready = _spin_until(executor, lambda: node.count_publishers('/mocap/physics/motion') > 0,
-                        60)
+    ready = peer.spin(60, until=lambda: peer.node.count_publishers('/mocap/physics/motion') > 0)
     assert ready, log.read_text()
     player, play_log = processes.start(
         ros2_cmd + ['bag', 'play', str(BAG), '--delay', '2',
                     '--topics', '/mocap/groundtruth/motion', '/mocap/groundtruth/contacts',
                     '--remap', '/mocap/groundtruth/motion:=/mocap/lifter/motion',
                     '/mocap/groundtruth/contacts:=/mocap/lifter/contacts'], 'play')
-    ok = _spin_until(executor, lambda: len(got['right']) >= n and len(got['motion']) >= n
-                     and len(got['floor']) >= n and len(got['markers']) >= n, 90)
+    ok = peer.spin(90, until=lambda: len(got['right']) >= n and len(got['motion']) >= n
+                   and len(got['floor']) >= n and len(got['markers']) >= n)
     assert ok, ({k: len(v) for k, v in got.items()}, log.read_text(), play_log.read_text())
     assert player.wait(timeout=30) == 0, play_log.read_text()
-    _spin_until(executor, lambda: False, 0.5)   # nothing more should come
+    peer.spin(0.5)   # nothing more should come
 
     # every frame, in order, with the bag's stamps, in the floor frame
     t0 = 1_700_000_000 * 10 ** 9

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
@@ -10,43 +9,19 @@ import pytest
 
 
 @pytest.fixture
-def graph(ros_env):
-    import rclpy
+def graph(peer):
+    """The test's rclpy peer: publishes lifter motion and contacts, collects physics output."""
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
     from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-    from mocap_core.qos import STREAM_QOS
-
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
-    node = rclpy.create_node('test_physics_driver', context=context)
-    got = {'motion': [], 'left': [], 'right': [], 'states': []}
-    node.create_subscription(MultiDOFJointTrajectory, '/mocap/physics/motion',
-                             got['motion'].append, STREAM_QOS)
-    node.create_subscription(WrenchStamped, '/mocap/physics/grf/left', got['left'].append,
-                             STREAM_QOS)
-    node.create_subscription(WrenchStamped, '/mocap/physics/grf/right', got['right'].append,
-                             STREAM_QOS)
-    node.create_subscription(JointState, '/mocap/physics/joint_states', got['states'].append,
-                             STREAM_QOS)
-    pubs = {'motion': node.create_publisher(MultiDOFJointTrajectory, '/mocap/lifter/motion',
-                                            STREAM_QOS),
-            'contacts': node.create_publisher(JointState, '/mocap/lifter/contacts', STREAM_QOS)}
-    executor = rclpy.executors.SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield executor, pubs, got
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-
-
-def _spin_until(executor, cond, timeout):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    return cond()
+    got = {'motion': peer.subscribe(MultiDOFJointTrajectory, '/mocap/physics/motion'),
+           'left': peer.subscribe(WrenchStamped, '/mocap/physics/grf/left'),
+           'right': peer.subscribe(WrenchStamped, '/mocap/physics/grf/right'),
+           'states': peer.subscribe(JointState, '/mocap/physics/joint_states')}
+    pubs = {'motion': peer.publisher(MultiDOFJointTrajectory, '/mocap/lifter/motion'),
+            'contacts': peer.publisher(JointState, '/mocap/lifter/contacts')}
+    return peer, pubs, got
 
 
 def test_physics_node_standing(processes, ros2_cmd, graph):
@@ -55,14 +30,13 @@ def test_physics_node_standing(processes, ros2_cmd, graph):
                                             msg_to_wrench, pose_to_motion, stamp_to_ns)
     from mocap_core.skeleton import Skeleton
 
-    executor, pubs, got = graph
+    peer, pubs, got = graph
     proc, log = processes.start(ros2_cmd + ['run', 'mocap_physics', 'physics', '--ros-args',
                                             '-p', 'body_mass:=80.0',
                                             '-p', 'floor_source:=input'], 'physics')
-    ready = _spin_until(executor, lambda: pubs['motion'].get_subscription_count() > 0
-                        and pubs['contacts'].get_subscription_count() > 0
-                        and executor.get_nodes()[0].count_publishers('/mocap/physics/motion') > 0,
-                        60)
+    ready = peer.spin(60, until=lambda: pubs['motion'].get_subscription_count() > 0
+                      and pubs['contacts'].get_subscription_count() > 0
+                      and peer.node.count_publishers('/mocap/physics/motion') > 0)
     assert ready, log.read_text()
     time.sleep(0.5)
     sk = Skeleton.default()
@@ -78,10 +52,8 @@ def test_physics_node_standing(processes, ros2_cmd, graph):
             pubs['motion'].publish(bad)
             continue
         pubs['motion'].publish(pose_to_motion(rest, header))
-        end = time.monotonic() + 1 / 30      # a live lifter publishes at the frame rate
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.005)
-    ok = _spin_until(executor, lambda: len(got["right"]) >= n - 1, 30)
+        peer.spin(1 / 30, step=0.005)     # a live lifter publishes at the frame rate
+    ok = peer.spin(30, until=lambda: len(got["right"]) >= n - 1)
     assert ok, (len(got["motion"]), len(got["right"]), len(got["states"]), log.read_text())
     assert len(got['motion']) == n - 1 and len(got['states']) == n - 1
     stamps = [stamp_to_ns(m.header.stamp) for m in got['motion']]

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import threading
 import time
 from pathlib import Path
 
@@ -18,43 +17,25 @@ class _Counter:
     """Receive times of /mocap/physics/motion and /mocap/world/motion, spun in a thread."""
 
     def __init__(self, domain_id: int) -> None:
-        import rclpy
         from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-        from mocap_core.qos import STREAM_QOS
+        from mocap_core.ros_peer import RosPeer
 
-        self.context = rclpy.Context()
-        rclpy.init(args=[], context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node('robustness_counter', context=self.context)
-        self.times = {'physics': [], 'world': []}
-        for stage in self.times:
-            self.node.create_subscription(
-                MultiDOFJointTrajectory, f'/mocap/{stage}/motion',
-                lambda m, s=stage: self.times[s].append(time.monotonic()), STREAM_QOS)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while not self.stop.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
+        self.peer = RosPeer('robustness_counter', domain_id)
+        self.times = {stage: self.peer.subscribe(MultiDOFJointTrajectory,
+                                                 f'/mocap/{stage}/motion',
+                                                 transform=lambda m: time.monotonic())
+                      for stage in ('physics', 'world')}
+        self.peer.spin_in_background()
 
     def after(self, stage: str, t: float) -> int:
         return sum(1 for x in self.times[stage] if x > t)
 
     def close(self) -> None:
-        self.stop.set()
-        self.thread.join(5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+        self.peer.close()
 
 
 def test_physics_killed_and_restarted_mid_stream(processes, ros2_cmd, ros_env):
-    import os
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     counter = _Counter(int(ros_env['ROS_DOMAIN_ID']))
     try:
         lifter, lifter_log = processes.start([*ros2_cmd, 'run', 'mocap_lifter', 'lifter'],
@@ -102,41 +83,23 @@ def test_physics_killed_and_restarted_mid_stream(processes, ros2_cmd, ros_env):
         counter.close()
 
 
-def test_a_publisher_of_the_wrong_type_on_an_input_topic(processes, ros2_cmd, ros_env):
+def test_a_publisher_of_the_wrong_type_on_an_input_topic(processes, ros2_cmd, peer):
     """A std_msgs/String publisher on /mocap/keypoints2d next to the real keypoints: DDS does
     not match the types, the lifter lifts every real frame and stays up."""
-    import os
-
-    import rclpy
     from std_msgs.msg import String
     from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-    from mocap_core.qos import STREAM_QOS
-
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     lifter, log = processes.start([*ros2_cmd, 'run', 'mocap_lifter', 'lifter'], 'lifter')
     processes.wait_for_text(log, 'lifter ready', 120, lifter)
-    context = rclpy.Context()
-    rclpy.init(args=[], context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
-    try:
-        node = rclpy.create_node('wrong_type', context=context)
-        wrong = node.create_publisher(String, '/mocap/keypoints2d', 10)
-        got = []
-        node.create_subscription(MultiDOFJointTrajectory, '/mocap/lifter/motion', got.append,
-                                 STREAM_QOS)
-        executor = rclpy.executors.SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        player, play_log = processes.start(
-            [*ros2_cmd, 'bag', 'play', str(GT_BAG), '--delay', '3', '--topics',
-             '/mocap/camera_info', '/mocap/keypoints2d'], 'play')
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and (player.poll() is None or len(got) < 168):
-            wrong.publish(String(data='not keypoints'))
-            executor.spin_once(timeout_sec=0.02)
-        executor.shutdown()
-        node.destroy_node()
-    finally:
-        context.try_shutdown()
+    wrong = peer.publisher(String, '/mocap/keypoints2d', 10)
+    got = peer.subscribe(MultiDOFJointTrajectory, '/mocap/lifter/motion')
+    player, play_log = processes.start(
+        [*ros2_cmd, 'bag', 'play', str(GT_BAG), '--delay', '3', '--topics',
+         '/mocap/camera_info', '/mocap/keypoints2d'], 'play')
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (player.poll() is None or len(got) < 168):
+        wrong.publish(String(data='not keypoints'))
+        peer.spin(0.02, step=0.02)
     assert player.returncode == 0, play_log.read_text()
     assert len(got) >= 160, len(got)            # best effort: a frame may be lost under load
     assert lifter.poll() is None and 'Traceback' not in log.read_text(), log.read_text()

@@ -1,6 +1,6 @@
 """Lifter benchmark (``python -m mocap_lifter.bench``): per-frame latency of the online lifter
 (ring buffer + network, as the node runs it) and offline throughput of one pass over a whole
-clip, on the shipped weights, with real keypoints from a committed bag. Prints the figures
+clip, for MotioNet (windowed, causal) and VTM (windowed), on the shipped weights, with real keypoints from a committed bag. Prints the figures
 and writes a Markdown report (default ``docs/benchmarks/lifter.md``)."""
 
 from __future__ import annotations
@@ -44,8 +44,12 @@ def main(argv=None) -> int:
     torch.set_num_threads(args.threads)
     kp, intr = _keypoints(Path(args.bag))
     rows = []
-    for mode in ('windowed', 'causal'):
-        model = load_weights(default_weights(mode))
+    for arch, mode in (('motionet', 'windowed'), ('motionet', 'causal'), ('vtm', 'windowed')):
+        path = default_weights(mode, arch)
+        if not path.exists():
+            print(f'{arch} {mode}: no weights ({path}), skipped')
+            continue
+        model = load_weights(path)
         lat = []
         for _ in range(args.repeat):
             online = OnlineLifter(model, mode)
@@ -65,16 +69,17 @@ def main(argv=None) -> int:
                 model(x, r, s)
             offline = args.repeat * len(kp) / (time.perf_counter() - t)
         lat_ms = 1000 * np.asarray(lat[len(kp):] if args.repeat > 1 else lat)
-        rows.append((mode, float(np.median(lat_ms)), float(np.percentile(lat_ms, 95)), offline,
-                     online.latency))
-        print(f'{mode:9s} online per frame: median {rows[-1][1]:.2f} ms, p95 {rows[-1][2]:.2f}'
+        rows.append((f'{arch} {mode}', float(np.median(lat_ms)),
+                     float(np.percentile(lat_ms, 95)), offline, online.latency))
+        print(f'{arch:8s} {mode:9s} online per frame: median {rows[-1][1]:.2f} ms, '
+              f'p95 {rows[-1][2]:.2f}'
               f' ms; offline {offline:.0f} frames/s; look-ahead {online.latency} frames')
     lines = ['# Lifter benchmark', '',
              f'`python -m mocap_lifter.bench --threads {args.threads}` on {platform.machine()}, '
              f'{torch.get_num_threads()} torch thread(s), {len(kp)} real keypoint frames of '
              f'`{Path(args.bag).name}`, {args.repeat} passes (the first pass is warm-up for the '
              'online figures). Medians and 95th percentiles; the machine is shared.', '',
-             '| mode | online per frame (ring buffer + network), median | p95 | offline: network + FK, one pass per clip | '
+             '| model, mode | online per frame (ring buffer + network), median | p95 | offline: network + FK, one pass per clip | '
              'look-ahead |', '|---|---|---|---|---|']
     lines += [f'| {m} | {a:.2f} ms | {b:.2f} ms | {c:.0f} frames/s | {d} frames |'
               for m, a, b, c, d in rows]

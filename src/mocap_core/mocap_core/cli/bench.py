@@ -33,7 +33,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Dict, List, Optional
@@ -140,46 +139,30 @@ def bench_offline(bag: Path, repeat: int, work: Path, times: int = 5) -> Dict:
 
 
 class _Listener:
-    """Receive times of every stage's output, keyed by header stamp."""
+    """Receive times of every stage's output, keyed by header stamp: ``samples[stage]`` is a
+    list of (header stamp ns, arrival time ns), filled by a background thread."""
 
     def __init__(self, domain_id: int) -> None:
-        import rclpy
         from sensor_msgs.msg import PointCloud2
         from trajectory_msgs.msg import MultiDOFJointTrajectory
 
         from ..qos import SENSOR_QOS, STREAM_QOS
+        from ..ros_peer import RosPeer
 
-        self.context = rclpy.Context()
-        rclpy.init(args=[], context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node('bench_listener', context=self.context)
-        self.samples: Dict[str, List[tuple]] = {s: [] for s in STAGE_TOPICS}
-        for stage, topic in STAGE_TOPICS.items():
-            cls = PointCloud2 if stage == 'keypoints' else MultiDOFJointTrajectory
-            qos = SENSOR_QOS if stage == 'keypoints' else STREAM_QOS
-            self.node.create_subscription(cls, topic, self._callback(stage), qos)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+        def arrival(msg) -> tuple:
+            return (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                    time.time_ns())
 
-    def _callback(self, stage):
-        def on_msg(msg) -> None:
-            now = time.time_ns()
-            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-            self.samples[stage].append((stamp, now))
-        return on_msg
-
-    def _spin(self) -> None:
-        while not self.stop.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
+        self.peer = RosPeer('bench_listener', domain_id)
+        self.samples: Dict[str, List[tuple]] = {
+            stage: self.peer.subscribe(
+                PointCloud2 if stage == 'keypoints' else MultiDOFJointTrajectory, topic,
+                SENSOR_QOS if stage == 'keypoints' else STREAM_QOS, transform=arrival)
+            for stage, topic in STAGE_TOPICS.items()}
+        self.peer.spin_in_background()
 
     def close(self) -> None:
-        self.stop.set()
-        self.thread.join(5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
+        self.peer.close()
 
 
 def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict) -> Dict:
