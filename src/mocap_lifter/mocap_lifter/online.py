@@ -9,8 +9,10 @@ frame, runs the network over the buffer and returns one lifted frame:
   future frames (better accuracy, bounded delay of latency / fps seconds).
 
 ``chunk`` > 1 (offline processing) waits for that many frames more and lifts them in one
-network pass: the same outputs (the network is purely convolutional, every output's receptive
-field lies inside the pass) for a fraction of the time per frame, ``chunk - 1`` frames later.
+network pass: the same outputs (MotioNet is purely convolutional, every output's receptive
+field lies inside the pass; VTM lifts each frame from the window it would get frame by frame,
+:meth:`mocap_lifter.vtm.VTM.lift_frames`) for a fraction of the time per frame, ``chunk - 1``
+frames later.
 
 The skeleton (bone lengths) is estimated by E_S over the growing buffer until
 ``skeleton_frames`` frames were seen, then held for this person. A gap longer than
@@ -70,7 +72,10 @@ class OnlineLifter:
         self.mode = mode
         rf = model.cfg.receptive_field()
         self.latency = 0 if mode == 'causal' else (rf // 2 if latency is None else int(latency))
-        self.context = rf + self.latency
+        # frames the newest output needs: the receptive field behind it (MotioNet), or one
+        # window ending at the newest frame (VTM)
+        context_frames = getattr(model, 'context_frames', None)
+        self.context = context_frames(self.latency) if context_frames else rf + self.latency
         self.skeleton_frames = max(int(skeleton_frames), 1)
         self.max_gap_ns = int(max_gap_s * 1e9)
         self.device = device
@@ -162,7 +167,17 @@ class OnlineLifter:
         # the oldest frame to emit needs the context the newest-possible one would
         extra = max(0, -indices[0] - (1 + self.latency))
         ctx = slice(-(self.context + extra), None)
-        out = self.model(x[:, ctx], r[:, ctx], sc[:, ctx], lengths=lengths)
+        lift_frames = getattr(self.model, 'lift_frames', None)
+        if lift_frames is not None:
+            # VTM: each frame from the window it gets frame by frame (ending `latency` frames
+            # after it), so chunks and flushes give the frame-by-frame output
+            n = min(x.shape[1], self.context + extra)
+            out = lift_frames(x[:, ctx], r[:, ctx], lengths, [n + i for i in indices],
+                              self.latency)
+            rows = list(range(-len(indices), 0))      # the output holds those frames only
+        else:
+            out = self.model(x[:, ctx], r[:, ctx], sc[:, ctx], lengths=lengths)
+            rows = list(indices)
         skeletons: Dict[int, Skeleton] = {}
         rot = out['rotations'][0].cpu().numpy().astype(np.float64)
         root = out['root'][0].cpu().numpy().astype(np.float64)
@@ -170,14 +185,14 @@ class OnlineLifter:
         depth = out['depth'][0].cpu().numpy()
         stamps = list(self._stamps)
         frames = []
-        for i, (lengths_i, fixed_i) in zip(indices, per_frame):
+        for i, k, (lengths_i, fixed_i) in zip(indices, rows, per_frame):
             key = id(lengths_i)
             if key not in skeletons:
                 skeletons[key] = Skeleton.from_group_lengths(
                     lengths_i[0].cpu().numpy().astype(np.float64))
             self._last_emitted = stamps[i]
-            frames.append(LiftedFrame(stamps[i], Pose(skeletons[key], rot[i], root[i]),
-                                      contacts[i], fixed_i, float(depth[i])))
+            frames.append(LiftedFrame(stamps[i], Pose(skeletons[key], rot[k], root[k]),
+                                      contacts[k], fixed_i, float(depth[k])))
         return frames
 
     def _features(self):

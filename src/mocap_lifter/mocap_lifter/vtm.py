@@ -111,6 +111,8 @@ class VTMConfig:
     dropout: float = 0.1
     virtual_lengths: List[float] = field(default_factory=lambda: [0.0] * NUM_BONE_GROUPS)
     causal: bool = False        # VTM is windowed only (bounded look-ahead); kept for the API
+    root_from: str = 'decoder'  # 'decoder' (the paper: decoded depth) or 'reprojection'
+    root_prior: float = 0.1     # reprojection: weight of the decoded root (m^-2 scale)
 
     def receptive_field(self) -> int:
         """Frames one inference window spans (the online lifter's context unit)."""
@@ -254,6 +256,57 @@ def keypoint_parts(features: torch.Tensor, root_2d: torch.Tensor,
     return up, lo
 
 
+#: Layout keypoints that are joints of the skeleton (used to place the root by reprojection).
+_JOINT_KEYPOINTS = ('left_shoulder', 'right_shoulder', 'left_elbow', 'right_elbow',
+                    'left_wrist', 'right_wrist', 'left_hip', 'right_hip', 'left_knee',
+                    'right_knee', 'left_ankle', 'right_ankle')
+_KP_OF_JOINT = [KEYPOINT_INDEX[n] for n in _JOINT_KEYPOINTS]
+_JOINT_OF_KP = [JOINT_INDEX[n] for n in _JOINT_KEYPOINTS]
+
+
+def reprojection_root(relative: torch.Tensor, features: torch.Tensor, root_2d: torch.Tensor,
+                      prior: torch.Tensor, prior_weight: float) -> torch.Tensor:
+    """Root position that best reprojects the lifted joints onto the seen keypoints (beyond
+    the paper, ``root_from='reprojection'``).
+
+    Per frame, weighted linear least squares for the root (X, Y, Z): for each of the 12
+    keypoints that are joints, with canonical image coordinates (u, v), confidence w and
+    root-relative joint position p (camera frame), ``X - u Z = u p_z - p_x`` and
+    ``Y - v Z = v p_z - p_y`` (pinhole projection), plus ``prior_weight`` times the decoded
+    root as a prior (which also decides frames with too few seen keypoints).
+
+    Args:
+        relative: (B, T, J, 3) joint positions relative to the root, camera frame, m.
+        features: (B, T, 72) lifter features (scaled root-relative keypoints, confidences,
+            log scale; :mod:`.features`).
+        root_2d: (B, T, 2) canonical root keypoint.
+        prior: (B, T, 3) the decoded root, m.
+        prior_weight: weight of the prior rows (the keypoint rows have weight = confidence).
+    Returns:
+        (B, T, 3) root position, camera frame, m.
+    """
+    b, t = features.shape[:2]
+    scale = torch.exp(features[..., NUM_KEYPOINTS * 3 + 2])[..., None, None]
+    xy = features[..., :NUM_KEYPOINTS * 2].reshape(b, t, NUM_KEYPOINTS, 2)[:, :, _KP_OF_JOINT]
+    uv = xy * scale + root_2d[:, :, None]                                   # (B, T, K, 2)
+    w = features[..., NUM_KEYPOINTS * 2:NUM_KEYPOINTS * 3][:, :, _KP_OF_JOINT].clamp(0, 1)
+    p = relative[:, :, _JOINT_OF_KP]                                        # (B, T, K, 3)
+    zeros = torch.zeros_like(w)
+    ones = torch.ones_like(w)
+    # rows for x and y: [1, 0, -u] . (X, Y, Z) = u p_z - p_x ; [0, 1, -v] . = v p_z - p_y
+    a_x = torch.stack([ones, zeros, -uv[..., 0]], dim=-1)
+    a_y = torch.stack([zeros, ones, -uv[..., 1]], dim=-1)
+    r_x = uv[..., 0] * p[..., 2] - p[..., 0]
+    r_y = uv[..., 1] * p[..., 2] - p[..., 1]
+    a = torch.cat([a_x, a_y], dim=2)                                       # (B, T, 2K, 3)
+    r = torch.cat([r_x, r_y], dim=2)
+    ww = torch.cat([w, w], dim=2)
+    eye = torch.eye(3, dtype=a.dtype, device=a.device)
+    lhs = (a * ww[..., None]).transpose(-1, -2) @ a + prior_weight * eye
+    rhs = ((a * ww[..., None]) * r[..., None]).sum(dim=2) + prior_weight * prior
+    return torch.linalg.solve(lhs, rhs[..., None])[..., 0]
+
+
 def motion_representation(rotations: torch.Tensor, root: torch.Tensor,
                           virtual_lengths: torch.Tensor) -> torch.Tensor:
     """§3.1 representation on the virtual skeleton.
@@ -386,12 +439,19 @@ class VTM(nn.Module):
         return torch.cat([root_q[:, :, None], rot6d_to_quat(raw[..., :6])], dim=2)
 
     def outputs(self, dec: Dict[str, torch.Tensor], root_2d: torch.Tensor,
-                lengths: torch.Tensor) -> Dict[str, torch.Tensor]:
-        """Decoded channels -> the MotioNet-style output dict (see :meth:`forward`)."""
+                lengths: torch.Tensor, features: Optional[torch.Tensor] = None,
+                ) -> Dict[str, torch.Tensor]:
+        """Decoded channels -> the MotioNet-style output dict (see :meth:`forward`). With
+        ``features`` and ``cfg.root_from == 'reprojection'`` the root is refined by
+        :func:`reprojection_root`."""
         root_q, logz = self.root_outputs(dec['root'])
         q = self.joint_rotations(dec['non_root'], root_q)
         depth = torch.exp(logz.clamp(-3.0, 4.0))
         root = torch.cat([root_2d * depth[..., None], depth[..., None]], dim=-1)
+        if features is not None and self.cfg.root_from == 'reprojection':
+            relative = fk_layer(lengths, q, torch.zeros_like(root))
+            root = reprojection_root(relative, features, root_2d, root, self.cfg.root_prior)
+            depth = root[..., 2]
         return {'rotations': q, 'depth': depth, 'root': root, 'contacts': dec['contacts'],
                 'lengths': lengths, 'positions': fk_layer(lengths, q, root)}
 
@@ -403,9 +463,42 @@ class VTM(nn.Module):
         dec = self.decode(z_u, z_l)
         if lengths is None:
             lengths = ratios * self.virtual_lengths
-        out = self.outputs(dec, root_2d, lengths)
+        out = self.outputs(dec, root_2d, lengths, features)
         out.update(ratios=ratios, z_u=z_u, z_l=z_l, decoded=dec)
         return out
+
+    def context_frames(self, latency: int) -> int:
+        """Frames the online lifter must pass for the output ``latency`` frames before the
+        newest: one window ending at the newest frame (that output lies at its centre for
+        the default latency W/2)."""
+        return max(self.cfg.window, int(latency) + 1)
+
+    def lift_frames(self, features: torch.Tensor, root_2d: torch.Tensor,
+                    lengths: torch.Tensor, frames: List[int], latency: int,
+                    ) -> Dict[str, torch.Tensor]:
+        """Online lifting of several buffered frames in one batched pass, each exactly as
+        frame-by-frame lifting computes it: frame ``f`` (index into the buffer (1, T, ...))
+        from the window of W frames ending ``latency`` frames after it (or at the buffer's
+        end), padded at the start with the buffer's first frame where the buffer begins
+        later. Returns the :meth:`forward` outputs for those frames, (1, len(frames), ...)."""
+        w = self.cfg.window
+        t = features.shape[1]
+        wins, rwins, pos = [], [], []
+        for f in frames:
+            end = min(f + latency, t - 1)
+            start = end - w + 1
+            lead = max(0, -start)
+            idx = torch.cat([torch.zeros(lead, dtype=torch.long),
+                             torch.arange(max(start, 0), end + 1)])
+            wins.append(features[:, idx])
+            rwins.append(root_2d[:, idx])
+            pos.append(f - start)
+        z_u, z_l, _ = self.encode_visual(torch.cat(wins), torch.cat(rwins))
+        dec = self.decode(z_u, z_l)
+        rows = torch.arange(len(frames))
+        dec = {k: v[rows, torch.tensor(pos)][None] for k, v in dec.items()}
+        sel = torch.tensor(frames)
+        return self.outputs(dec, root_2d[:, sel], lengths, features[:, sel])
 
     def estimate_lengths(self, features: torch.Tensor, root_2d: torch.Tensor) -> torch.Tensor:
         """(1, T, 72) lifter features and (1, T, 2) root keypoint -> (1, G) bone-group
@@ -471,4 +564,4 @@ class VTM(nn.Module):
         wi = torch.tensor([p[0] for p in pick])
         pi = torch.tensor([p[1] for p in pick])
         dec = {k: v[wi, pi][None] for k, v in dec.items()}       # (1, T, C)
-        return self.outputs(dec, root_2d, lengths)
+        return self.outputs(dec, root_2d, lengths, features)

@@ -147,11 +147,20 @@ def test_online_lifter_windowed_emits_every_frame_once_in_order():
     assert [f.stamp_ns for f in got] == stamps and online.pending() == 0
 
 
-@pytest.mark.parametrize('mode', ['windowed', 'causal'])
+@pytest.mark.parametrize('mode', ['windowed', 'causal', 'vtm'])
 def test_online_lifter_chunks_give_the_same_frames_later(mode):
     """chunk = 8 lifts eight frames per network pass: the same poses as frame by frame (the
-    network is convolutional), emitted in groups, every frame once."""
-    model = MotioNet(LifterConfig(**SMALL, causal=mode == 'causal')).eval()
+    network is convolutional; VTM lifts each frame from its frame-by-frame window), emitted in
+    groups, every frame once."""
+    if mode == 'vtm':
+        from mocap_lifter.vtm import VTM, VTMConfig
+        torch.manual_seed(0)
+        model = VTM(VTMConfig(width=32, latent_upper=16, latent_lower=8, keypoint_width=16,
+                              heads=2, dropout=0.0,
+                              virtual_lengths=list(Skeleton.default().group_lengths()))).eval()
+        mode = 'windowed'
+    else:
+        model = MotioNet(LifterConfig(**SMALL, causal=mode == 'causal')).eval()
     intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
     rng = np.random.default_rng(5)
     kp = np.concatenate([rng.uniform(200, 400, (50, 23, 2)), np.ones((50, 23, 1))], -1)

@@ -230,3 +230,36 @@ def test_two_training_stages_reduce_their_losses_and_resume(tmp_path):
     mtime = (tmp_path / 'tpve' / 'last.pt').stat().st_mtime
     train_stage(train, val, tmp_path / 'tpve', cfg2, progress=False)   # resumes: done
     assert (tmp_path / 'tpve' / 'last.pt').stat().st_mtime == mtime
+
+
+def test_reprojection_root_recovers_the_root_from_exact_keypoints():
+    """Lifted joints relative to the root + their exact projections: the least-squares root
+    is the true root, even from a prior 0.5 m off; unseen keypoints do not count."""
+    from mocap_lifter.features import NUM_FEATURES
+    from mocap_lifter.vtm import reprojection_root
+    from mocap_core.skeleton import JOINT_INDEX, KEYPOINT_NAMES
+    m = _motion(6)
+    sk = Skeleton.default()
+    rel = forward_kinematics(sk.parents, sk.offsets, m.rotations, np.zeros((6, 3))).positions
+    true_root = np.array([0.3, -0.2, 4.0]) + np.linspace(0, 0.5, 6)[:, None]
+    cam = rel + true_root[:, None]
+    feats = np.zeros((6, NUM_FEATURES))
+    root_2d = true_root[:, :2] / true_root[:, 2:]
+    s = 0.07
+    for k, name in enumerate(KEYPOINT_NAMES):
+        if name in JOINT_INDEX:
+            p = cam[:, JOINT_INDEX[name]]
+            feats[:, 2 * k:2 * k + 2] = (p[:, :2] / p[:, 2:] - root_2d) / s
+            feats[:, 2 * NUM_KEYPOINTS + k] = 1.0
+    feats[:, 3 * NUM_KEYPOINTS + 2] = np.log(s)
+    # a wrong keypoint that is marked unseen must not matter
+    feats[:, 2 * KEYPOINT_INDEX['left_wrist']] += 5.0
+    feats[:, 2 * NUM_KEYPOINTS + KEYPOINT_INDEX['left_wrist']] = 0.0
+    prior = true_root + np.array([0.0, 0.0, 0.5])
+    t = lambda x: torch.as_tensor(x[None], dtype=torch.float64)  # noqa: E731
+    out = reprojection_root(t(rel), t(feats), t(root_2d), t(prior), 1e-4)[0].numpy()
+    np.testing.assert_allclose(out, true_root, atol=2e-3)
+    # no keypoint seen: the prior
+    feats[:, 2 * NUM_KEYPOINTS:3 * NUM_KEYPOINTS] = 0.0
+    out = reprojection_root(t(rel), t(feats), t(root_2d), t(prior), 1e-4)[0].numpy()
+    np.testing.assert_allclose(out, prior, atol=1e-9)
