@@ -8,7 +8,8 @@
 #   scripts/live.sh none                   # lifter, physics, gmr only (feed them yourself)
 #
 # Environment: RECORD=folder also records every pipeline topic with `ros2 bag record`;
-# LIFTER_MODE=causal|windowed, GAINS=fixed|learned, STATIC_CAMERA=true|false.
+# LIFTER_MODE=causal|windowed, LIFTER_MODEL=motionet|vtm, GAINS=fixed|learned,
+# STATIC_CAMERA=true|false.
 # Stop with Ctrl-C (file sources and bags stop by themselves). Logs: $LOGS (default out/live).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -35,6 +36,7 @@ if [[ -n "${RECORD:-}" ]]; then
   echo "[live] recording to $RECORD"
 fi
 ros2 run mocap_lifter lifter --ros-args -p mode:="${LIFTER_MODE:-windowed}" \
+  -p model:="${LIFTER_MODEL:-motionet}" \
   > "$logs/lifter.log" 2>&1 &
 pids+=("$!")
 ros2 run mocap_physics physics --ros-args -p gains_mode:="${GAINS:-fixed}" \

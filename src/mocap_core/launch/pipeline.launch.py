@@ -37,8 +37,10 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('image_topic', default_value='/camera/image_raw'),
         DeclareLaunchArgument('calibration_file', default_value='',
                               description='camera_info YAML (else approximate intrinsics)'),
+        DeclareLaunchArgument('lifter_model', default_value='motionet',
+                              description="lifter network: 'motionet' or 'vtm' (windowed only)"),
         DeclareLaunchArgument('lifter_mode', default_value='windowed',
-                              description='windowed (accurate, 14 frames latency) or causal'),
+                              description='windowed (accurate; latency 14 frames, 16 for VTM) or causal (MotioNet only)'),
         DeclareLaunchArgument('gains_mode', default_value='fixed',
                               description='physics PD gains: fixed or learned'),
         DeclareLaunchArgument('lookahead', default_value='15',
@@ -56,7 +58,7 @@ def generate_launch_description() -> LaunchDescription:
                      'image_topic': arg('image_topic'),
                      'calibration_file': arg('calibration_file')}])
     lifter = Node(package='mocap_lifter', executable='lifter', name='lifter', output='screen',
-                  parameters=[{'mode': arg('lifter_mode')}])
+                  parameters=[{'mode': arg('lifter_mode'), 'model': arg('lifter_model')}])
     physics = Node(package='mocap_physics', executable='physics', name='physics',
                    output='screen', parameters=[{'gains_mode': arg('gains_mode')}])
     gmr = Node(package='mocap_global', executable='gmr', name='gmr', output='screen',
