@@ -72,6 +72,7 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
             'accel_error_mm': M.accel_error_mm(p, g),
             'skating_mm': M.foot_skating_mm(p[:, _FEET], out['contacts'] >= 0.5, up_axis=1),
             'skating_gt_mm': M.foot_skating_mm(g[:, _FEET], s['contacts'], up_axis=1),
+            **rotation_errors_deg(out['rotations'], s['rotations']),
         })
     frames = np.array([r['frames'] for r in rows], dtype=np.float64)
     summary = {k: _weighted_mean([r[k] for r in rows], frames)
@@ -112,6 +113,16 @@ def evaluate_tpmae(model, motions: Sequence[Motion], device: str = 'cpu',
     return {'clips': len(rows), 'frames': int(frames.sum()),
             'summary': {k: _weighted_mean([r[k] for r in rows], frames)
                         for k in ('mpjpe_mm', 'pa_mpjpe_mm', 'mrpe_mm')}}
+
+
+def rotation_errors_deg(pred: np.ndarray, gt: np.ndarray) -> Dict[str, float]:
+    """Mean geodesic angles (degrees) between predicted and true rotations (T, J, 4):
+    ``local_rotation_error_deg`` over the non-root joints (relative to the parent, against
+    the common rest pose) and ``root_orientation_error_deg`` (camera frame)."""
+    from mocap_core.rotations import quat_angle
+    ang = np.degrees(quat_angle(np.asarray(pred, np.float64), np.asarray(gt, np.float64)))
+    return {'local_rotation_error_deg': float(ang[:, 1:].mean()),
+            'root_orientation_error_deg': float(ang[:, 0].mean())}
 
 
 def _weighted_mean(values: Sequence[float], weights: np.ndarray) -> float:
@@ -218,14 +229,15 @@ def write_report(results: Sequence[Dict], out_dir: Path, title: str,
     (out_dir / 'eval.json').write_text(json.dumps(
         {'results': list(results), 'real': real, **(extra or {})}, indent=1))
     keys = ['mpjpe_mm', 'n_mpjpe_mm', 'pa_mpjpe_mm', 'mrpe_mm', 'mble_mm', 'bone_spread_mm',
-            'contact_accuracy', 'accel_error_mm', 'skating_mm', 'skating_gt_mm']
+            'contact_accuracy', 'accel_error_mm', 'skating_mm', 'skating_gt_mm',
+            'local_rotation_error_deg', 'root_orientation_error_deg']
     lines = [f'# {title}', '', '| input | clips | frames | ' + ' | '.join(keys) + ' |',
              '|---|---|---|' + '---|' * len(keys)]
     for r in results:
         s = r['summary']
         lines.append(f"| {r['noise']} | {r['clips']} | {r['frames']} | "
                      + ' | '.join(f'{s[k]:.3f}' if 'accuracy' in k else f'{s[k]:.1f}'
-                                  for k in keys) + ' |')
+                                  for k in keys if k in s) + ' |')
     if real:
         ref = real.get('groundtruth', {})
         lines += ['', f"## Real OpenPose sequences (no ground truth): {real['sequences']} "
