@@ -55,10 +55,7 @@ def test_tpmae_reconstructs_validation_motion(model, bag):
     gt = np.stack([p.joint_positions() for p in poses])
     with torch.no_grad():
         x = model.normalise_motion(motion_representation(rot, root, model.virtual_lengths))
-        wins, pick = model._windows(x)
-        dec = model.decode(*model.encode_motion(wins))
-        wi, pi = torch.tensor([p[0] for p in pick]), torch.tensor([p[1] for p in pick])
-        dec = {k: v[wi, pi][None] for k, v in dec.items()}
+        dec = model.autoencode(x)
         out = model.outputs(dec, root[..., :2] / root[..., 2:], lengths)
     pred = out['positions'][0].double().numpy()
     err, pa = mpjpe_mm(pred, gt), pa_mpjpe_mm(pred, gt)

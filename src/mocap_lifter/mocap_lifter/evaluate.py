@@ -98,11 +98,7 @@ def evaluate_tpmae(model, motions: Sequence[Motion], device: str = 'cpu',
         x = motion_representation(torch.as_tensor(s['rotations'][None], device=device),
                                   torch.as_tensor(s['root'][None], device=device),
                                   model.virtual_lengths)
-        wins, pick = model._windows(model.normalise_motion(x))
-        dec = model.decode(*model.encode_motion(wins))
-        wi = torch.tensor([p[0] for p in pick])
-        pi = torch.tensor([p[1] for p in pick])
-        dec = {k: v[wi, pi][None] for k, v in dec.items()}
+        dec = model.autoencode(model.normalise_motion(x))
         out = model.outputs(dec, torch.as_tensor(s['root_2d'][None], device=device),
                             torch.as_tensor(s['lengths'][None], device=device))
         p, g = out['positions'][0].cpu().numpy(), s['positions']

@@ -258,12 +258,22 @@ def _discriminator_step(disc, opt_d, fake_q, real_vel, rng, device) -> None:
     opt_d.step()
 
 
+def half_state(model: nn.Module) -> Dict[str, torch.Tensor]:
+    """The model's state dict with floating tensors as float16 (small shipped files)."""
+    return {k: (v.half() if v.is_floating_point() else v) for k, v in model.state_dict().items()}
+
+
+def load_half_state(model: nn.Module, state: Dict[str, torch.Tensor]) -> None:
+    """Load a :func:`half_state` dict (floating tensors back to float32)."""
+    model.load_state_dict({k: (v.float() if v.is_floating_point() else v)
+                           for k, v in state.items()})
+
+
 def save_weights(model: MotioNet, path: Path, info: Optional[Dict] = None) -> None:
     """Inference weights: state dict (floating tensors stored as float16 to keep the shipped
     file small) + network configuration (+ free-form info)."""
-    state = {k: (v.half() if v.is_floating_point() else v) for k, v in
-             model.state_dict().items()}
-    torch.save({'model': state, 'config': asdict(model.cfg), 'info': info or {}}, path)
+    torch.save({'model': half_state(model), 'config': asdict(model.cfg), 'info': info or {}},
+               path)
 
 
 def export_checkpoint(checkpoint: Path, out: Path) -> Path:
@@ -292,8 +302,7 @@ def load_weights(path: Path, device: str = 'cpu', causal: Optional[bool] = None)
     if causal is not None:
         cfg.causal = causal
     model = MotioNet(cfg).to(device)
-    model.load_state_dict({k: (v.float() if v.is_floating_point() else v)
-                           for k, v in state['model'].items()})
+    load_half_state(model, state['model'])
     model.eval()
     return model
 

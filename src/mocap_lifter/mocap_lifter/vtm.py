@@ -57,6 +57,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from mocap_core.data.synth2d import JOINT_KEYPOINTS
 from mocap_core.rotations import quat_to_rot6d, rot6d_to_quat
 from mocap_core.skeleton import (END_EFFECTORS, JOINT_INDEX, KEYPOINT_INDEX, NUM_BONE_GROUPS,
                                  NUM_JOINTS, NUM_KEYPOINTS)
@@ -256,12 +257,9 @@ def keypoint_parts(features: torch.Tensor, root_2d: torch.Tensor,
     return up, lo
 
 
-#: Layout keypoints that are joints of the skeleton (used to place the root by reprojection).
-_JOINT_KEYPOINTS = ('left_shoulder', 'right_shoulder', 'left_elbow', 'right_elbow',
-                    'left_wrist', 'right_wrist', 'left_hip', 'right_hip', 'left_knee',
-                    'right_knee', 'left_ankle', 'right_ankle')
-_KP_OF_JOINT = [KEYPOINT_INDEX[n] for n in _JOINT_KEYPOINTS]
-_JOINT_OF_KP = [JOINT_INDEX[n] for n in _JOINT_KEYPOINTS]
+# the layout keypoints that are joints place the root by reprojection
+_KP_OF_JOINT = [KEYPOINT_INDEX[n] for n in JOINT_KEYPOINTS]
+_JOINT_OF_KP = [JOINT_INDEX[n] for n in JOINT_KEYPOINTS]
 
 
 def reprojection_root(relative: torch.Tensor, features: torch.Tensor, root_2d: torch.Tensor,
@@ -560,8 +558,18 @@ class VTM(nn.Module):
         z_u, z_l, ratios = self.encode_visual(wins, rwins)
         if lengths is None:
             lengths = ratios.mean(dim=0, keepdim=True) * self.virtual_lengths
-        dec = self.decode(z_u, z_l)
-        wi = torch.tensor([p[0] for p in pick])
-        pi = torch.tensor([p[1] for p in pick])
-        dec = {k: v[wi, pi][None] for k, v in dec.items()}       # (1, T, C)
+        dec = _stitch(self.decode(z_u, z_l), pick)
         return self.outputs(dec, root_2d, lengths, features)
+
+    def autoencode(self, xn: torch.Tensor) -> Dict[str, torch.Tensor]:
+        """The TPMAE alone over any length: normalised representation (1, T, J*12) ->
+        decoded channels (1, T, ...) (:meth:`decode`), window by window as :meth:`forward`."""
+        wins, pick = self._windows(xn)
+        return _stitch(self.decode(*self.encode_motion(wins)), pick)
+
+
+def _stitch(dec: Dict[str, torch.Tensor], pick) -> Dict[str, torch.Tensor]:
+    """Per-window outputs (N, W, C) -> (1, T, C): each frame from its (window, position)."""
+    wi = torch.tensor([p[0] for p in pick])
+    pi = torch.tensor([p[1] for p in pick])
+    return {k: v[wi, pi][None] for k, v in dec.items()}

@@ -38,6 +38,7 @@ from mocap_core.data.motion import Motion
 from mocap_core.skeleton import END_EFFECTORS, NUM_JOINTS
 
 from .samples import Augmentation, WindowSampler
+from .train import half_state, load_half_state, plot_log, to_torch
 from .vtm import ROOT_OUT_CHANNELS, VTM, VTMConfig, keypoint_parts, motion_representation
 
 F = nn.functional
@@ -177,8 +178,6 @@ def train_stage(train_motions: Sequence[Motion], val_motions: Sequence[Motion], 
     """Train one stage, checkpointing to ``run_dir``; returns the path of the weights."""
     from tqdm import tqdm
 
-    from .train import plot_log
-
     if cfg.stage not in ('tpmae', 'tpve'):
         raise ValueError(f"stage must be 'tpmae' or 'tpve', got {cfg.stage!r}")
     torch.set_num_threads(cfg.threads)
@@ -230,7 +229,7 @@ def train_stage(train_motions: Sequence[Motion], val_motions: Sequence[Motion], 
         for g in opt.param_groups:
             g['lr'] = lr
         model.train()
-        gt = {k: torch.as_tensor(v, device=device) for k, v in sampler.batch(cfg.batch).items()}
+        gt = to_torch(sampler.batch(cfg.batch), device)
         terms = stage_losses(model, gt, cfg, weights)
         opt.zero_grad()
         terms['total'].backward()
@@ -277,7 +276,7 @@ def validate(model: VTM, batches, cfg: VTMTrainConfig, weights, device: str,
     model.eval()
     acc: Dict[str, float] = {}
     for b in batches:
-        gt = {k: torch.as_tensor(v, device=device) for k, v in b.items()}
+        gt = to_torch(b, device)
         for k, v in stage_losses(model, gt, cfg, weights).items():
             acc[k] = acc.get(k, 0.0) + float(v) / len(batches)
     return acc
@@ -285,9 +284,7 @@ def validate(model: VTM, batches, cfg: VTMTrainConfig, weights, device: str,
 
 def save_vtm(model: VTM, path: Path, info: Optional[Dict] = None) -> None:
     """Inference weights (float16 tensors) + configuration + ``arch: 'vtm'``."""
-    state = {k: (v.half() if v.is_floating_point() else v) for k, v in
-             model.state_dict().items()}
-    torch.save({'arch': 'vtm', 'model': state, 'config': asdict(model.cfg),
+    torch.save({'arch': 'vtm', 'model': half_state(model), 'config': asdict(model.cfg),
                 'info': info or {}}, path)
 
 
@@ -297,7 +294,6 @@ def load_vtm(path: Path, device: str = 'cpu') -> VTM:
     if state.get('arch') != 'vtm':
         raise ValueError(f'{path} holds no VTM weights (arch {state.get("arch", "motionet")!r})')
     model = VTM(VTMConfig(**state['config'])).to(device)
-    model.load_state_dict({k: (v.float() if v.is_floating_point() else v)
-                           for k, v in state['model'].items()})
+    load_half_state(model, state['model'])
     model.eval()
     return model

@@ -57,7 +57,8 @@ FOOT_POINTS: Dict[str, Tuple[str, Tuple[float, float, float]]] = {
     'right_big_toe': ('right_toe', (0.35, 0.08, 0.0)),
     'right_small_toe': ('right_toe', (0.15, -0.30, 0.0)),
 }
-_JOINT_KEYPOINTS = ('left_shoulder', 'right_shoulder', 'left_elbow', 'right_elbow',
+#: Layout keypoints that are joints of the pipeline skeleton (same name, same point).
+JOINT_KEYPOINTS: Tuple[str, ...] = ('left_shoulder', 'right_shoulder', 'left_elbow', 'right_elbow',
                     'left_wrist', 'right_wrist', 'left_hip', 'right_hip', 'left_knee',
                     'right_knee', 'left_ankle', 'right_ankle')
 
@@ -68,7 +69,7 @@ def keypoints_3d(skeleton: Skeleton, rotations: np.ndarray,
     fk = forward_kinematics(skeleton.parents, skeleton.offsets, rotations, root_positions)
     pos, rot = fk.positions, fk.global_rotations
     out = np.zeros(pos.shape[:-2] + (NUM_KEYPOINTS, 3))
-    for name in _JOINT_KEYPOINTS:
+    for name in JOINT_KEYPOINTS:
         out[..., KEYPOINT_INDEX[name], :] = pos[..., JOINT_INDEX[name], :]
     bone = skeleton.bone_lengths()
     scale = {'head': bone[JOINT_INDEX['head']], 'left_toe': skeleton.foot_length(),
