@@ -18,7 +18,8 @@ import pytest
 from mocap_core.data.bvh import BVH, iter_bvh_archive, parse_bvh, read_bvh
 from mocap_core.data.bvh_synth import synthetic_walk_bvh
 from mocap_core.data.dataset import (build_dataset, compute_report, find_dataset, load_dataset,
-                                     load_split, process_clip, report_markdown)
+                                     TELEPORT_SPEED_MPS, load_split, process_clip,
+                                     report_markdown)
 from mocap_core.data.splits import (SPLITS_PATH, ClipInfo, Splits, SplitsError,
                                     archive_member_ids, clip_labels, hashed_split, load_splits,
                                     make_splits, nominal_fps, resolve_clip)
@@ -276,6 +277,26 @@ def test_process_clip_drops_a_rest_pose_lead_in():
     assert m.num_frames == 60          # 239 frames at 120 fps -> t = 0 ... 238/120 s
     _, info = process_clip(lead, 'lead', trim_lead_in=False)
     assert info['trimmed_frames'] == 0
+
+
+def test_process_clip_drops_frames_before_a_capture_jump():
+    """A pelvis jump faster than any human (DAZ 09_10: 2.1 m in one 120 fps frame) within the
+    lead-in window drops the frames before it, with or without a rest pose at frame 0; a clip
+    whose first frames move normally keeps them."""
+    bvh = parse_bvh(synthetic_walk_bvh(240, 120.0), 'walk')
+    motion = bvh.motion.copy()
+    motion[:4, :3] += np.array([40.0, 0.0, 0.0])        # 4 frames far off, then a jump
+
+    def clip(m):
+        return BVH(bvh.joint_names, bvh.parents, bvh.offsets, bvh.channels, bvh.end_sites,
+                   bvh.frame_time, m, 'jump')
+    m, info = process_clip(clip(motion), 'jump')
+    assert info['trimmed_frames'] == 4
+    speed = np.linalg.norm(np.diff(m.root_positions, axis=0), axis=-1) * m.fps
+    assert speed.max() < TELEPORT_SPEED_MPS
+    late = bvh.motion.copy()
+    late[100:, :3] += np.array([40.0, 0.0, 0.0])        # after the lead-in window: kept
+    assert process_clip(clip(late), 'late')[1]['trimmed_frames'] == 0
 
 
 # ---------------------------------------------------------------------------------------------

@@ -7,7 +7,8 @@ CPU core and torch on one thread, and reports the time of each ``push`` (feature
 pass over the window, accumulation; the ROS conversions are not included): median, p95 and
 max, for the shipped weights (or, when they do not exist yet, a randomly initialised network
 of the shipped size: the time does not depend on the weights) at several look-aheads and
-window lengths, with and without the static-camera fusion. Goal (issue): <= 5 ms per frame.
+window lengths, with and without the static-camera fusion and with test-time augmentation
+(2 or 4 windows per pass). Goal (issue): <= 5 ms per frame at the node's defaults.
 
 Writes a Markdown report (default ``docs/benchmarks/gmr.md``) and a JSON file next to it.
 """
@@ -60,7 +61,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     import torch
 
     from .evaluate import read_groundtruth_bag
-    from .model import GMR, GMRConfig, load_weights
+    from .model import GMR, GMRConfig, load_weights, with_tta
     from .node import default_weights
 
     try:
@@ -81,13 +82,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     poses = b['poses'] * args.repeat
     cfg = model.cfg
     rows = []
-    for lookahead, window, fusion in ((15, 48, False), (0, 48, False), (15, 48, True),
-                                      (15, 64, False), (31, 64, False), (15, 32, False)):
-        r = run(model, poses, stamps, lookahead, window, fusion)
-        r.update({'lookahead': lookahead, 'window': window or cfg.window, 'fusion': fusion})
+    for lookahead, window, fusion, tta in (
+            (15, 48, False, 'none'), (0, 48, False, 'none'), (15, 48, True, 'none'),
+            (15, 64, False, 'none'), (31, 64, False, 'none'), (15, 32, False, 'none'),
+            (15, 48, False, 'mirror'), (15, 48, False, 'both')):
+        r = run(with_tta(model, tta), poses, stamps, lookahead, window, fusion)
+        r.update({'lookahead': lookahead, 'window': window or cfg.window, 'fusion': fusion,
+                  'tta': tta})
         rows.append(r)
-        print(f"look-ahead {lookahead:2d}, window {r['window']:3d}, fusion {fusion!s:5s}: "
-              f"median {r['median_ms']:.2f} ms, p95 {r['p95_ms']:.2f} ms, max "
+        print(f"look-ahead {lookahead:2d}, window {r['window']:3d}, fusion {fusion!s:5s}, "
+              f"test-time augmentation {tta:6s}: median {r['median_ms']:.2f} ms, p95 {r['p95_ms']:.2f} ms, max "
               f"{r['max_ms']:.2f} ms ({r['frames']} frames)", flush=True)
     res = {'date': datetime.datetime.now().strftime('%Y-%m-%d %H:%M'), 'weights': source,
            'model': f'{cfg.layers} x {cfg.hidden} bi-GRU, projection {cfg.projection}',
@@ -101,10 +105,11 @@ def main(argv: Optional[List[str]] = None) -> int:
              f'{args.repeat}x replayed as one stream. Time per frame of OnlineGMR.push (one '
              'GRU pass over the window + accumulation). The node\'s default: look-ahead 15, '
              'window 48. Goal: <= 5 ms.', '',
-             '| look-ahead | window | fusion | median ms | p95 ms | max ms | frames |',
-             '|---|---|---|---|---|---|---|']
+             '| look-ahead | window | fusion | test-time augmentation | median ms | p95 ms | '
+             'max ms | frames |',
+             '|---|---|---|---|---|---|---|---|']
     for r in rows:
-        lines.append(f"| {r['lookahead']} | {r['window']} | {r['fusion']} | "
+        lines.append(f"| {r['lookahead']} | {r['window']} | {r['fusion']} | {r['tta']} | "
                      f"{r['median_ms']:.2f} | {r['p95_ms']:.2f} | {r['max_ms']:.2f} | "
                      f"{r['frames']} |")
     args.output.parent.mkdir(parents=True, exist_ok=True)

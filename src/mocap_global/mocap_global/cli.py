@@ -4,7 +4,8 @@
                     [--minutes M] [--run-dir runs/gmr_30fps] [--device cpu|cuda]
                     [--threads N] [--no-resume] [--install]
     mocap eval gmr [--weights FILE] [--noise none|lifter|both] [--lookahead N]
-                   [--out DIR] [--device cpu|cuda] [--no-bags]
+                   [--tta none|mirror|reverse|both] [--out DIR] [--device cpu|cuda]
+                   [--no-bags]
 
 Training reads the train split of the processed dataset (``mocap data build``; built on
 first use), evaluation the validation split (and the committed ground-truth bags for the
@@ -24,6 +25,8 @@ from pathlib import Path
 from typing import List, Optional
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / 'weights'
+#: ``--tta`` choices (:data:`.model.TTA_MODES`, repeated to keep ``--help`` free of torch).
+TTA_CHOICES = ('none', 'mirror', 'reverse', 'both')
 
 
 def passive_openmp() -> None:
@@ -71,6 +74,9 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--window', type=int, default=48, help='frames per GRU pass of the online '
                    'evaluation (default 48, the node\'s default)')
     p.add_argument('--max-clips', type=int, help='evaluate on the first N clips only')
+    p.add_argument('--tta', choices=TTA_CHOICES, default='none', help='test-time '
+                   'augmentation: average the motion read off the mirrored and/or '
+                   'time-reversed input (2 or 4 times the compute; default none)')
     p.add_argument('--out', help='report directory (default: next to the weights)')
     p.add_argument('--device', default='cpu')
     p.add_argument('--threads', type=int, default=1, help='torch CPU threads (default 1)')
@@ -129,7 +135,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from mocap_core.data.dataset import load_dataset
 
     from .evaluate import evaluate_all, write_report
-    from .model import load_weights
+    from .model import load_weights, with_tta
 
     import torch
     torch.set_num_threads(args.threads)
@@ -138,7 +144,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         print(f'mocap eval gmr: error: weights not found: {weights} (train them with '
               '`mocap train gmr --install`)', file=sys.stderr)
         return 1
-    model = load_weights(weights, args.device)
+    model = with_tta(load_weights(weights, args.device), args.tta)
     val = load_dataset('validation')
     if args.max_clips:
         val = val[:args.max_clips]
@@ -150,8 +156,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
                           progress=True, window=args.window)
     report['eval_seconds'] = round(time.time() - t0, 1)
     report['weights'] = str(weights)
-    out = Path(args.out) if args.out else weights.parent / f'{weights.stem}_eval'
-    path = write_report(report, out, f'GMR ({weights.name}) on the validation split')
+    report['tta'] = args.tta
+    tta = '' if args.tta == 'none' else f'_tta_{args.tta}'
+    out = Path(args.out) if args.out else weights.parent / f'{weights.stem}{tta}_eval'
+    title = f'GMR ({weights.name}' + (f', test-time augmentation {args.tta}'
+                                      if args.tta != 'none' else '') + ') on the validation split'
+    path = write_report(report, out, title)
     print(path.read_text())
     print(f'report: {path} (and eval.json)')
     return 0

@@ -18,6 +18,13 @@ lifter cannot see, :mod:`.features`), the bone-group lengths (``skeleton_input``
 forward differences of the pose features (``velocity_input``: joint velocities in the root
 frame, computed inside the network so that a window never looks beyond its end) as extra
 inputs. :meth:`GMRConfig.paper` is the paper's input (quaternions only).
+
+Test-time augmentation (``tta``, inference only, beyond the paper): the two augmentations the
+network is trained with are exact symmetries of the task, so the motion can also be read off
+the mirrored sequence (left/right swapped, reflected back) and off the time-reversed sequence
+(its motions inverted and put back in order); ``'mirror'``, ``'reverse'`` or ``'both'``
+(all four combinations) average these estimates (axis-angle and translation means: the
+per-frame motions are small rotations), at 2 or 4 times the compute in one batched pass.
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ import torch
 from torch import nn
 
 from mocap_core.rotations import axis_angle_to_matrix
-from mocap_core.skeleton import JOINT_NAMES
+from mocap_core.skeleton import JOINT_MIRROR, JOINT_NAMES, NUM_JOINTS
 
 from .features import num_features, pose_dims
 
@@ -61,6 +68,12 @@ class GMRConfig:
     @property
     def num_features(self) -> int:
         return num_features(self.root_input, self.skeleton_input, self.pose_input)
+
+
+#: Test-time augmentations (module docstring).
+TTA_MODES = ('none', 'mirror', 'reverse', 'both')
+_MIRROR_AXIAL = (-1.0, 1.0, -1.0)     # axis-angle (a pseudo-vector) under y -> -y
+_MIRROR_POLAR = (1.0, -1.0, 1.0)      # translations, up vectors, positions under y -> -y
 
 
 def reverse_padded(x: torch.Tensor, lengths: Optional[torch.Tensor]) -> torch.Tensor:
@@ -140,14 +153,72 @@ class GMR(nn.Module):
         self.out_mean.copy_(t(out_mean))
         self.out_std.copy_(torch.clamp(t(out_std), min=1e-4))
 
-    def forward(self, x: torch.Tensor,
-                lengths: Optional[torch.Tensor] = None) -> Dict[str, torch.Tensor]:
+    def forward(self, x: torch.Tensor, lengths: Optional[torch.Tensor] = None,
+                tta: str = 'none') -> Dict[str, torch.Tensor]:
         """``x`` (B, T, C) features; ``lengths`` (B,) valid frames per sequence (the rest is
-        padding: the backward GRU starts at each sequence's own end, :class:`BiGRU`).
+        padding: the backward GRU starts at each sequence's own end, :class:`BiGRU`);
+        ``tta``: test-time augmentation, one of :data:`TTA_MODES` (module docstring).
 
         Returns ``axis_angle`` (B, T, 3) and ``translation`` (B, T, 3): the motion from
         frame i to i + 1 in the body frame of frame i; ``rotation`` (B, T, 3, 3) its matrix;
         ``up`` (B, T, 3): the world's up direction in the body frame of frame i (unit)."""
+        if tta == 'none':
+            return self._single(x, lengths)
+        if tta not in TTA_MODES:
+            raise ValueError(f'tta must be one of {TTA_MODES}, got {tta!r}')
+        b, t = x.shape[:2]
+        if lengths is None:
+            lengths = torch.full((b,), t, dtype=torch.long, device=x.device)
+        mirror = tta in ('mirror', 'both')
+        reverse = tta in ('reverse', 'both')
+        views = [(False, False)] + ([(True, False)] if mirror else []) \
+            + ([(False, True)] if reverse else []) + ([(True, True)] if mirror and reverse
+                                                      else [])
+        xs = []
+        for m, r in views:
+            v = self.mirror_features(x) if m else x
+            xs.append(reverse_padded(v, lengths) if r else v)
+        out = self._single(torch.cat(xs), lengths.repeat(len(views)))
+        aa = torch.zeros_like(x[..., :3])
+        tr = torch.zeros_like(aa)
+        up = torch.zeros_like(aa)
+        for i, (m, r) in enumerate(views):
+            a = out['axis_angle'][i * b:(i + 1) * b]
+            d = out['translation'][i * b:(i + 1) * b]
+            u = out['up'][i * b:(i + 1) * b]
+            if r:   # motion j of the reversed sequence is motion n-2-j inverted
+                Rt = out['rotation'][i * b:(i + 1) * b].transpose(-1, -2)
+                a, d = -a, -(Rt @ d[..., None])[..., 0]
+                a, d = reverse_padded(a, lengths - 1), reverse_padded(d, lengths - 1)
+                u = reverse_padded(u, lengths)
+            if m:
+                a = a * a.new_tensor(_MIRROR_AXIAL)
+                d = d * d.new_tensor(_MIRROR_POLAR)
+                u = u * u.new_tensor(_MIRROR_POLAR)
+            aa, tr, up = aa + a, tr + d, up + u
+        aa, tr = aa / len(views), tr / len(views)
+        up = up / up.norm(dim=-1, keepdim=True).clamp(min=1e-6)
+        return {'axis_angle': aa, 'translation': tr, 'rotation': axis_angle_to_matrix(aa),
+                'up': up}
+
+    def mirror_features(self, x: torch.Tensor) -> torch.Tensor:
+        """The input features of the left/right mirrored sequence (y -> -y in the root frame,
+        left and right joints swapped); the bone-group lengths are symmetric and stay.
+        (..., C) -> (..., C)."""
+        n = NUM_JOINTS - 1
+        d = pose_dims(self.cfg.pose_input)
+        k = d // n
+        perm = [JOINT_MIRROR[j] - 1 for j in range(1, NUM_JOINTS)]
+        pose = x[..., :d].reshape(x.shape[:-1] + (n, k))[..., perm, :]
+        sign = _MIRROR_POLAR if k == 3 else _MIRROR_AXIAL + (1.0,)
+        parts = [(pose * pose.new_tensor(sign)).reshape(x.shape[:-1] + (d,)), x[..., d:]]
+        if self.cfg.root_input == 'up':
+            parts[1] = torch.cat([x[..., d:-3], x[..., -3:] * x.new_tensor(_MIRROR_POLAR)], -1)
+        return torch.cat(parts, dim=-1)
+
+    def _single(self, x: torch.Tensor,
+                lengths: Optional[torch.Tensor] = None) -> Dict[str, torch.Tensor]:
+        """One pass of the network (:meth:`forward` without test-time augmentation)."""
         h = (x - self.feature_mean) / self.feature_std
         if self.cfg.velocity_input:
             h = torch.cat([h, self._velocity(x, lengths)], dim=-1)
@@ -160,7 +231,6 @@ class GMR(nn.Module):
         return {'axis_angle': aa, 'translation': motion[..., 3:],
                 'rotation': axis_angle_to_matrix(aa), 'up': up}
 
-
     def _velocity(self, x: torch.Tensor, lengths: Optional[torch.Tensor]) -> torch.Tensor:
         """Forward differences of the local-pose features, x_{i+1} - x_i (quaternions x 10,
         root-frame joint positions x fps: m/s), zero at the last valid frame of each sequence
@@ -172,6 +242,30 @@ class GMR(nn.Module):
             t = torch.arange(x.shape[1], device=x.device)[None]
             d = d * (t < lengths.to(x.device)[:, None] - 1)[..., None].to(d.dtype)
         return d * (10.0 if self.cfg.pose_input == 'quat' else self.cfg.fps)
+
+
+class Augmented(nn.Module):
+    """A :class:`GMR` that always infers with one test-time augmentation: a drop-in model for
+    the evaluation and the node (``Augmented(model, 'mirror')(x)`` is
+    ``model(x, tta='mirror')``)."""
+
+    def __init__(self, model: GMR, tta: str) -> None:
+        super().__init__()
+        if tta not in TTA_MODES:
+            raise ValueError(f'tta must be one of {TTA_MODES}, got {tta!r}')
+        self.model = model
+        self.tta = tta
+        self.cfg = model.cfg
+        self.info = getattr(model, 'info', {})
+
+    def forward(self, x: torch.Tensor,
+                lengths: Optional[torch.Tensor] = None) -> Dict[str, torch.Tensor]:
+        return self.model(x, lengths, tta=self.tta)
+
+
+def with_tta(model: GMR, tta: str) -> nn.Module:
+    """``model`` itself for ``tta='none'``, else an :class:`Augmented` wrapper."""
+    return model if tta == 'none' else Augmented(model, tta)
 
 
 def save_weights(model: GMR, path: Union[str, Path], info: Optional[Dict] = None) -> None:

@@ -48,6 +48,10 @@ PARAMETERS = (
               read_only=True, min_value=0),
     ParamSpec('window', 48, 'Frames the GRU sees per update (0 = the training window, 64); '
               'the time per frame grows with it', read_only=True, min_value=0),
+    ParamSpec('test_time_augmentation', 'none', "Average the motion read off the mirrored "
+              "('mirror'), time-reversed ('reverse') or both ('both') window as well: "
+              'slightly more accurate, 2 or 4 windows per update', read_only=True,
+              additional_constraints="one of: none, mirror, reverse, both"),
     ParamSpec('max_gap_s', 0.25, 'A larger gap between input stamps restarts the '
               'accumulation from a new gravity-aligned pose', min_value=0.0),
     ParamSpec('tilt_correction', 0.05, 'Fraction per frame by which the accumulated '
@@ -140,7 +144,10 @@ def node_class():
             if not path.exists():
                 raise FileNotFoundError(f'weights not found: {path} (train them with '
                                         '`mocap train gmr --install`)')
-            self.model = load_weights(path, p['device'])
+            if p['test_time_augmentation'] not in TTA_MODES:
+                raise ValueError(f"test_time_augmentation must be one of {TTA_MODES}, got "
+                                 f"{p['test_time_augmentation']!r}")
+            self.model = with_tta(load_weights(path, p['device']), p['test_time_augmentation'])
             cfg = self.model.cfg
             self.fps = cfg.fps
             if p['input_up'] not in ('auto', 'estimate'):
@@ -172,7 +179,8 @@ def node_class():
             }
             self.diag = NodeDiagnostics(self, 'gmr', hardware_id=path.name)
             self.diag.set_value('model', f'GMR {cfg.layers}x{cfg.hidden} bi-GRU, '
-                                f'{cfg.fps:g} fps, window {p["window"] or cfg.window}')
+                                f'{cfg.fps:g} fps, window {p["window"] or cfg.window}, '
+                                f"test-time augmentation {p['test_time_augmentation']}")
             self.diag.set_value('lookahead_frames', p['lookahead'])
             self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
             self.diag.set_value('static_camera', p['static_camera'])

@@ -14,7 +14,8 @@ from mocap_core.skeleton import NUM_JOINTS, Skeleton
 
 from mocap_global import features as F
 from mocap_global import metrics as M
-from mocap_global.model import GMR, GMRConfig, load_weights, save_weights
+from mocap_global.model import (GMR, GMRConfig, TTA_MODES, load_weights, reverse_padded,
+                                 save_weights, with_tta)
 from mocap_global.online import OnlineGMR, StaticCameraFusion
 from mocap_global.samples import Augmentation, WindowSampler
 from mocap_global.se3 import (accumulate, align_yaw_translation, compose_steps, invert_motion,
@@ -202,6 +203,53 @@ def test_model_shapes_padding_and_weights_roundtrip(tmp_path):
     (tmp_path / 'bad.pt').write_bytes(b'not weights')
     with pytest.raises(Exception):
         load_weights(tmp_path / 'bad.pt')
+
+
+@pytest.mark.parametrize('pose_input', ['quat', 'positions'])
+def test_test_time_augmentation_is_mirror_and_time_reversal_equivariant(pose_input):
+    """Mirrored features are the features of the mirrored motion; with 'mirror' or 'both'
+    the model's motion of a mirrored sequence is exactly the mirrored motion, with 'reverse'
+    or 'both' the rotation of a reversed sequence is exactly the inverted, reordered one; the
+    padding of a batch does not change the augmented output either."""
+    R, T = circle_walk(20)
+    m = _motion(R, T)
+    gl = m.skeleton.group_lengths()
+    model = _small_model(pose_input=pose_input)
+    f = torch.as_tensor(F.gmr_features(m.rotations, gl, pose_input=pose_input))
+    fm = torch.as_tensor(F.gmr_features(F.mirror_rotations(m.rotations), gl,
+                                        pose_input=pose_input))
+    assert torch.allclose(model.mirror_features(f), fm, atol=1e-5)
+    assert torch.allclose(model.mirror_features(model.mirror_features(f)), f)
+    axial = torch.tensor([-1.0, 1.0, -1.0])
+    polar = torch.tensor([1.0, -1.0, 1.0])
+    with torch.no_grad():
+        for tta in TTA_MODES:
+            a, b = model(f[None], tta=tta), model(fm[None], tta=tta)
+            err = (b['axis_angle'] * axial - a['axis_angle'])[:, :-1].abs().max()
+            if tta in ('mirror', 'both'):
+                assert err < 1e-5, tta
+                assert torch.allclose(b['translation'] * polar, a['translation'], atol=1e-5)
+                assert torch.allclose(b['up'] * polar, a['up'], atol=1e-5)
+            else:
+                assert err > 1e-3, tta          # the plain network is not symmetric
+            r = model(f.flip(0)[None], tta=tta)
+            back = -r['axis_angle'][0, :-1].flip(0)
+            err = (back - a['axis_angle'][0, :-1]).abs().max()
+            assert (err < 1e-5) if tta in ('reverse', 'both') else (err > 1e-3), tta
+        x = torch.stack([f, torch.cat([f[:12], torch.zeros(8, f.shape[1])])])
+        batch = model(x, torch.tensor([20, 12]), tta='both')
+        alone = model(f[None, :12], tta='both')
+        assert torch.allclose(batch['axis_angle'][1, :11], alone['axis_angle'][0, :11],
+                              atol=1e-5)
+        assert torch.allclose(with_tta(model, 'both')(f[None])['translation'],
+                              model(f[None], tta='both')['translation'])
+    assert with_tta(model, 'none') is model
+    with pytest.raises(ValueError, match='tta'):
+        model(f[None], tta='sideways')
+    # reverse_padded is its own inverse and keeps the padding in place
+    lengths = torch.tensor([20, 12])
+    assert torch.equal(reverse_padded(reverse_padded(x, lengths), lengths), x)
+    assert torch.equal(reverse_padded(x, lengths)[1, 12:], x[1, 12:])
 
 
 def test_paper_configuration():

@@ -145,6 +145,9 @@ LEAD_IN_FACTOR = 2.0
 LEAD_IN_MIN_STEP_M = 0.01
 #: Frame 0 is a rest pose when all its non-root rotation channels are within this (deg).
 LEAD_IN_REST_DEG = 20.0
+#: Within the lead-in window, a pelvis displacement faster than this (m/s) is a jump of the
+#: capture, not human motion: the frames up to it are dropped too.
+TELEPORT_SPEED_MPS = 15.0
 
 
 def lead_in_frames(bvh: BVH, source_positions: np.ndarray) -> int:
@@ -158,21 +161,29 @@ def lead_in_frames(bvh: BVH, source_positions: np.ndarray) -> int:
     :data:`LEAD_IN_REST_DEG`), frame 0 is dropped, and so are the next frames while the largest
     joint displacement to the following frame exceeds :data:`LEAD_IN_FACTOR` x the 90th
     percentile of that displacement over the clip (and :data:`LEAD_IN_MIN_STEP_M`), up to
-    :data:`LEAD_IN_MAX_SECONDS`. Any other clip is not trimmed (Bandai Namco, CMU ASF-named
-    files, the TMoCo mb2 files).
+    :data:`LEAD_IN_MAX_SECONDS`. In any clip, a pelvis jump faster than
+    :data:`TELEPORT_SPEED_MPS` within that window also drops the frames before it (DAZ
+    ``09_10`` holds a rest pose for 5 frames, then its pelvis moves 2.1 m in one 120 fps
+    frame). Any other clip is not trimmed (Bandai Namco, CMU ASF-named files, the TMoCo mb2
+    files).
     """
+    if bvh.num_frames < 3:
+        return 0
+    max_frames = min(bvh.num_frames - 2, int(round(LEAD_IN_MAX_SECONDS * bvh.fps)))
+    speed = np.linalg.norm(np.diff(source_positions[:max_frames + 1, 0], axis=0),
+                           axis=-1) * bvh.fps
+    jumps = np.nonzero(speed > TELEPORT_SPEED_MPS)[0]
+    after_jump = int(jumps[-1]) + 1 if len(jumps) else 0
     rot_cols = [bvh.channel_start[j] + k for j in range(1, bvh.num_joints)
                 for k, c in enumerate(bvh.channels[j]) if c.endswith('rotation')]
-    if bvh.num_frames < 3 or not rot_cols or \
-            np.max(np.abs(bvh.motion[0, rot_cols])) > LEAD_IN_REST_DEG:
-        return 0
+    if not rot_cols or np.max(np.abs(bvh.motion[0, rot_cols])) > LEAD_IN_REST_DEG:
+        return after_jump
     step = np.linalg.norm(np.diff(source_positions, axis=0), axis=-1).max(axis=-1)
     limit = max(LEAD_IN_FACTOR * float(np.percentile(step, 90)), LEAD_IN_MIN_STEP_M)
-    max_frames = min(bvh.num_frames - 2, int(round(LEAD_IN_MAX_SECONDS * bvh.fps)))
     start = 1
     while start < max_frames and step[start] > limit:
         start += 1
-    return start
+    return max(start, after_jump)
 
 
 def process_clip(bvh: BVH, clip_id: str, fps: float = DEFAULT_FPS,
