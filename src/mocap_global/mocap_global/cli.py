@@ -112,22 +112,31 @@ def cmd_train(args: argparse.Namespace) -> int:
                     resume=not args.no_resume, minutes=args.minutes)
     print(f'weights: {weights}')
     if args.install:
-        WEIGHTS_DIR.mkdir(exist_ok=True)
-        name = weights_name(cfg.model.fps)
-        dest = WEIGHTS_DIR / name
-        shutil.copy(weights, dest)
-        stem = Path(name).stem
-        shutil.copy(run_dir / 'loss.png', WEIGHTS_DIR / f'{stem}_loss.png')
-        shutil.copy(run_dir / 'log.csv', WEIGHTS_DIR / f'{stem}_log.csv')
-        import torch
-        info = torch.load(weights, map_location='cpu', weights_only=False)['info']
-        (WEIGHTS_DIR / f'{stem}_train.json').write_text(json.dumps(
-            {'config': asdict(cfg), 'command': ' '.join(['mocap', 'train', 'gmr']
-                                                       + sys.argv[3:]),
-             'steps': info.get('steps'), 'train_seconds': info.get('train_seconds'),
-             'validation_windows': info.get('validation_windows')}, indent=1))
+        dest = install(run_dir, cfg, ' '.join(['mocap', 'train', 'gmr'] + sys.argv[3:]))
         print(f'installed {dest}')
     return 0
+
+
+def install(run_dir: Path, cfg, command: str) -> Path:
+    """Copy a finished run's weights (``run_dir/gmr.pt``), loss curve and log into the package
+    (``weights/gmr.pt`` for 30 fps, ``gmr_<fps>fps.pt`` otherwise) with a training record
+    (``<stem>_train.json``: configuration, command, steps, time, validation figures)."""
+    import torch
+
+    weights = Path(run_dir) / 'gmr.pt'
+    WEIGHTS_DIR.mkdir(exist_ok=True)
+    name = weights_name(cfg.model.fps)
+    dest = WEIGHTS_DIR / name
+    shutil.copy(weights, dest)
+    stem = Path(name).stem
+    shutil.copy(Path(run_dir) / 'loss.png', WEIGHTS_DIR / f'{stem}_loss.png')
+    shutil.copy(Path(run_dir) / 'log.csv', WEIGHTS_DIR / f'{stem}_log.csv')
+    info = torch.load(weights, map_location='cpu', weights_only=False)['info']
+    (WEIGHTS_DIR / f'{stem}_train.json').write_text(json.dumps(
+        {'config': asdict(cfg), 'command': command, 'steps': info.get('steps'),
+         'train_seconds': info.get('train_seconds'),
+         'validation_windows': info.get('validation_windows')}, indent=1))
+    return dest
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
