@@ -132,7 +132,7 @@ def node_class():
     from mocap_core.diagnostics import NodeDiagnostics
     from mocap_core.qos import STREAM_QOS, input_qos
 
-    from .model import load_weights
+    from .model import TTA_MODES, load_weights, with_tta
     from .online import OnlineGMR, StaticCameraFusion
 
     class GMRNode(Node):
