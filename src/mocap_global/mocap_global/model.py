@@ -169,11 +169,9 @@ class GMR(nn.Module):
         b, t = x.shape[:2]
         if lengths is None:
             lengths = torch.full((b,), t, dtype=torch.long, device=x.device)
-        mirror = tta in ('mirror', 'both')
-        reverse = tta in ('reverse', 'both')
-        views = [(False, False)] + ([(True, False)] if mirror else []) \
-            + ([(False, True)] if reverse else []) + ([(True, True)] if mirror and reverse
-                                                      else [])
+        mirrors = (False, True) if tta in ('mirror', 'both') else (False,)
+        reverses = (False, True) if tta in ('reverse', 'both') else (False,)
+        views = [(m, r) for r in reverses for m in mirrors]      # (mirrored, reversed)
         xs = []
         for m, r in views:
             v = self.mirror_features(x) if m else x

@@ -244,6 +244,8 @@ def test_test_time_augmentation_is_mirror_and_time_reversal_equivariant(pose_inp
         assert torch.allclose(with_tta(model, 'both')(f[None])['translation'],
                               model(f[None], tta='both')['translation'])
     assert with_tta(model, 'none') is model
+    from mocap_global.cli import TTA_CHOICES
+    assert TTA_CHOICES == TTA_MODES                     # `mocap eval gmr --tta` offers them all
     with pytest.raises(ValueError, match='tta'):
         model(f[None], tta='sideways')
     # reverse_padded is its own inverse and keeps the padding in place
