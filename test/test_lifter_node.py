@@ -97,7 +97,7 @@ def test_node_lifts_a_played_bag(processes, ros2_cmd, listener, model):
                                                '/mocap/keypoints2d'], 'play')
     peer.spin(120, until=lambda: player.poll() is not None)
     assert player.returncode == 0, plog.read_text()
-    peer.spin(15, until=lambda: len(got['motion']) >= len(stamps))
+    peer.spin(15, until=lambda: all(len(got[k]) >= len(stamps) for k in OUTPUTS))
     text = log.read_text()
     assert 'Traceback' not in text, text
     for name in OUTPUTS:
