@@ -1,0 +1,59 @@
+"""Loading weight and checkpoint files safely (no ROS imports).
+
+Every ``.pt`` file the project reads goes through :func:`load_checkpoint`: it unpickles with
+``torch.load(weights_only=True)``, which accepts tensors, numbers, strings and plain
+containers only, so a crafted file cannot run code. Any problem (missing file, truncated or
+corrupt archive, a pickle that needs other objects, a file that is not a dictionary) becomes
+one :class:`WeightsError` with a one-line message naming the file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Dict, Iterable, Union
+
+
+class WeightsError(ValueError):
+    """A weights or checkpoint file that cannot be used; the message is one line."""
+
+
+def load_checkpoint(path: Union[str, Path], map_location: Any = 'cpu',
+                    required: Iterable[str] = ()) -> Dict[str, Any]:
+    """Read a ``torch.save`` dictionary from ``path`` with tensors only (no code execution).
+
+    Args:
+        path: the file.
+        map_location: device the tensors are loaded to (``torch.load``'s argument).
+        required: keys the dictionary must have.
+
+    Returns:
+        The saved dictionary.
+
+    Raises:
+        WeightsError: the file is missing, unreadable, corrupt, holds something other than
+            plain data, is not a dictionary or lacks a required key.
+    """
+    import pickle
+
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise WeightsError(f'weights file not found: {path}')
+    try:
+        state = torch.load(str(path), map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
+        raise WeightsError(f'{path}: refused, the file holds more than tensors and plain data '
+                           f'({first[:160]})') from None
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for a damaged file
+        text = ' '.join(str(exc).split())[:160]
+        raise WeightsError(f'{path}: not a readable weights file ({type(exc).__name__}: '
+                           f'{text})') from None
+    if not isinstance(state, dict):
+        raise WeightsError(f'{path}: expected a dictionary of weights, found '
+                           f'{type(state).__name__}')
+    missing = [k for k in required if k not in state]
+    if missing:
+        raise WeightsError(f"{path}: not the expected weights (missing {', '.join(missing)})")
+    return state

@@ -1,0 +1,72 @@
+"""Default topic names of the pipeline, in one place (the design contract, ``docs/design.md``).
+
+Nodes create their publishers and subscriptions with these names; users remap them with
+``--ros-args -r /mocap/keypoints2d:=/other`` as usual. Tools (``mocap process``, the recorder,
+the benchmarks, the tests) use the same constants.
+"""
+
+from __future__ import annotations
+
+# inputs of the keypoint node
+IMAGE = '/camera/image_raw'
+IMAGE_CAMERA_INFO = '/camera/camera_info'
+
+# keypoint node
+KEYPOINTS = '/mocap/keypoints2d'
+CAMERA_INFO = '/mocap/camera_info'
+ANNOTATED = '/mocap/keypoints2d/annotated'
+
+# every node
+DIAGNOSTICS = '/diagnostics'
+
+# lifter
+SKELETON_URDF = '/mocap/skeleton/urdf'
+LIFTER_CONTACTS = '/mocap/lifter/contacts'
+
+# physics
+PHYSICS_GRF_LEFT = '/mocap/physics/grf/left'
+PHYSICS_GRF_RIGHT = '/mocap/physics/grf/right'
+PHYSICS_FLOOR = '/mocap/physics/floor'
+PHYSICS_COM = '/mocap/physics/com'
+
+# world stage
+WORLD_ODOM = '/mocap/world/odom'
+WORLD_PATH = '/mocap/world/path'
+
+# ground truth written by the data tools (bags for tests and evaluation)
+GROUNDTRUTH_MOTION = '/mocap/groundtruth/motion'
+GROUNDTRUTH_JOINTS3D = '/mocap/groundtruth/joints3d'
+GROUNDTRUTH_CONTACTS = '/mocap/groundtruth/contacts'
+GROUNDTRUTH_CAMERA_POSE = '/mocap/groundtruth/camera_pose'
+GROUNDTRUTH_WORLD_MOTION = '/mocap/groundtruth/world_motion'
+
+#: The three 3D stages, in pipeline order.
+STAGES = ('lifter', 'physics', 'world')
+
+
+def stage_prefix(stage: str) -> str:
+    """``/mocap/<stage>/``: the namespace of one stage's outputs."""
+    if stage not in STAGES:
+        raise ValueError(f'unknown stage {stage!r} (one of {", ".join(STAGES)})')
+    return f'/mocap/{stage}/'
+
+
+def stage_topic(stage: str, name: str) -> str:
+    """``/mocap/<stage>/<name>``, e.g. ``stage_topic('physics', 'motion')``; ``name`` is one of
+    ``motion``, ``joints3d``, ``joint_states``, ``markers`` (common to the three stages) or a
+    stage's own output."""
+    return stage_prefix(stage) + name
+
+
+LIFTER_MOTION = stage_topic('lifter', 'motion')
+LIFTER_JOINTS3D = stage_topic('lifter', 'joints3d')
+LIFTER_JOINT_STATES = stage_topic('lifter', 'joint_states')
+LIFTER_MARKERS = stage_topic('lifter', 'markers')
+PHYSICS_MOTION = stage_topic('physics', 'motion')
+PHYSICS_JOINTS3D = stage_topic('physics', 'joints3d')
+PHYSICS_JOINT_STATES = stage_topic('physics', 'joint_states')
+PHYSICS_MARKERS = stage_topic('physics', 'markers')
+WORLD_MOTION = stage_topic('world', 'motion')
+WORLD_JOINTS3D = stage_topic('world', 'joints3d')
+WORLD_JOINT_STATES = stage_topic('world', 'joint_states')
+WORLD_MARKERS = stage_topic('world', 'markers')
