@@ -212,7 +212,7 @@ def test_to_bag_real_validation_clip(tmp_path, ros_env):
 
 
 def test_from_openpose_reproduces_the_json(tmp_path, ros_env):
-    from mocap_keypoints.openpose import list_openpose_files, read_openpose_file
+    from mocap_core.data.openpose import list_openpose_files, read_openpose_file
 
     out = tmp_path / 'op'
     r = run(['data', 'from-openpose', EXAMPLE, '-o', out, '--fps', 25, '--fov', 50], ros_env)

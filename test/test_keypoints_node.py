@@ -44,7 +44,7 @@ def _run_node(processes, ros2_cmd, path: Path, *extra: str):
 def test_node_publishes_every_frame_in_order(processes, ros2_cmd, listener):
     from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
                                             stamp_to_ns)
-    from mocap_keypoints.openpose import list_openpose_files, read_openpose_file
+    from mocap_core.data.openpose import list_openpose_files, read_openpose_file
 
     peer, got = listener
     proc, log = _run_node(processes, ros2_cmd, EXAMPLE)

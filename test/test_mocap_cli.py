@@ -25,7 +25,7 @@ def run(args, env, timeout=120):
 @pytest.fixture(scope='module')
 def keypoint_bag(tmp_path_factory):
     """A bag of the real OpenPose example as keypoint clouds, plus one malformed cloud."""
-    from mocap_keypoints.openpose import list_openpose_files, read_openpose_file
+    from mocap_core.data.openpose import list_openpose_files, read_openpose_file
 
     path = tmp_path_factory.mktemp('bags') / 'kp'
     with BagWriter(path) as bag:

@@ -26,5 +26,9 @@ setup(
         'console_scripts': [
             'gmr = mocap_global.node:main',
         ],
+        # the core finds the pipeline's parts through these groups (mocap_core.plugins)
+        'mocap.nodes': ['gmr = mocap_global.node:GMRNode'],
+        'mocap.benches': ['gmr = mocap_global.bench:main'],
+        'mocap.commands': ['gmr = mocap_global.training.cli'],
     },
 )

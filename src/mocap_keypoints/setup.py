@@ -21,5 +21,8 @@ setup(
         'console_scripts': [
             'keypoints = mocap_keypoints.node:main',
         ],
+        # the core finds the pipeline's parts through these groups (mocap_core.plugins)
+        'mocap.nodes': ['keypoints = mocap_keypoints.node:KeypointsNode'],
+        'mocap.benches': ['keypoints = mocap_keypoints.bench:main'],
     },
 )

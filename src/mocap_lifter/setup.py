@@ -25,5 +25,9 @@ setup(
         'console_scripts': [
             'lifter = mocap_lifter.node:main',
         ],
+        # the core finds the pipeline's parts through these groups (mocap_core.plugins)
+        'mocap.nodes': ['lifter = mocap_lifter.node:LifterNode'],
+        'mocap.benches': ['lifter = mocap_lifter.bench:main'],
+        'mocap.commands': ['lifter = mocap_lifter.training.cli'],
     },
 )

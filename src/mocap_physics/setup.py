@@ -24,5 +24,9 @@ setup(
         'console_scripts': [
             'physics = mocap_physics.node:main',
         ],
+        # the core finds the pipeline's parts through these groups (mocap_core.plugins)
+        'mocap.nodes': ['physics = mocap_physics.node:PhysicsNode'],
+        'mocap.benches': ['physics = mocap_physics.bench:main'],
+        'mocap.commands': ['physics = mocap_physics.training.cli'],
     },
 )

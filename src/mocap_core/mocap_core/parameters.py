@@ -78,21 +78,33 @@ def spin_node(make_node, args, name: str) -> int:
 
     Returns the exit code: 0 after Ctrl-C or an external shutdown; 2 with a one-line
     ``<name>: error: ...`` on stderr when building the node raises FileNotFoundError or
-    ValueError (missing weights, a bad parameter). Always destroys the node and shuts down."""
+    ValueError (missing or unreadable weights, a bad parameter). Once the node runs, an
+    exception that escapes a callback (nodes wrap theirs with :func:`mocap_core.guard.guarded`,
+    so this is a last resort) is counted and logged like a guarded one, and spinning goes on:
+    a frame that fails never stops the node. Always destroys the node and shuts down."""
     import sys
 
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
+    from .guard import record_failure
+
     rclpy.init(args=args)
     node = None
     try:
-        node = make_node()
-        rclpy.spin(node)
+        try:
+            node = make_node()
+        except (FileNotFoundError, ValueError) as exc:
+            print(f'{name}: error: {exc}', file=sys.stderr)
+            return 2
+        while rclpy.ok():
+            try:
+                rclpy.spin(node)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                raise
+            except Exception as exc:  # noqa: BLE001 - the failing-callback policy
+                record_failure(node, 'callback', exc)
         return 0
-    except (FileNotFoundError, ValueError) as exc:
-        print(f'{name}: error: {exc}', file=sys.stderr)
-        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
     finally:

@@ -87,3 +87,42 @@ def test_declare_parameters_with_descriptions_and_ranges(node):
     assert node.describe_parameter('source').read_only
     table = describe_parameters(specs)
     assert '| `fps` | `30.0` | frames per second |' in table
+
+
+SPIN_SCRIPT = '''
+import sys
+import rclpy
+from rclpy.node import Node
+from mocap_core.parameters import spin_node
+
+class Failing(Node):
+    def __init__(self):
+        super().__init__('failing')
+        self.calls = 0
+        self.diag = None
+        self.create_timer(0.01, self.tick)
+
+    def tick(self):
+        self.calls += 1
+        if self.calls <= 3:
+            raise ValueError(f'bad frame {self.calls}')
+        print(f'still running after {self.calls - 1} failures', flush=True)
+        rclpy.shutdown()
+
+sys.exit(spin_node(Failing, [], 'failing'))
+'''
+
+
+def test_spin_node_keeps_running_when_a_callback_raises(tmp_path):
+    """A ValueError inside a running node's (unguarded) callback is logged and counted; the
+    node keeps spinning and exits 0 at shutdown (it used to exit 2, 'configuration error')."""
+    import subprocess
+    import sys
+
+    script = tmp_path / 'spin.py'
+    script.write_text(SPIN_SCRIPT)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert 'still running after 3 failures' in out.stdout
+    assert 'frame dropped after an error (ValueError: bad frame 1)' in out.stderr

@@ -19,7 +19,8 @@ Sources (parameter ``source``; ``auto`` picks from ``path``):
   * ``images``: a directory of images in natural name order, stamped at ``fps``;
   * ``topic``: sensor_msgs/Image or CompressedImage on ``image_topic`` (CompressedImage when
     the name ends in ``/compressed``), with ``camera_info_topic``; stamps = the image's (an
-    image whose stamp is not after the previous one is dropped with a warning);
+    image whose stamp is not after the previous one is dropped with a warning; stamps jumping
+    back by ``restart_after_s`` or more start a new stream, as when a bag is looped);
   * ``openpose_json``: a directory of OpenPose JSON files (BODY_25 / COCO-18), no detector.
 
 Detector: MediaPipe BlazePose full (mediapipe 0.10.14, bundled weights), in its own thread
@@ -35,21 +36,38 @@ Exit status: 0 at the end of a file source or on Ctrl-C; 2 when the source canno
 from __future__ import annotations
 
 import collections
-import functools
 import re
 import sys
 import threading
 import time
-from typing import Deque, Dict, List, Optional, Tuple
+from typing import Deque, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
+import rclpy
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
+from mocap_core import topics
+from mocap_core.camera import CameraCalibration, read_camera_info_yaml
+from mocap_core.data.openpose import infer_image_size
+from mocap_core.diagnostics import NodeDiagnostics
+from mocap_core.guard import guarded, record_failure
 from mocap_core.metrics import LatencyStats, RateMeter
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
+from mocap_core.qos import SENSOR_QOS, STREAM_QOS
+from mocap_core.ros_conversions import (MessageError, bgr_to_image, camera_info_to_intrinsics,
+                                        compressed_image_to_bgr, image_to_bgr,
+                                        intrinsics_to_camera_info, keypoints_to_cloud,
+                                        make_header, stamp_to_ns)
+from mocap_core.streams import StampOrder
 
-from .openpose import infer_image_size
-from .pipeline import FrameResult, select_persons  # noqa: F401  (re-exported for users)
-from .sources import SOURCE_KINDS, SourceError
+from .detector import create_detector
+from .intrinsics import IntrinsicsProvider
+from .pipeline import FrameProcessor, FrameResult, select_persons  # noqa: F401 (re-exported)
+from .sources import SOURCE_KINDS, Frame, SourceError, open_source, resolve_kind
+from .worker import LatestWorker, SourceFeeder
 
 PARAMETERS = (
     ParamSpec('source', 'auto', 'Input kind: auto, ' + ', '.join(SOURCE_KINDS) + '. auto: '
@@ -59,7 +77,7 @@ PARAMETERS = (
               read_only=True),
     ParamSpec('device', '0', 'Camera (source camera): OpenCV index, /dev/videoN or a stream '
               'URL', read_only=True),
-    ParamSpec('image_topic', '/camera/image_raw', 'Image topic (source topic); '
+    ParamSpec('image_topic', topics.IMAGE, 'Image topic (source topic); '
               'sensor_msgs/CompressedImage when it ends in /compressed, else sensor_msgs/Image',
               read_only=True),
     ParamSpec('image_qos', 'auto', 'Reliability of the image subscription: auto (reliable '
@@ -68,7 +86,7 @@ PARAMETERS = (
               'Raw images are large: best effort loses many of them over Fast DDS\'s UDP '
               'transport here, reliable does not', read_only=True,
               additional_constraints='auto, reliable or best_effort'),
-    ParamSpec('camera_info_topic', '/camera/camera_info', 'CameraInfo topic (source topic)',
+    ParamSpec('camera_info_topic', topics.IMAGE_CAMERA_INFO, 'CameraInfo topic (source topic)',
               read_only=True),
     ParamSpec('fps', 0.0, 'Frame rate: stamps of video/image/JSON sources advance by 1/fps '
               '(0 = the video file\'s own rate, 30 for directories); camera: rate requested '
@@ -113,11 +131,14 @@ PARAMETERS = (
               min_value=0),
     ParamSpec('wait_timeout_s', 10.0, 'Longest wait for those subscribers, seconds',
               min_value=0.0),
+    ParamSpec('restart_after_s', 1.0, 'Source topic: image stamps jumping back by this much or '
+              'more start a new stream (a looped bag, a restarted driver, a clock reset); a '
+              'smaller step back or a repeated stamp drops the image as stale', min_value=0.001),
     ParamSpec('frame_id', 'camera_optical_frame', 'frame_id of the keypoints and camera info '
               '(source topic: the image\'s own frame_id when it has one)'),
 )
 
-ANNOTATED_TOPIC = '/mocap/keypoints2d/annotated'
+ANNOTATED_TOPIC = topics.ANNOTATED
 
 
 class _LockedRateMeter(RateMeter):
@@ -148,12 +169,17 @@ def main(args: Optional[List[str]] = None) -> int:
     node = None
     try:
         try:
-            node = node_class()()
+            node = KeypointsNode()
         except (SourceError, FileNotFoundError, ValueError, ParameterException) as exc:
             print(f'keypoints: error: {exc}', file=sys.stderr)
             return 2
         while rclpy.ok() and not node.done:
-            rclpy.spin_once(node, timeout_sec=0.1)
+            try:
+                rclpy.spin_once(node, timeout_sec=0.1)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                raise
+            except Exception as exc:  # noqa: BLE001 - the failing-callback policy
+                record_failure(node, 'callback', exc)
         node._drain()
         reason, error = node.source_end or ('stopped', None)
         # Let the last messages leave before the publishers go away.
@@ -178,381 +204,396 @@ def main(args: Optional[List[str]] = None) -> int:
             rclpy.shutdown()
 
 
+def _side_node(name: str, cli_args: Optional[List[str]]) -> Node:
+    """A publisher-only node in its own context (its own DDS participant). Large debug
+    images sent by the keypoint node's own participant were seen to make Fast DDS lose
+    best-effort keypoint messages at 40 fps on a loaded 2-core machine; from a second
+    participant they do not. Topic remaps apply; node-name remaps do not."""
+    from rclpy.context import Context
 
+    raw = list(sys.argv if cli_args is None else cli_args)
+    keep: List[str] = []
+    i = 0
+    while i < len(raw):
+        if raw[i] in ('-r', '--remap') and i + 1 < len(raw) and \
+                raw[i + 1].split(':=')[0].split(':')[-1] in ('__node', '__name'):
+            i += 2
+            continue
+        keep.append(raw[i])
+        i += 1
+    context = Context()
+    rclpy.init(args=keep, context=context)
+    return rclpy.create_node(name, context=context)
 
-@functools.lru_cache(maxsize=None)
-def node_class():
-    """The node class (``KeypointsNode``; rclpy is imported here, not at module import, so
-    ``--help`` stays fast). Keyword arguments of the constructor go to
-    ``rclpy.node.Node`` (``context``, ``parameter_overrides``, ...)."""
+class KeypointsNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__('keypoints', **kwargs)
+        # 'device' accepts an index (an integer to ROS: device:=1) or a path/URL string.
+        self.p = p = declare_parameters(self, [s for s in PARAMETERS if s.name != 'device'])
+        spec = next(s for s in PARAMETERS if s.name == 'device')
+        desc = spec.descriptor()
+        desc.dynamic_typing = True
+        p['device'] = str(self.declare_parameter('device', spec.default, desc).value)
+        self.kind = resolve_kind(p['source'], p['path'])
+        if p['image_qos'] not in ('auto', 'reliable', 'best_effort'):
+            raise ValueError(f"image_qos must be auto, reliable or best_effort, got "
+                             f"{p['image_qos']!r}")
+        log = self.get_logger()
+        calibration = None
+        if p['calibration_file']:
+            calibration = read_camera_info_yaml(p['calibration_file'])
+            log.info(f"calibration from {p['calibration_file']}: "
+                     f'{calibration.intrinsics.width}x{calibration.intrinsics.height}, '
+                     f'fx={calibration.intrinsics.fx:.1f} fy={calibration.intrinsics.fy:.1f}'
+                     f', {calibration.distortion_model}')
+        self.provider = IntrinsicsProvider(calibration, p['horizontal_fov_deg'],
+                                           p['calibration_file'])
+        self.source = None
+        fixed_size = None
+        if self.kind != 'topic':
+            self.source = open_source(
+                self.kind, p['path'], p['device'], fps=p['fps'], loop=p['loop'],
+                width=p['image_width'], height=p['image_height'], clock_ns=self._now_ns)
+        if self.kind == 'openpose_json':
+            detector = None
+            w, h = p['image_width'], p['image_height']
+            if w <= 0 or h <= 0:
+                w, h = infer_image_size(self.source.files)
+            fixed_size = (w, h)
+            self.detector_name = 'openpose_json (recorded detections)'
+        else:
+            detector = create_detector(
+                p['detector'], tracking=p['tracking'],
+                min_detection_confidence=p['min_detection_confidence'],
+                min_tracking_confidence=p['min_tracking_confidence'])
+            self.detector_name = detector.name
+        self.detector = detector
+        self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
+                                        undistort=p['undistort'],
+                                        annotate=p['publish_annotated'],
+                                        fixed_size=fixed_size,
+                                        restart_after_s=p['restart_after_s'])
+        self.pub_kp = self.create_publisher(PointCloud2, topics.KEYPOINTS, SENSOR_QOS)
+        self.pub_info = self.create_publisher(CameraInfo, topics.CAMERA_INFO, STREAM_QOS)
+        self.pub_annotated = None
+        self._annotated_node = None
+        if p['publish_annotated']:
+            self._annotated_node = _side_node(self.get_name() + '_annotated',
+                                             kwargs.get('cli_args'))
+            # Reliable (serves reliable and best-effort subscribers): large best-effort
+            # samples are often lost over UDP; keep-last 2 never queues stale images.
+            self.pub_annotated = self._annotated_node.create_publisher(
+                Image, ANNOTATED_TOPIC,
+                QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
+                           reliability=ReliabilityPolicy.RELIABLE))
+        description = (self.source.description if self.source is not None
+                       else f"topic {p['image_topic']}")
+        self.diag = NodeDiagnostics(self, 'keypoints', hardware_id=description)
+        self.diag.input = _LockedRateMeter()
+        self.diag.set_value('source', description)
+        self.diag.set_value('detector', self.detector_name)
+        self.diag.set_value('intrinsics', 'none yet')
+        self.detector_stats = LatencyStats()
+        self.results: Deque[tuple] = collections.deque()
+        self.guard = self.create_guard_condition(guarded(self, self._drain, 'results'))
+        self.worker = LatestWorker(self.processor.process, self._on_result).start()
+        self.feeder: Optional[SourceFeeder] = None
+        self.source_end: Optional[Tuple[str, Optional[BaseException]]] = None
+        self.published = 0
+        self.no_person = 0
+        self.stale = 0
+        self._worker_dropped = 0
+        self.input_order = StampOrder(p['restart_after_s'])    # images received (topic)
+        self.output_order = StampOrder(p['restart_after_s'])   # keypoints published
+        self.topic_index = 0
+        self.intrinsics_detail = ''
+        self.intrinsics_approx = False
+        self._last_error_t = -1e9
+        self._last_error = ''
+        self._limited: Dict[str, float] = {}
+        self._next_annotated = 0.0
+        self.t0_ns = self._now_ns()
+        self.create_timer(1.0, guarded(self, self._refresh_diagnostics, 'diagnostics'))
+        if self.kind == 'topic':
+            topic = p['image_topic']
+            self.compressed = topic.rstrip('/').endswith('/compressed')
+            self.image_type = CompressedImage if self.compressed else Image
+            self.image_sub = None
+            self.image_reliability = ''
+            self._subscribe_images()
+            if p['image_qos'] == 'auto':  # follow the publishers as they come and go
+                self.create_timer(1.0, guarded(self, self._subscribe_images, 'image QoS'))
+            self.create_subscription(CameraInfo, p['camera_info_topic'],
+                                     guarded(self, self._on_camera_info, 'camera_info'),
+                                     qos_profile_sensor_data)
+            if calibration is not None:
+                log.info(f"{p['camera_info_topic']} is ignored: the calibration file "
+                         'takes precedence')
+            log.info(f"listening on {topic} ({self.image_type.__name__}) and "
+                     f"{p['camera_info_topic']}; detector {self.detector_name}")
+        else:
+            self.start_timer = self.create_timer(0.02, guarded(self, self._maybe_start, 'start'))
+            mode = ('live' if self.source.live else 'at its frame rate, dropping frames '
+                    'the detector cannot keep up with' if p['realtime']
+                    else 'as fast as possible, no drops')
+            log.info(f'{description}: {mode}; detector {self.detector_name}')
 
-    import rclpy
-    from rclpy.event_handler import SubscriptionEventCallbacks
-    from rclpy.node import Node
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-    from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+    # --- time -------------------------------------------------------------------------
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
 
-    from mocap_core.camera import CameraCalibration, read_camera_info_yaml
-    from mocap_core.diagnostics import NodeDiagnostics
-    from mocap_core.qos import SENSOR_QOS, STREAM_QOS
-    from mocap_core.ros_conversions import (MessageError, bgr_to_image,
-                                            camera_info_to_intrinsics,
-                                            compressed_image_to_bgr, image_to_bgr,
-                                            intrinsics_to_camera_info, keypoints_to_cloud,
-                                            make_header, stamp_to_ns)
+    # --- logging helpers --------------------------------------------------------------
+    def _warn_limited(self, key: str, text: str, period_s: float = 5.0) -> None:
+        """Warn, at most once per ``period_s`` for the same ``key``."""
+        now = time.monotonic()
+        if now - self._limited.get(key, -1e9) >= period_s:
+            self._limited[key] = now
+            self.get_logger().warn(text)
 
-    from .detector import create_detector
-    from .intrinsics import IntrinsicsProvider
-    from .pipeline import FrameProcessor
-    from .sources import Frame, open_source, resolve_kind
-    from .worker import LatestWorker, SourceFeeder
+    def _problem(self, key: str, text: str) -> None:
+        self.diag.errors += 1
+        self._last_error, self._last_error_t = text, time.monotonic()
+        self._warn_limited(key, text)
 
-    def _side_node(name: str, cli_args: Optional[List[str]]) -> Node:
-        """A publisher-only node in its own context (its own DDS participant). Large debug
-        images sent by the keypoint node's own participant were seen to make Fast DDS lose
-        best-effort keypoint messages at 40 fps on a loaded 2-core machine; from a second
-        participant they do not. Topic remaps apply; node-name remaps do not."""
-        from rclpy.context import Context
+    # --- file and camera sources --------------------------------------------------------
+    def _ready(self) -> bool:
+        need = self.p['wait_for_subscribers']
+        if need <= 0 or self.pub_kp.get_subscription_count() >= need:
+            return True
+        waited = (self._now_ns() - self.t0_ns) * 1e-9
+        if waited > self.p['wait_timeout_s']:
+            self.get_logger().warn(f'only {self.pub_kp.get_subscription_count()} of {need} '
+                                   f'subscribers after {waited:.1f} s; starting anyway')
+            return True
+        return False
 
-        raw = list(sys.argv if cli_args is None else cli_args)
-        keep: List[str] = []
-        i = 0
-        while i < len(raw):
-            if raw[i] in ('-r', '--remap') and i + 1 < len(raw) and \
-                    raw[i + 1].split(':=')[0].split(':')[-1] in ('__node', '__name'):
-                i += 2
-                continue
-            keep.append(raw[i])
-            i += 1
-        context = Context()
-        rclpy.init(args=keep, context=context)
-        return rclpy.create_node(name, context=context)
+    def _maybe_start(self) -> None:
+        if self.feeder is not None or not self._ready():
+            return
+        self.start_timer.cancel()
+        self.feeder = SourceFeeder(self.source, self.worker, realtime=self.p['realtime'],
+                                   on_frame=lambda f: self.diag.input.tick(),
+                                   on_end=self._on_source_end).start()
 
-    class KeypointsNode(Node):
-        def __init__(self, **kwargs) -> None:
-            super().__init__('keypoints', **kwargs)
-            # 'device' accepts an index (an integer to ROS: device:=1) or a path/URL string.
-            self.p = p = declare_parameters(self, [s for s in PARAMETERS if s.name != 'device'])
-            spec = next(s for s in PARAMETERS if s.name == 'device')
-            desc = spec.descriptor()
-            desc.dynamic_typing = True
-            p['device'] = str(self.declare_parameter('device', spec.default, desc).value)
-            self.kind = resolve_kind(p['source'], p['path'])
-            if p['image_qos'] not in ('auto', 'reliable', 'best_effort'):
-                raise ValueError(f"image_qos must be auto, reliable or best_effort, got "
-                                 f"{p['image_qos']!r}")
-            log = self.get_logger()
-            calibration = None
-            if p['calibration_file']:
-                calibration = read_camera_info_yaml(p['calibration_file'])
-                log.info(f"calibration from {p['calibration_file']}: "
-                         f'{calibration.intrinsics.width}x{calibration.intrinsics.height}, '
-                         f'fx={calibration.intrinsics.fx:.1f} fy={calibration.intrinsics.fy:.1f}'
-                         f', {calibration.distortion_model}')
-            self.provider = IntrinsicsProvider(calibration, p['horizontal_fov_deg'],
-                                               p['calibration_file'])
-            self.source = None
-            fixed_size = None
-            if self.kind != 'topic':
-                self.source = open_source(
-                    self.kind, p['path'], p['device'], fps=p['fps'], loop=p['loop'],
-                    width=p['image_width'], height=p['image_height'], clock_ns=self._now_ns)
-            if self.kind == 'openpose_json':
-                detector = None
-                w, h = p['image_width'], p['image_height']
-                if w <= 0 or h <= 0:
-                    w, h = infer_image_size(self.source.files)
-                fixed_size = (w, h)
-                self.detector_name = 'openpose_json (recorded detections)'
+    def _on_source_end(self, reason: str, error: Optional[BaseException]) -> None:
+        self.source_end = (reason, error)  # feeder thread
+        self.guard.trigger()
+
+    # --- topic source ------------------------------------------------------------------
+    def _on_image(self, msg) -> None:
+        self.diag.input.tick()
+        stamp = stamp_to_ns(msg.header.stamp)
+        previous = self.input_order.last_ns
+        verdict = self.input_order.check(stamp)
+        if verdict == 'stale':
+            self.stale += 1
+            self.diag.dropped += 1
+            self._problem('stamp', f'image stamp {stamp} ns is not after the previous '
+                          f'{previous} ns (a duplicate or a late image): dropping the image')
+            return
+        if verdict == 'restart':
+            self.get_logger().warn(
+                f'image stamps jumped back by {(previous - stamp) * 1e-9:.1f} s (a bag played '
+                'again, a restarted driver): starting a new stream')
+        convert = compressed_image_to_bgr if self.compressed else image_to_bgr
+        frame = Frame(stamp, None, self.topic_index,
+                      f"{self.p['image_topic']} image {self.topic_index}",
+                      decode=lambda m=msg: convert(m), frame_id=msg.header.frame_id)
+        self.topic_index += 1
+        if self.p['synchronous']:
+            self.process_now(frame)
+        else:
+            self.worker.submit(frame)
+
+    # --- offline processing (``mocap process``) -------------------------------------------
+    def offline_frames(self) -> Iterator[Frame]:
+        """The frames of the node's file source, in order, for processing in the calling
+        thread with :meth:`process_offline` (the node is not spun: its own feeder thread
+        never starts). Raises ValueError for the topic source."""
+        if self.source is None:
+            raise ValueError('offline frames need a file source (source:=video, images or '
+                             'openpose_json), not an image topic')
+        return iter(self.source)
+
+    @property
+    def frame_count(self) -> Optional[int]:
+        """Number of frames of the file source when known (video files, directories)."""
+        n = int(getattr(self.source, 'frame_count', 0) or 0)
+        return n or None
+
+    @property
+    def frame_id(self) -> str:
+        """The frame_id of images without their own (parameter ``frame_id``)."""
+        return self.p['frame_id']
+
+    def process_offline(self, frame: Frame) -> None:
+        """Count one input frame, detect and publish it in the calling thread (nothing is
+        dropped; a failure drops and counts this frame only, as live)."""
+        self.diag.input.tick()
+        try:
+            self.process_now(frame)
+        except Exception as exc:  # noqa: BLE001 - the failing-callback policy, offline
+            record_failure(self, 'frame', exc)
+
+    def process_now(self, frame) -> None:
+        """Detect and publish one frame in the calling thread (offline processing:
+        ``synchronous`` images and ``mocap process`` on a video; nothing is dropped)."""
+        t0 = time.perf_counter()
+        try:
+            result, error = self.processor.process(frame), None
+        except Exception as exc:  # noqa: BLE001 - reported per frame, as the worker does
+            result, error = None, exc
+        self._handle(frame, result, error, time.perf_counter() - t0)
+
+    def _subscribe_images(self) -> None:
+        """(Re)create the image subscription with the reliability ``image_qos`` asks for
+        (``auto``: what the current publishers offer; kept once images arrive)."""
+        mode = self.p['image_qos']
+        topic = self.p['image_topic']
+        if mode == 'auto':
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos and self.image_sub is not None:
+                return  # no publisher now: keep the subscription as it is
+            mode = ('reliable' if infos and all(
+                i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+                else 'best_effort')
+        if mode == self.image_reliability:
+            return
+        if self.image_sub is not None:
+            self.destroy_subscription(self.image_sub)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
+                         reliability=(ReliabilityPolicy.RELIABLE if mode == 'reliable'
+                                      else ReliabilityPolicy.BEST_EFFORT))
+        self.image_sub = self.create_subscription(
+            self.image_type, topic, guarded(self, self._on_image, 'image'), qos,
+            event_callbacks=SubscriptionEventCallbacks(
+                incompatible_qos=self._on_incompatible_qos))
+        self.image_reliability = mode
+        self.diag.set_value('image_qos', mode)
+        self.get_logger().info(f'subscribed to {topic} ({self.image_type.__name__}, '
+                               f'{mode.replace("_", " ")})')
+
+    def _on_incompatible_qos(self, event) -> None:
+        self._warn_limited('qos', f"a publisher of {self.p['image_topic']} offers "
+                           'incompatible QoS (a best-effort publisher cannot serve a '
+                           'reliable subscription): set image_qos:=best_effort or auto')
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            intr = camera_info_to_intrinsics(msg)
+        except MessageError as exc:
+            self._problem('camera_info', f"ignoring {self.p['camera_info_topic']}: {exc} "
+                          '(an uncalibrated camera has K = 0)')
+            return
+        calib = CameraCalibration(intr, str(msg.distortion_model),
+                                  tuple(float(d) for d in msg.d))
+        if self.provider.update_camera_info(calib):
+            self.get_logger().info(
+                f"camera_info: {intr.width}x{intr.height}, fx={intr.fx:.1f} "
+                f"fy={intr.fy:.1f} cx={intr.cx:.1f} cy={intr.cy:.1f}, "
+                f"{msg.distortion_model or 'no'} distortion")
+
+    # --- results -----------------------------------------------------------------------
+    def _on_result(self, frame, result, error, seconds) -> None:
+        self.results.append((frame, result, error, seconds))  # worker thread
+        self.guard.trigger()
+
+    def _drain(self) -> None:
+        while self.results:
+            frame, result, error, seconds = self.results.popleft()
+            self._handle(frame, result, error, seconds)
+        self._count_worker_drops()
+
+    def _count_worker_drops(self) -> None:
+        """Add the frames the detector thread dropped since the last call to the dropped
+        count (which also counts stale images and failed callbacks)."""
+        dropped = self.worker.dropped
+        self.diag.dropped += dropped - self._worker_dropped
+        self._worker_dropped = dropped
+
+    def _handle(self, frame, res: Optional[FrameResult], error, seconds: float) -> None:
+        log = self.get_logger()
+        if error is not None:
+            self._problem(f'detector:{type(error).__name__}',
+                          f'{frame.name}: detector failed ({type(error).__name__}: '
+                          f'{error}); skipping the frame')
+            return
+        for note in res.notes:
+            if 'approximating' in note or 'ignoring' in note or 'not supported' in note:
+                log.warn(note)
             else:
-                detector = create_detector(
-                    p['detector'], tracking=p['tracking'],
-                    min_detection_confidence=p['min_detection_confidence'],
-                    min_tracking_confidence=p['min_tracking_confidence'])
-                self.detector_name = detector.name
-            self.detector = detector
-            self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
-                                            undistort=p['undistort'],
-                                            annotate=p['publish_annotated'],
-                                            fixed_size=fixed_size)
-            self.pub_kp = self.create_publisher(PointCloud2, '/mocap/keypoints2d', SENSOR_QOS)
-            self.pub_info = self.create_publisher(CameraInfo, '/mocap/camera_info', STREAM_QOS)
-            self.pub_annotated = None
-            self._annotated_node = None
-            if p['publish_annotated']:
-                self._annotated_node = _side_node(self.get_name() + '_annotated',
-                                                 kwargs.get('cli_args'))
-                # Reliable (serves reliable and best-effort subscribers): large best-effort
-                # samples are often lost over UDP; keep-last 2 never queues stale images.
-                self.pub_annotated = self._annotated_node.create_publisher(
-                    Image, ANNOTATED_TOPIC,
-                    QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
-                               reliability=ReliabilityPolicy.RELIABLE))
-            description = (self.source.description if self.source is not None
-                           else f"topic {p['image_topic']}")
-            self.diag = NodeDiagnostics(self, 'keypoints', hardware_id=description)
-            self.diag.input = _LockedRateMeter()
-            self.diag.set_value('source', description)
-            self.diag.set_value('detector', self.detector_name)
-            self.diag.set_value('intrinsics', 'none yet')
-            self.detector_stats = LatencyStats()
-            self.results: Deque[tuple] = collections.deque()
-            self.guard = self.create_guard_condition(self._drain)
-            self.worker = LatestWorker(self.processor.process, self._on_result).start()
-            self.feeder: Optional[SourceFeeder] = None
-            self.source_end: Optional[Tuple[str, Optional[BaseException]]] = None
-            self.published = 0
-            self.no_person = 0
-            self.stale = 0
-            self.last_stamp = -1
-            self.last_input_stamp = -1
-            self.topic_index = 0
-            self.intrinsics_detail = ''
-            self.intrinsics_approx = False
-            self._last_error_t = -1e9
-            self._last_error = ''
-            self._limited: Dict[str, float] = {}
-            self._next_annotated = 0.0
-            self.t0_ns = self._now_ns()
-            self.create_timer(1.0, self._refresh_diagnostics)
-            if self.kind == 'topic':
-                topic = p['image_topic']
-                self.compressed = topic.rstrip('/').endswith('/compressed')
-                self.image_type = CompressedImage if self.compressed else Image
-                self.image_sub = None
-                self.image_reliability = ''
-                self._subscribe_images()
-                if p['image_qos'] == 'auto':  # follow the publishers as they come and go
-                    self.create_timer(1.0, self._subscribe_images)
-                self.create_subscription(CameraInfo, p['camera_info_topic'],
-                                         self._on_camera_info, qos_profile_sensor_data)
-                if calibration is not None:
-                    log.info(f"{p['camera_info_topic']} is ignored: the calibration file "
-                             'takes precedence')
-                log.info(f"listening on {topic} ({self.image_type.__name__}) and "
-                         f"{p['camera_info_topic']}; detector {self.detector_name}")
-            else:
-                self.start_timer = self.create_timer(0.02, self._maybe_start)
-                mode = ('live' if self.source.live else 'at its frame rate, dropping frames '
-                        'the detector cannot keep up with' if p['realtime']
-                        else 'as fast as possible, no drops')
-                log.info(f'{description}: {mode}; detector {self.detector_name}')
-
-        # --- time -------------------------------------------------------------------------
-        def _now_ns(self) -> int:
-            return self.get_clock().now().nanoseconds
-
-        # --- logging helpers --------------------------------------------------------------
-        def _warn_limited(self, key: str, text: str, period_s: float = 5.0) -> None:
-            """Warn, at most once per ``period_s`` for the same ``key``."""
+                log.info(note)
+        if res.error is not None:
+            # Files: one warning per file. Streams: one per kind of error and 5 s.
+            key = res.error if self.kind in ('images', 'openpose_json') else \
+                re.sub(r'\d+', '#', res.error)
+            self._problem(key, f'skipping frame: {res.error}')
+            return
+        if self.output_order.check(res.stamp_ns) == 'stale':
+            self.stale += 1
+            self.diag.dropped += 1
+            self._problem('order', f'{res.name}: stamp {res.stamp_ns} not after the last '
+                          'published one; dropping it')
+            return
+        header = make_header(res.stamp_ns, res.frame_id or self.p['frame_id'])
+        fi = res.intrinsics
+        if fi.detail != self.intrinsics_detail:
+            self.intrinsics_detail = fi.detail
+            self.intrinsics_approx = fi.approximate
+            self.diag.set_value('intrinsics', fi.detail)
+        self.pub_info.publish(intrinsics_to_camera_info(fi.intrinsics, header))
+        self.pub_kp.publish(keypoints_to_cloud(res.keypoints, header))
+        if self.pub_annotated is not None and res.annotated is not None:
             now = time.monotonic()
-            if now - self._limited.get(key, -1e9) >= period_s:
-                self._limited[key] = now
-                self.get_logger().warn(text)
+            if now >= self._next_annotated:
+                rate = self.p['annotated_max_fps']
+                self._next_annotated = now + (1.0 / rate if rate > 0 else 0.0)
+                self.pub_annotated.publish(bgr_to_image(res.annotated, header))
+        self.published += 1
+        self.diag.latency.add(seconds)
+        if res.detector_s > 0:
+            self.detector_stats.add(res.detector_s)
+        self.diag.output.tick()
+        if not res.person_found:
+            self.no_person += 1
+            log.info(f'no person found ({res.name}); publishing all confidences 0',
+                     throttle_duration_sec=2.0)
 
-        def _problem(self, key: str, text: str) -> None:
-            self.diag.errors += 1
-            self._last_error, self._last_error_t = text, time.monotonic()
-            self._warn_limited(key, text)
+    def _refresh_diagnostics(self) -> None:
+        s = self.detector_stats.summary()
+        for key, v in (('detector_ms_median', s['median']), ('detector_ms_p95', s['p95'])):
+            self.diag.set_value(key, 'nan' if np.isnan(v) else f'{v * 1e3:.2f}')
+        self.diag.set_value('frames_without_person', self.no_person)
+        self._count_worker_drops()
+        if time.monotonic() - self._last_error_t < 5.0:
+            self.diag.warn(self._last_error)
+        elif self.intrinsics_approx:
+            self.diag.warn('intrinsics approximated from the image size and field of view '
+                           '(no calibration)')
+        else:
+            self.diag.warn(None)
 
-        # --- file and camera sources --------------------------------------------------------
-        def _ready(self) -> bool:
-            need = self.p['wait_for_subscribers']
-            if need <= 0 or self.pub_kp.get_subscription_count() >= need:
-                return True
-            waited = (self._now_ns() - self.t0_ns) * 1e-9
-            if waited > self.p['wait_timeout_s']:
-                self.get_logger().warn(f'only {self.pub_kp.get_subscription_count()} of {need} '
-                                       f'subscribers after {waited:.1f} s; starting anyway')
-                return True
-            return False
+    @property
+    def done(self) -> bool:
+        return (self.source_end is not None and self.worker.idle and not self.results)
 
-        def _maybe_start(self) -> None:
-            if self.feeder is not None or not self._ready():
-                return
-            self.start_timer.cancel()
-            self.feeder = SourceFeeder(self.source, self.worker, realtime=self.p['realtime'],
-                                       on_frame=lambda f: self.diag.input.tick(),
-                                       on_end=self._on_source_end).start()
+    def summary(self) -> str:
+        self._count_worker_drops()
+        return (f'{self.published} frames published, {self.diag.dropped} '
+                f'dropped, {self.diag.errors} skipped, {self.no_person} without a person')
 
-        def _on_source_end(self, reason: str, error: Optional[BaseException]) -> None:
-            self.source_end = (reason, error)  # feeder thread
-            self.guard.trigger()
-
-        # --- topic source ------------------------------------------------------------------
-        def _on_image(self, msg) -> None:
-            self.diag.input.tick()
-            stamp = stamp_to_ns(msg.header.stamp)
-            if stamp <= self.last_input_stamp:
-                self.stale += 1
-                self._problem('stamp', f'image stamp {stamp} ns is not after the previous '
-                              f'{self.last_input_stamp} ns (time went backwards or a '
-                              'duplicate): dropping the image')
-                return
-            self.last_input_stamp = stamp
-            convert = compressed_image_to_bgr if self.compressed else image_to_bgr
-            frame = Frame(stamp, None, self.topic_index,
-                          f"{self.p['image_topic']} image {self.topic_index}",
-                          decode=lambda m=msg: convert(m), frame_id=msg.header.frame_id)
-            self.topic_index += 1
-            if self.p['synchronous']:
-                self.process_now(frame)
-            else:
-                self.worker.submit(frame)
-
-        def process_now(self, frame) -> None:
-            """Detect and publish one frame in the calling thread (offline processing:
-            ``synchronous`` images and ``mocap process`` on a video; nothing is dropped)."""
-            t0 = time.perf_counter()
-            try:
-                result, error = self.processor.process(frame), None
-            except Exception as exc:  # noqa: BLE001 - reported per frame, as the worker does
-                result, error = None, exc
-            self._handle(frame, result, error, time.perf_counter() - t0)
-
-        def _subscribe_images(self) -> None:
-            """(Re)create the image subscription with the reliability ``image_qos`` asks for
-            (``auto``: what the current publishers offer; kept once images arrive)."""
-            mode = self.p['image_qos']
-            topic = self.p['image_topic']
-            if mode == 'auto':
-                infos = self.get_publishers_info_by_topic(topic)
-                if not infos and self.image_sub is not None:
-                    return  # no publisher now: keep the subscription as it is
-                mode = ('reliable' if infos and all(
-                    i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-                    else 'best_effort')
-            if mode == self.image_reliability:
-                return
-            if self.image_sub is not None:
-                self.destroy_subscription(self.image_sub)
-            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
-                             reliability=(ReliabilityPolicy.RELIABLE if mode == 'reliable'
-                                          else ReliabilityPolicy.BEST_EFFORT))
-            self.image_sub = self.create_subscription(
-                self.image_type, topic, self._on_image, qos,
-                event_callbacks=SubscriptionEventCallbacks(
-                    incompatible_qos=self._on_incompatible_qos))
-            self.image_reliability = mode
-            self.diag.set_value('image_qos', mode)
-            self.get_logger().info(f'subscribed to {topic} ({self.image_type.__name__}, '
-                                   f'{mode.replace("_", " ")})')
-
-        def _on_incompatible_qos(self, event) -> None:
-            self._warn_limited('qos', f"a publisher of {self.p['image_topic']} offers "
-                               'incompatible QoS (a best-effort publisher cannot serve a '
-                               'reliable subscription): set image_qos:=best_effort or auto')
-
-        def _on_camera_info(self, msg: CameraInfo) -> None:
-            try:
-                intr = camera_info_to_intrinsics(msg)
-            except MessageError as exc:
-                self._problem('camera_info', f"ignoring {self.p['camera_info_topic']}: {exc} "
-                              '(an uncalibrated camera has K = 0)')
-                return
-            calib = CameraCalibration(intr, str(msg.distortion_model),
-                                      tuple(float(d) for d in msg.d))
-            if self.provider.update_camera_info(calib):
-                self.get_logger().info(
-                    f"camera_info: {intr.width}x{intr.height}, fx={intr.fx:.1f} "
-                    f"fy={intr.fy:.1f} cx={intr.cx:.1f} cy={intr.cy:.1f}, "
-                    f"{msg.distortion_model or 'no'} distortion")
-
-        # --- results -----------------------------------------------------------------------
-        def _on_result(self, frame, result, error, seconds) -> None:
-            self.results.append((frame, result, error, seconds))  # worker thread
-            self.guard.trigger()
-
-        def _drain(self) -> None:
-            while self.results:
-                frame, result, error, seconds = self.results.popleft()
-                self._handle(frame, result, error, seconds)
-            self.diag.dropped = self.worker.dropped + self.stale
-
-        def _handle(self, frame, res: Optional[FrameResult], error, seconds: float) -> None:
-            log = self.get_logger()
-            if error is not None:
-                self._problem(f'detector:{type(error).__name__}',
-                              f'{frame.name}: detector failed ({type(error).__name__}: '
-                              f'{error}); skipping the frame')
-                return
-            for note in res.notes:
-                if 'approximating' in note or 'ignoring' in note or 'not supported' in note:
-                    log.warn(note)
-                else:
-                    log.info(note)
-            if res.error is not None:
-                # Files: one warning per file. Streams: one per kind of error and 5 s.
-                key = res.error if self.kind in ('images', 'openpose_json') else \
-                    re.sub(r'\d+', '#', res.error)
-                self._problem(key, f'skipping frame: {res.error}')
-                return
-            if res.stamp_ns <= self.last_stamp:
-                self.stale += 1
-                self._problem('order', f'{res.name}: stamp {res.stamp_ns} not after the last '
-                              'published one; dropping it')
-                return
-            self.last_stamp = res.stamp_ns
-            header = make_header(res.stamp_ns, res.frame_id or self.p['frame_id'])
-            fi = res.intrinsics
-            if fi.detail != self.intrinsics_detail:
-                self.intrinsics_detail = fi.detail
-                self.intrinsics_approx = fi.approximate
-                self.diag.set_value('intrinsics', fi.detail)
-            self.pub_info.publish(intrinsics_to_camera_info(fi.intrinsics, header))
-            self.pub_kp.publish(keypoints_to_cloud(res.keypoints, header))
-            if self.pub_annotated is not None and res.annotated is not None:
-                now = time.monotonic()
-                if now >= self._next_annotated:
-                    rate = self.p['annotated_max_fps']
-                    self._next_annotated = now + (1.0 / rate if rate > 0 else 0.0)
-                    self.pub_annotated.publish(bgr_to_image(res.annotated, header))
-            self.published += 1
-            self.diag.latency.add(seconds)
-            if res.detector_s > 0:
-                self.detector_stats.add(res.detector_s)
-            self.diag.output.tick()
-            if not res.person_found:
-                self.no_person += 1
-                log.info(f'no person found ({res.name}); publishing all confidences 0',
-                         throttle_duration_sec=2.0)
-
-        def _refresh_diagnostics(self) -> None:
-            s = self.detector_stats.summary()
-            for key, v in (('detector_ms_median', s['median']), ('detector_ms_p95', s['p95'])):
-                self.diag.set_value(key, 'nan' if np.isnan(v) else f'{v * 1e3:.2f}')
-            self.diag.set_value('frames_without_person', self.no_person)
-            self.diag.dropped = self.worker.dropped + self.stale
-            if time.monotonic() - self._last_error_t < 5.0:
-                self.diag.warn(self._last_error)
-            elif self.intrinsics_approx:
-                self.diag.warn('intrinsics approximated from the image size and field of view '
-                               '(no calibration)')
-            else:
-                self.diag.warn(None)
-
-        @property
-        def done(self) -> bool:
-            return (self.source_end is not None and self.worker.idle and not self.results)
-
-        def summary(self) -> str:
-            return (f'{self.published} frames published, {self.worker.dropped + self.stale} '
-                    f'dropped, {self.diag.errors} skipped, {self.no_person} without a person')
-
-        def shutdown(self) -> None:
-            if self.feeder is not None:
-                self.feeder.stop(2.0)
-            self.worker.stop(5.0)
-            if self.source is not None:
-                self.source.close()
-            if self.detector is not None:
-                self.detector.close()
-            if self._annotated_node is not None:
-                context = self._annotated_node.context
-                self._annotated_node.destroy_node()
-                context.try_shutdown()
-
-    return KeypointsNode
+    def shutdown(self) -> None:
+        if self.feeder is not None:
+            self.feeder.stop(2.0)
+        self.worker.stop(5.0)
+        if self.source is not None:
+            self.source.close()
+        if self.detector is not None:
+            self.detector.close()
+        if self._annotated_node is not None:
+            context = self._annotated_node.context
+            self._annotated_node.destroy_node()
+            context.try_shutdown()
 
 
 if __name__ == '__main__':

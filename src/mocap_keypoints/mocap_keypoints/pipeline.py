@@ -18,6 +18,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from mocap_core.skeleton import KEYPOINT_EDGES, KEYPOINT_NAMES, NUM_KEYPOINTS
+from mocap_core.streams import StampOrder
 
 from .detector import Detector
 from .intrinsics import FrameIntrinsics, IntrinsicsProvider, distortion_supported, \
@@ -103,8 +104,11 @@ class FrameProcessor:
 
     def __init__(self, detector: Optional[Detector], intrinsics: IntrinsicsProvider,
                  max_persons: int = 1, undistort: bool = True, annotate: bool = False,
-                 fixed_size: Optional[Tuple[int, int]] = None) -> None:
+                 fixed_size: Optional[Tuple[int, int]] = None,
+                 restart_after_s: float = 1.0) -> None:
         self.detector = detector
+        # stamps jumping back start a new stream: the detector forgets the person it tracked
+        self.order = StampOrder(restart_after_s)
         self.intrinsics = intrinsics
         self.max_persons = int(max_persons)
         self.undistort = undistort
@@ -115,6 +119,8 @@ class FrameProcessor:
 
     def process(self, frame: Frame) -> FrameResult:
         res = FrameResult(frame.stamp_ns, frame.index, frame.name, frame.frame_id)
+        if self.order.check(frame.stamp_ns) == 'restart' and self.detector is not None:
+            self.detector.reset()
         if frame.error is not None:
             res.error = frame.error
             return res

@@ -288,7 +288,7 @@ class OpenPoseSource(FrameSource):
 
     def __init__(self, path, fps: float = 30.0, loop: bool = False, **kw) -> None:
         super().__init__(**kw)
-        from .openpose import list_openpose_files
+        from mocap_core.data.openpose import list_openpose_files
 
         self.path = Path(path)
         try:
@@ -302,7 +302,7 @@ class OpenPoseSource(FrameSource):
                             f'{self.fps:g} fps{", looping" if loop else ""})')
 
     def __iter__(self) -> Iterator[Frame]:
-        from .openpose import OpenPoseError, read_openpose_file
+        from mocap_core.data.openpose import OpenPoseError, read_openpose_file
 
         index = 0
         while True:

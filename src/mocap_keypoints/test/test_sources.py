@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from mocap_keypoints.openpose import list_openpose_files, read_openpose_file
+from mocap_core.data.openpose import list_openpose_files, read_openpose_file
 from mocap_keypoints.sources import (CameraSource, Frame, ImageDirectorySource, OpenPoseSource,
                                      SourceError, VideoSource, check_image, open_source,
                                      parse_device, resolve_kind)

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import importlib
 import json
 import os
 import signal
@@ -39,11 +38,11 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from .. import plugins, topics
+
 ROOT = Path(__file__).resolve().parents[4]
-NODE_BENCHES = {'keypoints': 'mocap_keypoints.bench', 'lifter': 'mocap_lifter.bench',
-                'physics': 'mocap_physics.bench', 'gmr': 'mocap_global.bench'}
-STAGE_TOPICS = {'keypoints': '/mocap/keypoints2d', 'lifter': '/mocap/lifter/motion',
-                'physics': '/mocap/physics/motion', 'world': '/mocap/world/motion'}
+STAGE_TOPICS = {'keypoints': topics.KEYPOINTS, 'lifter': topics.LIFTER_MOTION,
+                'physics': topics.PHYSICS_MOTION, 'world': topics.WORLD_MOTION}
 
 
 def _proc_stats(pid: int) -> Optional[Dict[str, float]]:
@@ -96,10 +95,10 @@ def repeated_bag(bag: Path, out: Path, times: int, gap_s: float = 2.0) -> Path:
     from ..bag_io import BagReader, BagWriter
     from ..ros_msgs import deserialize, serialize
 
-    topics = ['/mocap/keypoints2d', '/mocap/camera_info']
+    names = [topics.KEYPOINTS, topics.CAMERA_INFO]
     with BagReader(bag) as reader:
-        infos = {t: reader.topics[t] for t in topics}
-        msgs = list(reader.messages(topics=topics))
+        infos = {t: reader.topics[t] for t in names}
+        msgs = list(reader.messages(topics=names))
     span = msgs[-1].timestamp_ns - msgs[0].timestamp_ns + int(gap_s * 1e9)
     with BagWriter(out, overwrite=True) as writer:
         for t, i in infos.items():
@@ -170,8 +169,11 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
     procs: Dict[str, subprocess.Popen] = {}
     logs: Dict[str, Path] = {}
 
-    def start(name: str, pkg: str, params: Dict[str, object]) -> None:
-        cmd = ros2 + [pkg, name, '--ros-args']
+    installed = plugins.nodes()
+
+    def start(name: str, params: Dict[str, object]) -> None:
+        plugin = installed[name]
+        cmd = ros2 + [plugin.package, plugin.executable, '--ros-args']
         for k, v in params.items():
             cmd += ['-p', f'{k}:={v}']
         logs[name] = work / f"{config['name']}_{name}.log"
@@ -193,14 +195,14 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
     stats: Dict[str, Dict[str, float]] = {}
     cpu0: Dict[str, float] = {}
     try:
-        start('lifter', 'mocap_lifter', {'mode': config['lifter_mode']})
-        start('physics', 'mocap_physics', {})
-        start('gmr', 'mocap_global', {'lookahead': config['lookahead']})
+        start('lifter', {'mode': config['lifter_mode']})
+        start('physics', {})
+        start('gmr', {'lookahead': config['lookahead']})
         for name, text in (('lifter', 'lifter ready'), ('physics', 'physics on'),
                            ('gmr', 'gmr ready')):
             wait_for(name, text)
         time.sleep(3.0)                                   # discovery between the processes
-        start('keypoints', 'mocap_keypoints', {'path': str(video), 'realtime': True,
+        start('keypoints', {'path': str(video), 'realtime': True,
                                                'loop': True, 'fps': 30.0,
                                                'wait_for_subscribers': 2})
         wait_for('keypoints', 'detector')
@@ -268,8 +270,9 @@ def cmd_soak(args: argparse.Namespace) -> int:
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
     ros2 = [sys.executable, '-m', 'mocap_core.cli.ros2']
     procs: Dict[str, subprocess.Popen] = {}
-    for pkg, exe in (('mocap_lifter', 'lifter'), ('mocap_physics', 'physics'),
-                     ('mocap_global', 'gmr')):
+    installed = plugins.nodes()
+    for stage in ('lifter', 'physics', 'gmr'):
+        pkg, exe = installed[stage].package, installed[stage].executable
         with (work / f'{exe}.log').open('wb') as f:
             procs[exe] = subprocess.Popen(ros2 + ['run', pkg, exe], env=env, stdout=f,
                                           stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
@@ -279,8 +282,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
         time.sleep(15.0)
         with (work / 'play.log').open('wb') as f:
             player = subprocess.Popen(ros2 + ['bag', 'play', str(args.bag), '--loop',
-                                              '--topics', '/mocap/camera_info',
-                                              '/mocap/keypoints2d'], env=env, stdout=f,
+                                              '--topics', topics.CAMERA_INFO,
+                                              topics.KEYPOINTS], env=env, stdout=f,
                                       stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         t0 = time.monotonic()
         while time.monotonic() - t0 < args.minutes * 60:
@@ -426,9 +429,8 @@ def add_parser(sub) -> None:
     ps.add_argument('--minutes', type=float, default=10.0)
     ps.add_argument('--output', default=str(ROOT / 'docs' / 'benchmarks' / 'soak.md'))
     ps.set_defaults(func=cmd_soak)
-    for name, module in NODE_BENCHES.items():
-        pn = bench_sub.add_parser(name, help=f'the {name} benchmark (python -m {module})',
+    for name, ep in plugins.benches().items():
+        pn = bench_sub.add_parser(name, help=f'the {name} benchmark ({ep.value})',
                                   add_help=False)
         pn.add_argument('rest', nargs=argparse.REMAINDER)
-        pn.set_defaults(func=lambda a, m=module: int(importlib.import_module(m).main(a.rest)
-                                                     or 0))
+        pn.set_defaults(func=lambda a, n=name: plugins.run_bench(n, a.rest))

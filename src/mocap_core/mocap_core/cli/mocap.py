@@ -248,10 +248,6 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-#: Modules providing ``add_train_parser(sub)`` and ``add_eval_parser(sub)``.
-MODEL_COMMANDS = ('mocap_lifter.cli', 'mocap_physics.cli', 'mocap_global.cli')
-
-
 def run_model_cli(commands, prog: str, argv: Optional[List[str]] = None) -> int:
     """``python -m <package>.cli train|eval ...`` for one model package: the same commands as
     ``mocap train|eval`` built from its ``add_train_parser`` / ``add_eval_parser``."""
@@ -330,16 +326,14 @@ def build_parser() -> argparse.ArgumentParser:
     pb.add_argument('--fps', type=float, help='frame rate (default: from the stamps)')
     pb.set_defaults(func=cmd_export_bvh)
 
-    # Training and evaluation commands live with their models, in the node packages.
+    # Training and evaluation commands live with their models, in the node packages, which
+    # register them as entry points (mocap_core.plugins).
     train_sub = sub.add_parser('train', help='train a model').add_subparsers(
         dest='model', metavar='MODEL')
     eval_sub = sub.add_parser('eval', help='evaluate a model').add_subparsers(
         dest='model', metavar='MODEL')
-    for module in MODEL_COMMANDS:
-        try:
-            commands = importlib.import_module(module)
-        except ImportError:
-            continue
+    from .. import plugins
+    for commands in plugins.command_modules():
         commands.add_train_parser(train_sub)
         commands.add_eval_parser(eval_sub)
     return parser
@@ -347,10 +341,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    from .bench import NODE_BENCHES
-    if len(argv) >= 2 and argv[0] == 'bench' and argv[1] in NODE_BENCHES:
+    from .. import plugins
+    if len(argv) >= 2 and argv[0] == 'bench' and argv[1] in plugins.benches():
         # the per-node benchmarks parse their own options (--help included)
-        return int(importlib.import_module(NODE_BENCHES[argv[1]]).main(argv[2:]) or 0)
+        return plugins.run_bench(argv[1], argv[2:])
     parser = build_parser()
     args = parser.parse_args(argv)
     if not hasattr(args, 'func'):

@@ -330,7 +330,7 @@ def cmd_from_openpose(args: argparse.Namespace) -> int:
 def most_confident_people(directories: Sequence[str]) -> Tuple[np.ndarray, List[str]]:
     """(N, 23) confidences of the most confident person (largest summed confidence) of every
     frame with at least one person, over OpenPose JSON folders; and the folder names."""
-    from mocap_keypoints.openpose import list_openpose_files, read_openpose_file
+    from mocap_core.data.openpose import list_openpose_files, read_openpose_file
 
     rows, names = [], []
     for d in directories:

@@ -28,7 +28,6 @@ YAML, e.g. ``--param lifter.mode=causal --param physics.gains_mode=learned``).
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 import time
@@ -36,18 +35,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
+from .. import topics as T
+from ..plugins import PIPELINE as NODES
+from ..plugins import PluginError, load_node_class
+
 STAGES = ('images', 'keypoints', 'lifter', 'physics')
-NODES = ('keypoints', 'lifter', 'physics', 'gmr')
-NODE_MODULES = {'keypoints': 'mocap_keypoints.node', 'lifter': 'mocap_lifter.node',
-                'physics': 'mocap_physics.node', 'gmr': 'mocap_global.node'}
 VIDEO_SUFFIXES = {'.mp4', '.avi', '.mov', '.mkv', '.webm', '.m4v', '.mpg', '.mpeg'}
 IMAGE_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'}
 #: Topics each stage's node produces (an input bag's copy of them is not kept).
 PRODUCED = {
-    'keypoints': ('/mocap/keypoints2d', '/mocap/camera_info'),
-    'lifter': ('/mocap/lifter/', '/mocap/skeleton/urdf'),
-    'physics': ('/mocap/physics/',),
-    'gmr': ('/mocap/world/',),
+    'keypoints': (T.KEYPOINTS, T.CAMERA_INFO),
+    'lifter': (T.stage_prefix('lifter'), T.SKELETON_URDF),
+    'physics': (T.stage_prefix('physics'),),
+    'gmr': (T.stage_prefix('world'),),
 }
 #: Parameters the offline run sets (overridable with --param).
 OFFLINE_DEFAULTS: Dict[str, Dict[str, Any]] = {
@@ -95,13 +95,13 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
         if image_topic not in topics:
             raise ProcessError(f'--image-topic {image_topic} is not in the input')
         images = [image_topic]
-    elif '/camera/image_raw' in images:
-        images = ['/camera/image_raw']
+    elif T.IMAGE in images:
+        images = [T.IMAGE]
     available = {
         'images': bool(images),
-        'keypoints': '/mocap/keypoints2d' in topics,
-        'lifter': '/mocap/lifter/motion' in topics,
-        'physics': '/mocap/physics/motion' in topics,
+        'keypoints': T.KEYPOINTS in topics,
+        'lifter': T.LIFTER_MOTION in topics,
+        'physics': T.PHYSICS_MOTION in topics,
     }
     if start == 'auto':
         start = next((s for s in STAGES if available[s]), '')
@@ -119,12 +119,10 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
                            '--image-topic')
     nodes = list(NODES[STAGES.index(start):])
     feed = {
-        'images': images[:1] + [t for t in ('/camera/camera_info',) if t in topics],
-        'keypoints': ['/mocap/keypoints2d'] + [t for t in ('/mocap/camera_info',)
-                                              if t in topics],
-        'lifter': ['/mocap/lifter/motion'] + [t for t in ('/mocap/lifter/contacts',)
-                                              if t in topics],
-        'physics': ['/mocap/physics/motion'],
+        'images': images[:1] + [t for t in (T.IMAGE_CAMERA_INFO,) if t in topics],
+        'keypoints': [T.KEYPOINTS] + [t for t in (T.CAMERA_INFO,) if t in topics],
+        'lifter': [T.LIFTER_MOTION] + [t for t in (T.LIFTER_CONTACTS,) if t in topics],
+        'physics': [T.PHYSICS_MOTION],
     }[start]
     produced = [p for n in nodes for p in PRODUCED[n]]
     dropped = [t for t in sorted(topics) if t not in feed and any(
@@ -172,7 +170,7 @@ class Recorder:
         header = getattr(msg, 'header', None)
         stamp = getattr(header, 'stamp', None)
         ts = self.now_ns
-        if stamp is not None and topic != '/diagnostics':
+        if stamp is not None and topic != T.DIAGNOSTICS:
             ts = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec) or self.now_ns
         self.writer.write_msg(topic, ts, msg, qos)
         self.counts[topic] = self.counts.get(topic, 0) + 1
@@ -250,7 +248,10 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
                 else:
                     values.update(source='topic', image_topic=plan.image_topic)
             values.update(params.get(name, {}))
-            cls = importlib.import_module(NODE_MODULES[name]).node_class()
+            try:
+                cls = load_node_class(name)
+            except PluginError as exc:
+                raise ProcessError(str(exc)) from None
             try:
                 nodes[name] = graph.add(cls(context=context,
                                             parameter_overrides=_overrides(values)))
@@ -336,19 +337,17 @@ def _run_video(node, graph, recorder, writer, record_images: bool, progress: boo
 
     from ..ros_conversions import bgr_to_image, make_header
 
-    source = node.source
-    total = int(getattr(source, 'frame_count', 0) or 0) or None
     frames = 0
-    with tqdm(total=total, desc='mocap process', unit='frame', disable=not progress) as bar:
-        for frame in source:
+    with tqdm(total=node.frame_count, desc='mocap process', unit='frame',
+              disable=not progress) as bar:
+        for frame in node.offline_frames():
             recorder.now_ns = frame.stamp_ns
             if record_images:
                 image = frame.image if frame.image is not None else frame.decode()
                 frame.image = image
-                header = make_header(frame.stamp_ns, node.p['frame_id'])
-                writer.write_msg('/camera/image_raw', frame.stamp_ns, bgr_to_image(image, header))
-            node.diag.input.tick()
-            node.process_now(frame)
+                header = make_header(frame.stamp_ns, node.frame_id)
+                writer.write_msg(T.IMAGE, frame.stamp_ns, bgr_to_image(image, header))
+            node.process_offline(frame)
             frames += 1
             bar.update(1)
     return frames

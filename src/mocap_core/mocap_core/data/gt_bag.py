@@ -239,7 +239,7 @@ def write_openpose_bag(directory: Union[str, os.PathLike], out: Union[str, os.Pa
     ``fov`` (degrees) over the smallest standard image size that contains the keypoints
     (OpenPose JSON does not record it).
     """
-    from mocap_keypoints.openpose import (OpenPoseError, infer_image_size,
+    from mocap_core.data.openpose import (OpenPoseError, infer_image_size,
                                           list_openpose_files, read_openpose_file)
 
     from ..bag_io import BagWriter

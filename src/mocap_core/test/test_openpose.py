@@ -6,7 +6,7 @@ import pytest
 
 from mocap_core.skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
 from mocap_keypoints.node import infer_image_size, select_persons
-from mocap_keypoints.openpose import (OpenPoseError, list_openpose_files, parse_people,
+from mocap_core.data.openpose import (OpenPoseError, list_openpose_files, parse_people,
                                       read_openpose_file)
 
 EXAMPLE = Path(__file__).resolve().parents[3] / 'data' / 'openpose_example' / 'seq1'

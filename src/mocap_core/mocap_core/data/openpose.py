@@ -19,7 +19,7 @@ from typing import List, Tuple
 
 import numpy as np
 
-from mocap_core.skeleton import BODY25_TO_LAYOUT, NUM_KEYPOINTS
+from ..skeleton import BODY25_TO_LAYOUT, NUM_KEYPOINTS
 
 # COCO-18 (OpenPose's older body model) index for each layout keypoint, -1 = missing.
 _COCO18_TO_LAYOUT = (0, 15, 14, 17, 16, 5, 2, 6, 3, 7, 4, 11, 8, 12, 9, 13, 10,
