@@ -49,7 +49,7 @@ def run(args, env=None, timeout=180):
 def one_line_error(r) -> str:
     assert r.returncode != 0, r.stdout
     assert 'Traceback' not in r.stderr, r.stderr
-    lines = [l for l in r.stderr.strip().splitlines() if l.strip()]
+    lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
     assert len(lines) == 1, r.stderr
     assert 'error' in lines[0]
     return lines[0]

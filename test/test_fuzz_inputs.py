@@ -35,7 +35,7 @@ def pipeline():
 
     from mocap_core.cli.process import OFFLINE_DEFAULTS, _overrides
     from mocap_core.inprocess import InProcessGraph
-    import importlib
+    from mocap_core.plugins import load_node_class
 
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
@@ -44,9 +44,8 @@ def pipeline():
     graph = InProcessGraph(record=lambda t, m, q: outputs.append((t, m)),
                            on_error=lambda n, t, e: errors.append((n, t, repr(e))))
     nodes = {}
-    for name, module in (('lifter', 'mocap_lifter.node'), ('physics', 'mocap_physics.node'),
-                         ('gmr', 'mocap_global.node')):
-        cls = importlib.import_module(module).node_class()
+    for name in ('lifter', 'physics', 'gmr'):
+        cls = load_node_class(name)
         nodes[name] = graph.add(cls(context=context, parameter_overrides=_overrides(
             OFFLINE_DEFAULTS.get(name, {}))))
     yield graph, nodes, outputs, errors
@@ -119,7 +118,7 @@ def test_lifter_survives_malformed_keypoints_and_camera_info(pipeline, valid):
     clouds, infos = valid
     t = _feed(graph, clouds[:30], infos[:30], 1_700_000_000_000_000_000)
     errors_before = nodes['lifter'].diag.errors + nodes['lifter'].diag.dropped
-    for name, bad in _bad_clouds(clouds[0]):
+    for _name, bad in _bad_clouds(clouds[0]):
         t += 33_333_333
         graph.publish('/mocap/keypoints2d', _stamped(bad, t))
     bad_info = copy.deepcopy(infos[0])
@@ -212,7 +211,7 @@ def test_physics_and_gmr_survive_malformed_motion_and_contacts(pipeline, valid, 
     # bad messages straight to the node, with stamps after the valid stream
     cases = _bad_motions(motion)
     injected = []
-    for k, (name, bad) in enumerate(cases):
+    for k, (_name, bad) in enumerate(cases):
         injected.append(_stamped(bad, t + k))
         graph.publish(topic, injected[-1])
         if target == 'physics':

@@ -46,7 +46,7 @@ def test_help_lists_commands(ros_env):
 def test_bag_check_valid_bag(keypoint_bag, ros_env):
     r = run(['bag', 'check', keypoint_bag], ros_env)
     assert r.returncode == 0, r.stdout + r.stderr
-    line = next(l for l in r.stdout.splitlines() if l.startswith('/mocap/keypoints2d'))
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith('/mocap/keypoints2d'))
     assert ' 30 ' in line and 'valid' in line and '30.00' in line
 
 
@@ -62,9 +62,9 @@ def test_bag_check_reports_malformed_messages(tmp_path, ros_env):
         bag.write_msg('/other', 3, PointCloud2())
     r = run(['bag', 'check', path], ros_env)
     assert r.returncode == 1
-    line = next(l for l in r.stdout.splitlines() if l.startswith('/mocap/keypoints2d'))
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith('/mocap/keypoints2d'))
     assert '1 invalid' in line and 'width' in line
-    assert 'not checked' in next(l for l in r.stdout.splitlines() if l.startswith('/other'))
+    assert 'not checked' in next(ln for ln in r.stdout.splitlines() if ln.startswith('/other'))
 
 
 @pytest.mark.parametrize('make', ['missing', 'garbage'])

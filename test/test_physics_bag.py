@@ -43,22 +43,34 @@ def graph(peer):
 def test_physics_node_on_groundtruth_bag(processes, ros2_cmd, graph):
     from mocap_core.ros_conversions import (motion_to_pose, msg_to_wrench, stamp_to_ns)
     from mocap_core.rotations import quat_to_matrix
-    from mocap_physics.evaluate import load_gt_bag
+    from mocap_physics.training.evaluate import load_gt_bag
     from mocap_physics.markers import CONE_NS
+    from sensor_msgs.msg import JointState
 
     clip = load_gt_bag(BAG)
     n = clip.num_frames
     peer, got = graph
-    proc, log = processes.start(ros2_cmd + ['run', 'mocap_physics', 'physics'], 'physics')
-    ready = peer.spin(60, until=lambda: peer.node.count_publishers('/mocap/physics/motion') > 0)
-    assert ready, log.read_text()
+    # every frame with its contacts even when a loaded machine slows the node below the bag's
+    # rate: deep queues (the node's input, the player's publishers: --qos-depth below) and a
+    # long wait for the contacts of a frame (the live defaults favour latency: 100, 0.05 s).
+    # A contacts publisher stays up, as a live lifter would: once the player has sent all and
+    # exited, a node still working through its queue would otherwise expect no more contacts
+    # and give its frames the previous frame's
+    peer.publisher(JointState, '/mocap/lifter/contacts')      # never publishes
+    proc, log = processes.start(ros2_cmd + ['run', 'mocap_physics', 'physics', '--ros-args',
+                                            '-p', 'queue_depth:=1000',
+                                            '-p', 'contacts_wait_s:=2.0'], 'physics')
+    # no fixed delays: the test's subscriptions have matched every node output, and the player
+    # waits until the node's two inputs have matched before its first message
+    ready = peer.wait_for_publishers(timeout=60, proc=proc)
+    assert ready, (peer.unmatched_subscriptions(), log.read_text())
     player, play_log = processes.start(
-        ros2_cmd + ['bag', 'play', str(BAG), '--delay', '2',
+        ros2_cmd + ['bag', 'play', str(BAG), '--wait-for-subscribers', '--wait-timeout', '60',
+                    '--qos-depth', '1000',
                     '--topics', '/mocap/groundtruth/motion', '/mocap/groundtruth/contacts',
                     '--remap', '/mocap/groundtruth/motion:=/mocap/lifter/motion',
                     '/mocap/groundtruth/contacts:=/mocap/lifter/contacts'], 'play')
-    ok = peer.spin(90, until=lambda: len(got['right']) >= n and len(got['motion']) >= n
-                   and len(got['floor']) >= n and len(got['markers']) >= n)
+    ok = peer.spin(90, until=lambda: all(len(v) >= n for v in got.values()))
     assert ok, ({k: len(v) for k, v in got.items()}, log.read_text(), play_log.read_text())
     assert player.wait(timeout=30) == 0, play_log.read_text()
     peer.spin(0.5)   # nothing more should come
@@ -82,9 +94,9 @@ def test_physics_node_on_groundtruth_bag(processes, ros2_cmd, graph):
     # GRF: finite, inside the friction cone, plausible for walking
     weight = 70.0 * 9.81
     fz = []
-    for l, r in zip(got['left'], got['right']):
+    for lw, rw in zip(got['left'], got['right']):
         total = 0.0
-        for msg in (l, r):
+        for msg in (lw, rw):
             f, m = msg_to_wrench(msg)
             assert np.all(np.isfinite(f)) and np.all(np.isfinite(m))
             assert f[2] >= -1e-6

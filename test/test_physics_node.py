@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -34,11 +32,11 @@ def test_physics_node_standing(processes, ros2_cmd, graph):
     proc, log = processes.start(ros2_cmd + ['run', 'mocap_physics', 'physics', '--ros-args',
                                             '-p', 'body_mass:=80.0',
                                             '-p', 'floor_source:=input'], 'physics')
-    ready = peer.spin(60, until=lambda: pubs['motion'].get_subscription_count() > 0
-                      and pubs['contacts'].get_subscription_count() > 0
-                      and peer.node.count_publishers('/mocap/physics/motion') > 0)
-    assert ready, log.read_text()
-    time.sleep(0.5)
+    # the node's inputs have matched the test's publishers, and the test's subscriptions every
+    # node output: nothing sent from now on is lost
+    ready = peer.wait_for_subscribers(pubs.values(), timeout=60, proc=proc) and \
+        peer.wait_for_publishers(timeout=60, proc=proc)
+    assert ready, (peer.unmatched_subscriptions(), log.read_text())
     sk = Skeleton.default()
     rest = Pose.rest(sk)
     t0 = 1_000_000_000
@@ -53,15 +51,15 @@ def test_physics_node_standing(processes, ros2_cmd, graph):
             continue
         pubs['motion'].publish(pose_to_motion(rest, header))
         peer.spin(1 / 30, step=0.005)     # a live lifter publishes at the frame rate
-    ok = peer.spin(30, until=lambda: len(got["right"]) >= n - 1)
+    ok = peer.spin(30, until=lambda: all(len(v) >= n - 1 for v in got.values()))
     assert ok, (len(got["motion"]), len(got["right"]), len(got["states"]), log.read_text())
     assert len(got['motion']) == n - 1 and len(got['states']) == n - 1
     stamps = [stamp_to_ns(m.header.stamp) for m in got['motion']]
     assert stamps == [t0 + i * 33_333_333 for i in range(n) if i != 10]
     assert got['motion'][-1].header.frame_id == 'world'
     weight = 80.0 * 9.81
-    fz = [msg_to_wrench(l)[0][2] + msg_to_wrench(r)[0][2]
-          for l, r in zip(got['left'][1:], got['right'][1:])]
+    fz = [msg_to_wrench(lw)[0][2] + msg_to_wrench(rw)[0][2]
+          for lw, rw in zip(got['left'][1:], got['right'][1:])]
     np.testing.assert_allclose(fz, weight, rtol=0.03)
     out = motion_to_pose(got['motion'][-1])
     np.testing.assert_allclose(out.joint_positions(), rest.joint_positions(), atol=5e-3)

@@ -5,7 +5,6 @@ log line). The bag is played in a loop, so the stamps also jump back at every re
 from __future__ import annotations
 
 import signal
-import subprocess
 import time
 from pathlib import Path
 
@@ -46,13 +45,15 @@ def test_physics_killed_and_restarted_mid_stream(processes, ros2_cmd, ros_env):
         processes.wait_for_text(lifter_log, 'lifter ready', 120, lifter)
         processes.wait_for_text(physics_log, 'physics on', 120, physics)
         processes.wait_for_text(gmr_log, 'gmr ready', 120, gmr)
+        # no fixed delays: the counter's subscriptions have matched, and the player waits until
+        # the lifter's inputs have matched before its first message (not again at each loop)
+        assert counter.peer.wait_for_publishers(timeout=60), counter.peer.unmatched_subscriptions()
         player, play_log = processes.start(
-            [*ros2_cmd, 'bag', 'play', str(GT_BAG), '--loop', '--delay', '3', '--topics',
-             '/mocap/camera_info', '/mocap/keypoints2d'], 'play')
-        deadline = time.monotonic() + 60
-        while counter.after('world', 0) < 30 and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert counter.after('world', 0) >= 30, gmr_log.read_text()
+            [*ros2_cmd, 'bag', 'play', str(GT_BAG), '--loop', '--wait-for-subscribers',
+             '--wait-timeout', '60', '--topics', '/mocap/camera_info', '/mocap/keypoints2d'],
+            'play')
+        counter.peer.wait_until(lambda: counter.after('world', 0) >= 30, 60, proc=player)
+        assert counter.after('world', 0) >= 30, (gmr_log.read_text(), play_log.read_text())
 
         physics.send_signal(signal.SIGKILL)                 # no clean shutdown
         physics.wait(10)
@@ -63,9 +64,9 @@ def test_physics_killed_and_restarted_mid_stream(processes, ros2_cmd, ros_env):
             [*ros2_cmd, 'run', 'mocap_physics', 'physics'], 'physics_restarted')
         processes.wait_for_text(physics2_log, 'physics on', 120, physics2)
         restarted = time.monotonic()
-        deadline = restarted + 60
-        while counter.after('world', restarted) < 60 and time.monotonic() < deadline:
-            time.sleep(0.2)
+        # (the counter may match the new node's publisher a moment after GMR does)
+        counter.peer.wait_until(lambda: min(counter.after('physics', restarted),
+                                            counter.after('world', restarted)) >= 60, 60)
         assert counter.after('physics', restarted) >= 60, physics2_log.read_text()
         assert counter.after('world', restarted) >= 60, gmr_log.read_text()
         assert player.poll() is None, play_log.read_text()
@@ -89,13 +90,17 @@ def test_a_publisher_of_the_wrong_type_on_an_input_topic(processes, ros2_cmd, pe
     from std_msgs.msg import String
     from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-    lifter, log = processes.start([*ros2_cmd, 'run', 'mocap_lifter', 'lifter'], 'lifter')
+    # a deep input queue: every frame even when a loaded machine slows the node below the
+    # bag's rate (the live default, 30, favours latency)
+    lifter, log = processes.start([*ros2_cmd, 'run', 'mocap_lifter', 'lifter', '--ros-args',
+                                   '-p', 'queue_depth:=1000'], 'lifter')
     processes.wait_for_text(log, 'lifter ready', 120, lifter)
     wrong = peer.publisher(String, '/mocap/keypoints2d', 10)
     got = peer.subscribe(MultiDOFJointTrajectory, '/mocap/lifter/motion')
+    assert peer.wait_for_publishers(timeout=60, proc=lifter), log.read_text()
     player, play_log = processes.start(
-        [*ros2_cmd, 'bag', 'play', str(GT_BAG), '--delay', '3', '--topics',
-         '/mocap/camera_info', '/mocap/keypoints2d'], 'play')
+        [*ros2_cmd, 'bag', 'play', str(GT_BAG), '--wait-for-subscribers', '--wait-timeout', '60',
+         '--topics', '/mocap/camera_info', '/mocap/keypoints2d'], 'play')
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (player.poll() is None or len(got) < 168):
         wrong.publish(String(data='not keypoints'))

@@ -4,7 +4,6 @@ plausibility, determinism and bad input."""
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,7 +16,7 @@ GT_BAG = ROOT / 'bags' / 'gt_cmu_walk_12_02'
 OPENPOSE_BAG = ROOT / 'bags' / 'openpose_seq1'
 VIDEO = ROOT / 'data' / 'video_example' / 'taiji_640x360.mp4'
 
-#: Per-frame outputs of DESIGN §2 (one message per input frame, same stamp).
+#: Per-frame outputs of docs/design.md §2 (one message per input frame, same stamp).
 PER_FRAME = [f'/mocap/{stage}/{leaf}' for stage in ('lifter', 'physics', 'world')
              for leaf in ('motion', 'joints3d', 'joint_states', 'markers')] + [
     '/mocap/lifter/contacts', '/mocap/physics/grf/left', '/mocap/physics/grf/right',
@@ -151,7 +150,7 @@ def test_process_ground_truth_bag_every_topic_same_stamps_accurate(gt_run):
     kp_stamps = _stamps(GT_BAG, '/mocap/keypoints2d')
     with BagReader(out) as reader:
         topics = reader.topics
-    # the input topics are kept, every output topic of DESIGN §2 is there
+    # the input topics are kept, every output topic of docs/design.md §2 is there
     for t in ['/mocap/keypoints2d', '/mocap/camera_info', '/mocap/groundtruth/motion',
               '/mocap/skeleton/urdf', '/diagnostics', '/mocap/physics/com'] + PER_FRAME:
         assert t in topics, (t, sorted(topics))
@@ -332,3 +331,37 @@ def test_process_a_bag_played_twice_restarts_each_stage(tmp_path):
     for stage in ('lifter', 'physics', 'world'):
         assert len(run.stages[stage].stamps) == 2 * 168, stage
         assert np.all(np.isfinite(run.stages[stage].joints))
+
+
+def test_process_person_leaving_without_camera_info(tmp_path):
+    """A keypoint stream without /mocap/camera_info (another detector, an older bag): the
+    person is seen for 20 frames, then every confidence is 0 for 40 frames. Every frame comes
+    out of every stage and no problem is reported (it used to be 20 of 60 frames, 40 errors
+    'zero-size array to reduction operation maximum', and a reset at every frame)."""
+    from mocap_core.bag_io import BagReader, BagWriter, deserialize
+    from mocap_core.ros_conversions import cloud_to_keypoints, keypoints_to_cloud
+    from mocap_core.run_report import load_run
+
+    leaving = tmp_path / 'leaving'
+    with BagReader(GT_BAG) as reader, BagWriter(leaving) as writer:
+        i = reader.topics['/mocap/keypoints2d']
+        writer.add_topic('/mocap/keypoints2d', i.msgtype, i.qos, msgdef=i.msgdef,
+                         type_hash=i.type_hash)
+        for k, m in enumerate(reader.messages(topics=['/mocap/keypoints2d'])):
+            if k == 60:
+                break
+            msg = deserialize(m.data, m.msgtype)
+            if k >= 20:
+                people = cloud_to_keypoints(msg)
+                people[..., 2] = 0.0
+                msg = keypoints_to_cloud(people, msg.header)
+            writer.write_msg('/mocap/keypoints2d', m.timestamp_ns, msg)
+    out = tmp_path / 'leaving_out'
+    res = _mocap('process', leaving, '-o', out, '--no-progress', '--summary',
+                 tmp_path / 'summary.json')
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert res.stderr.count('buffer and skeleton reset') <= 1, res.stderr
+    run = load_run(out)
+    for stage in ('lifter', 'physics', 'world'):
+        assert len(run.stages[stage].stamps) == 60, stage
+        assert np.all(np.isfinite(run.stages[stage].joints)), stage

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mocap_core.bag_io import BagReader, BagWriter
-from mocap_core.ros_msgs import serialize
+from mocap_core.ros_msgs import deserialize, serialize
 
 TIMEOUT = 60  # generous: a loaded 2-core machine
 
@@ -203,10 +203,12 @@ def test_play_record_roundtrip_is_byte_identical(input_bag, processes, ros2_cmd,
                                         'record')
     processes.wait_for_text(rec_log, 'Recording...', TIMEOUT, recorder)
 
-    # the delay covers DDS discovery of the new player process by the recorder: usually tens of
-    # ms, up to ~3 s when the first announcements are missed (the next periodic one comes 3 s on)
-    player = run([*ros2_cmd, 'bag', 'play', str(in_path), '--delay', '5'], ros_env)
+    # the recorder subscribes to each topic once it has discovered the player's publisher (tens
+    # of ms, or seconds on a loaded machine): the player waits for that before the first message
+    player = run([*ros2_cmd, 'bag', 'play', str(in_path), '--wait-for-subscribers',
+                  '--wait-timeout', str(TIMEOUT)], ros_env, timeout=2 * TIMEOUT)
     assert player.returncode == 0, player.stderr
+    assert 'Subscribers matched after' in player.stderr
 
     # every topic subscribed, then give the last messages a moment to arrive
     log = processes.wait_for_text(rec_log, 'Subscribed to topic', 10, recorder,
@@ -257,6 +259,11 @@ def test_bag_info_lists_every_topic(input_bag, ros2_cmd, ros_env):
     (['bag', 'play', '{tmp}/garbage.mcap'], 'is not an MCAP file'),
     (['bag', 'play', '{bag}', '--topics', '/nope'], "'/nope' not in bag"),
     (['bag', 'play', '{bag}', '--rate', '0'], 'rate must be > 0'),
+    (['bag', 'play', '{bag}', '--wait-timeout', '3'],
+     '--wait-timeout needs --wait-for-subscribers'),
+    (['bag', 'play', '{bag}', '--wait-for-subscribers', '--wait-timeout', '-1'],
+     'wait timeout must be >= 0'),
+    (['bag', 'play', '{bag}', '--qos-depth', '0'], 'qos depth must be >= 1'),
     (['bag', 'record', '-o', '{tmp}/out'], 'no topics to record'),
     (['bag', 'record', '-a', '-o', '{bag}'], 'already exists'),
     (['run', 'no_such_package_xyz', 'node'], "Package 'no_such_package_xyz' not found"),
@@ -272,11 +279,81 @@ def test_bad_input_gives_one_clear_line(input_bag, ros2_cmd, ros_env, tmp_path, 
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
 
 
-def test_wrong_arguments_exit_2_with_usage(ros2_cmd, ros_env):
-    result = run([*ros2_cmd, 'bag', 'play'], ros_env)
+@pytest.mark.parametrize('args', [[], ['{bag}', '--wait-for-subscribers', '0'],
+                                  ['--wait-for-subscribers', '{bag}']])
+def test_wrong_arguments_exit_2_with_usage(input_bag, ros2_cmd, ros_env, args):
+    result = run([*ros2_cmd, 'bag', 'play', *[a.format(bag=input_bag[0]) for a in args]],
+                 ros_env)
     assert result.returncode == 2
     assert 'usage: ros2 bag play' in result.stderr
     assert 'Traceback' not in result.stderr
+    if '--wait-for-subscribers' in args:
+        assert 'argument --wait-for-subscribers:' in result.stderr
+
+
+def test_play_waits_for_subscribers_then_loops(input_bag, processes, ros2_cmd, peer):
+    """With --wait-for-subscribers the first message waits for a subscriber that comes late
+    (volatile: without the wait it would miss the first round), and --loop goes on without
+    waiting again."""
+    from nav_msgs.msg import Odometry
+
+    path, payloads = input_bag
+    topic = '/mocap/world/odom'
+    player, log = processes.start([*ros2_cmd, 'bag', 'play', str(path), '--topics', topic,
+                                   '--loop', '--wait-for-subscribers', '--wait-timeout',
+                                   str(TIMEOUT)], 'play')
+    processes.wait_for_text(log, f'Waiting for 1 matched subscription on each of 1 topic: '
+                                 f'{topic}', TIMEOUT, player)
+    got = peer.subscribe(Odometry, topic)
+    rounds = 3
+    assert peer.spin(TIMEOUT, until=lambda: len(got) >= rounds * FRAMES, proc=player), \
+        (len(got), log.read_text())
+    sent = [deserialize(data, Odometry) for data in payloads[topic]]
+    assert got[:rounds * FRAMES] == sent * rounds   # nothing lost, in order
+    assert 'Subscribers matched after' in log.read_text()
+    player.send_signal(signal.SIGINT)
+    assert player.wait(timeout=TIMEOUT) == 0, log.read_text()
+
+
+def test_play_waits_for_n_subscribers_and_times_out(input_bag, processes, ros2_cmd, peer):
+    """--wait-for-subscribers N counts the matched subscriptions of each topic: one is not
+    enough for N=2, nothing is played, and --wait-timeout ends the wait with exit status 1,
+    naming what is missing."""
+    from nav_msgs.msg import Odometry
+
+    path, _ = input_bag
+    topic = '/mocap/world/odom'
+    player, log = processes.start([*ros2_cmd, 'bag', 'play', str(path), '--topics', topic,
+                                   '--wait-for-subscribers', '2', '--wait-timeout', '8'], 'play')
+    processes.wait_for_text(log, 'Waiting for 2 matched subscriptions on each of 1 topic',
+                            TIMEOUT, player)
+    got = peer.subscribe(Odometry, topic)
+    assert peer.wait_for_publishers([topic], timeout=TIMEOUT, proc=player), log.read_text()
+    peer.spin_until_exit(player, TIMEOUT)
+    text = log.read_text()
+    assert player.returncode == 1, text
+    assert text.strip().splitlines()[-1] == (
+        f'ros2 bag play: error: no subscribers after 8 s (--wait-timeout): {topic} (1 of 2)')
+    assert got == [] and 'Traceback' not in text
+
+
+def test_play_qos_depth_sets_the_publishers_history(input_bag):
+    """--qos-depth N: keep-last N (at least), reliable and durability as recorded."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
+
+    from mocap_core.cli.ros2 import build_parser
+    from mocap_core.cli.ros2.bag_play import DEFAULT_DEPTH, publisher_qos
+
+    with BagReader(input_bag[0]) as bag:
+        latched, volatile = bag.topics[URDF_TOPIC].qos, bag.topics['/mocap/world/odom'].qos
+    for option, expected in (([], DEFAULT_DEPTH), (['--qos-depth', '700'], 700),
+                             (['--qos-depth', '3'], 10)):     # the recorded depth is 10
+        args = build_parser().parse_args(['bag', 'play', 'my_bag', *option])
+        qos = publisher_qos(volatile, args.qos_depth)
+        assert (qos.history, qos.depth) == (HistoryPolicy.KEEP_LAST, expected), option
+        assert qos.reliability == ReliabilityPolicy.RELIABLE
+        assert qos.durability == DurabilityPolicy.VOLATILE
+    assert publisher_qos(latched, 700).durability == DurabilityPolicy.TRANSIENT_LOCAL
 
 
 def test_run_execs_executable_with_arguments(ros2_cmd, ros_env, tmp_path):
@@ -305,9 +382,28 @@ def test_defers_to_a_real_ros2_on_path(ros2_cmd, ros_env, tmp_path):
     env.pop('MOCAP_ROS2_NO_DEFER')
     result = run([*ros2_cmd, 'topic', 'list'], env)
     assert result.stdout.strip() == 'real ros2: topic list'
+    result = run([*ros2_cmd, 'bag', 'play', 'my_bag', '--wait-for-all-acked', '10'], env)
+    assert result.stdout.strip() == 'real ros2: bag play my_bag --wait-for-all-acked 10'
+    # an option only the built-in player has: it plays, and says why
+    result = run([*ros2_cmd, 'bag', 'play', str(tmp_path / 'nothing'),
+                  '--wait-for-subscribers=2'], env)
+    assert 'real ros2' not in result.stdout
+    assert ("--wait-for-subscribers is an option of this project's 'ros2 bag play' only"
+            in result.stderr)
+    assert 'does not exist' in result.stderr and result.returncode == 1
     env['MOCAP_ROS2_NO_DEFER'] = '1'
     result = run([*ros2_cmd, 'bag', 'info', str(tmp_path / 'nothing')], env)
     assert 'real ros2' not in result.stdout
+
+
+def test_options_of_the_builtin_player_only_are_recognised():
+    from mocap_core.cli.ros2 import own_play_option
+
+    for option in ('--wait-for-subscribers', '--wait-timeout', '--qos-depth'):
+        assert own_play_option(['bag', 'play', 'my_bag', option, '3']) == option
+        assert own_play_option(['bag', 'play', 'my_bag', f'{option}=3']) == option
+        assert own_play_option(['bag', 'record', option, '3']) is None
+    assert own_play_option(['bag', 'play', 'my_bag', '--rate', '2', '--loop']) is None
 
 
 def test_topic_echo_list_hz_while_playing(input_bag, processes, ros2_cmd, ros_env):

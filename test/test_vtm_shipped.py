@@ -37,14 +37,14 @@ def _ground_truth(name: str):
 
 @pytest.fixture(scope='module')
 def model():
-    from mocap_lifter.train import load_weights
+    from mocap_lifter.weights import load_weights
     torch.set_num_threads(1)
     return load_weights(WEIGHTS)
 
 
 @pytest.mark.parametrize('bag', BAGS)
 def test_tpmae_reconstructs_validation_motion(model, bag):
-    from mocap_lifter.metrics import mpjpe_mm, pa_mpjpe_mm
+    from mocap_lifter.training.metrics import mpjpe_mm, pa_mpjpe_mm
     from mocap_lifter.vtm import motion_representation
 
     _, _, poses = _ground_truth(bag)

@@ -18,7 +18,9 @@ setup(
     zip_safe=False,
     maintainer='Mocap pipeline maintainers',
     maintainer_email='maintainers@mocap-pipeline.dev',
-    description='Core library of the monocular motion-capture pipeline: skeleton, rotations, forward kinematics, URDF, ROS message conversions, QoS, diagnostics, bag I/O and the ros2/mocap command-line tools. No node.',
+    description=('Core library of the monocular motion-capture pipeline: skeleton, rotations, '
+                 'forward kinematics, URDF, ROS message conversions, QoS, diagnostics, bag I/O and'
+                 ' the ros2/mocap command-line tools. No node.'),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={

@@ -19,7 +19,8 @@ setup(
     zip_safe=False,
     maintainer='Mocap pipeline maintainers',
     maintainer_email='maintainers@mocap-pipeline.dev',
-    description='GMR: world-frame global motion from the local pose sequence with a bidirectional GRU.',
+    description=('GMR: world-frame global motion from the local pose sequence with a bidirectional'
+                 ' GRU.'),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={

@@ -14,7 +14,8 @@ setup(
     zip_safe=False,
     maintainer='Mocap pipeline maintainers',
     maintainer_email='maintainers@mocap-pipeline.dev',
-    description='2D body keypoints with confidences (23-point layout) from a camera, a video file, an image topic or OpenPose JSON.',
+    description=('2D body keypoints with confidences (23-point layout) from a camera, a video '
+                 'file, an image topic or OpenPose JSON.'),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={

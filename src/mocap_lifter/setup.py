@@ -18,7 +18,8 @@ setup(
     zip_safe=False,
     maintainer='Mocap pipeline maintainers',
     maintainer_email='maintainers@mocap-pipeline.dev',
-    description='MotioNet (and VTM) lifter: one symmetric skeleton, joint rotations, root position and foot contacts from 2D keypoints.',
+    description=('MotioNet (and VTM) lifter: one symmetric skeleton, joint rotations, root '
+                 'position and foot contacts from 2D keypoints.'),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={

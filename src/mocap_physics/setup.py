@@ -17,7 +17,8 @@ setup(
     zip_safe=False,
     maintainer='Mocap pipeline maintainers',
     maintainer_email='maintainers@mocap-pipeline.dev',
-    description='Physics cycle of neural PhysCap on Pinocchio: PD control, ground reaction forces in friction cones, forward dynamics, no-penetration QP.',
+    description=('Physics cycle of neural PhysCap on Pinocchio: PD control, ground reaction forces'
+                 ' in friction cones, forward dynamics, no-penetration QP.'),
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={

@@ -17,7 +17,7 @@ from launch.conditions import IfCondition, UnlessCondition
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 
-#: Every topic of the pipeline (DESIGN §2), for ``record:=true``.
+#: Every topic of the pipeline (docs/design.md §2), for ``record:=true``.
 TOPICS = ['/mocap/keypoints2d', '/mocap/camera_info', '/mocap/skeleton/urdf', '/diagnostics',
           '/mocap/lifter/contacts', '/mocap/physics/grf/left', '/mocap/physics/grf/right',
           '/mocap/physics/com', '/mocap/physics/floor', '/mocap/world/odom',
@@ -40,7 +40,8 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('lifter_model', default_value='motionet',
                               description="lifter network: 'motionet' or 'vtm' (windowed only)"),
         DeclareLaunchArgument('lifter_mode', default_value='windowed',
-                              description='windowed (accurate; latency 14 frames, 16 for VTM) or causal (MotioNet only)'),
+                              description='windowed (accurate; latency 14 frames, 16 for '
+                                          'VTM) or causal (MotioNet only)'),
         DeclareLaunchArgument('gains_mode', default_value='fixed',
                               description='physics PD gains: fixed or learned'),
         DeclareLaunchArgument('lookahead', default_value='15',

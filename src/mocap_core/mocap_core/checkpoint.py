@@ -9,8 +9,12 @@ one :class:`WeightsError` with a one-line message naming the file.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Dict, Iterable, Union
+
+
+_ANSI = re.compile(r'\x1b\[[0-9;]*m')
 
 
 class WeightsError(ValueError):
@@ -42,14 +46,16 @@ def load_checkpoint(path: Union[str, Path], map_location: Any = 'cpu',
         raise WeightsError(f'weights file not found: {path}')
     try:
         state = torch.load(str(path), map_location=map_location, weights_only=True)
-    except pickle.UnpicklingError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ''
-        raise WeightsError(f'{path}: refused, the file holds more than tensors and plain data '
-                           f'({first[:160]})') from None
     except Exception as exc:  # noqa: BLE001 - torch raises many types for a damaged file
-        text = ' '.join(str(exc).split())[:160]
+        text = ' '.join(_ANSI.sub('', str(exc)).split())
+        if isinstance(exc, pickle.UnpicklingError) and 'WeightsUnpickler error:' in text:
+            # a pickle naming code to run or classes to build, or random bytes: refused by the
+            # tensors-only reader before anything in it ran
+            detail = text.split('WeightsUnpickler error:')[-1].split('Check the documentation')[0]
+            raise WeightsError(f'{path}: not a file of tensors and plain data, refused '
+                               f'({detail.strip()[:160]})') from None
         raise WeightsError(f'{path}: not a readable weights file ({type(exc).__name__}: '
-                           f'{text})') from None
+                           f'{text[:160]})') from None
     if not isinstance(state, dict):
         raise WeightsError(f'{path}: expected a dictionary of weights, found '
                            f'{type(state).__name__}')

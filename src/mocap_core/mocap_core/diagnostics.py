@@ -1,5 +1,5 @@
-"""Per-node ``/diagnostics`` publishing (DESIGN §2): processing time, input and output rates,
-frames dropped, model in use, plus any key/values and warnings the node adds.
+"""Per-node ``/diagnostics`` publishing (docs/design.md §2): processing time, input and output
+rates, frames dropped, model in use, plus any key/values and warnings the node adds.
 
 Usage in a node::
 

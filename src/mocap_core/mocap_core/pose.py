@@ -1,7 +1,7 @@
 """One frame's complete pose of the pipeline skeleton (no ROS imports).
 
-A :class:`Pose` is what the ``/mocap/<stage>/motion`` topics carry (DESIGN §2): the skeleton
-(bone offsets), the local joint rotations relative to the rest pose and the root position.
+A :class:`Pose` is what the ``/mocap/<stage>/motion`` topics carry (docs/design.md §2): the
+skeleton (bone offsets), the local joint rotations relative to the rest pose and the root position.
 Joint positions, contact-point positions and revolute angles are derived from it.
 """
 

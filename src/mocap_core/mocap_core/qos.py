@@ -1,4 +1,4 @@
-"""QoS profiles of the pipeline's topics (DESIGN §2).
+"""QoS profiles of the pipeline's topics (docs/design.md §2).
 
 * :data:`SENSOR_QOS` — keypoints and the camera stream: best effort, keep the last few; a
   slow consumer gets the newest frame instead of a queue of stale ones.

@@ -1,4 +1,4 @@
-"""Thin conversion layer between the core types and standard ROS 2 messages (DESIGN §2).
+"""Thin conversion layer between the core types and standard ROS 2 messages (docs/design.md §2).
 
 Every ``*_to_*`` function has its inverse and a round-trip test. Parsing functions validate the
 message and raise :class:`MessageError` (a ``ValueError``) with a one-line reason, so a node

@@ -8,6 +8,8 @@ alone) on a given DDS domain, with discovery kept on this machine.
     with RosPeer('test_listener', domain_id=42) as peer:
         got = peer.subscribe(PointCloud2, '/mocap/lifter/joints3d')
         ... start the node process ...
+        assert peer.wait_for_publishers(['/mocap/lifter/joints3d'])   # matched: nothing lost
+        ... feed the node ...
         peer.spin(30.0, until=lambda: len(got) >= 100)
 """
 
@@ -16,7 +18,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from typing import Any, Callable, List, Optional
+from typing import Any, Callable, Dict, Iterable, List, Optional
 
 
 class RosPeer:
@@ -63,6 +65,59 @@ class RosPeer:
             self.node.create_subscription(msg_type, topic, lambda m: got.append(transform(m)),
                                           qos)
         return got
+
+    def unmatched_subscriptions(self, topics: Optional[Iterable[str]] = None,
+                                count: int = 1) -> Dict[str, int]:
+        """Topic -> matched publishers, for this peer's subscriptions (on ``topics``; all when
+        None) that have matched fewer than ``count`` publishers. Matching is DDS's: a
+        publisher the subscription will receive from, not only one seen in the graph."""
+        wanted = None if topics is None else {self._resolve(t) for t in topics}
+        if wanted is not None:
+            missing = wanted - {sub.topic_name for sub in self.node.subscriptions}
+            if missing:
+                raise ValueError(f"this peer has no subscription on {', '.join(sorted(missing))}")
+        unmatched: Dict[str, int] = {}
+        for sub in self.node.subscriptions:
+            if wanted is not None and sub.topic_name not in wanted:
+                continue
+            matched = sub.get_publisher_count()
+            if matched < count:
+                unmatched[sub.topic_name] = min(matched, unmatched.get(sub.topic_name, matched))
+        return unmatched
+
+    def wait_for_publishers(self, topics: Optional[Iterable[str]] = None, count: int = 1,
+                            timeout: float = 60.0, proc=None) -> bool:
+        """Wait until each of this peer's subscriptions (on ``topics``; all when None) has
+        matched at least ``count`` publishers, for up to ``timeout`` seconds or until the
+        subprocess ``proc`` (if given) exits. Returns whether they have (see
+        :meth:`unmatched_subscriptions` for what is missing)."""
+        topics = None if topics is None else list(topics)
+        return self.wait_until(lambda: not self.unmatched_subscriptions(topics, count),
+                               timeout, proc)
+
+    def wait_for_subscribers(self, publishers: Iterable[Any], count: int = 1,
+                             timeout: float = 60.0, proc=None) -> bool:
+        """Wait until each of ``publishers`` (made by :meth:`publisher`) has matched at least
+        ``count`` subscriptions, for up to ``timeout`` seconds or until ``proc`` exits."""
+        pubs = list(publishers)
+        return self.wait_until(lambda: all(p.get_subscription_count() >= count for p in pubs),
+                               timeout, proc)
+
+    def _resolve(self, topic: str) -> str:
+        return self.node.resolve_topic_name(topic)
+
+    def wait_until(self, condition: Callable[[], bool], timeout: float, proc=None) -> bool:
+        """Wait up to ``timeout`` seconds for ``condition()``, or until the subprocess ``proc``
+        (if given) exits; callbacks are processed meanwhile (in this thread, or by the
+        background thread of :meth:`spin_in_background`). Returns ``condition()``."""
+        if self._thread is None:
+            return self.spin(timeout, until=condition, proc=proc)
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() >= deadline or (proc is not None and proc.poll() is not None):
+                return condition()
+            self._stop.wait(0.02)
+        return True
 
     def publisher(self, msg_type, topic: str, qos: Any = None):
         """A publisher on this node (default QoS: the pipeline's stream QoS)."""

@@ -367,7 +367,7 @@ def axis_angle_to_matrix(v: Array) -> Array:
 
 
 def matrix_to_axis_angle(R: Array) -> Array:
-    """Rotation vector (angle in ``[0, pi]``) of a rotation matrix.  ``(..., 3, 3) -> (..., 3)``."""
+    """Rotation vector (angle in ``[0, pi]``) of a rotation matrix: ``(..., 3, 3) -> (..., 3)``."""
     return quat_to_axis_angle(matrix_to_quat(R))
 
 
@@ -526,8 +526,8 @@ def matrix_to_euler(R: Array, order: str) -> Array:
         a = _safe_atan2(xp, m(j, i), -s * m(k, i), lock)
         c = _safe_atan2(xp, m(i, j), s * m(i, k), lock)
     else:
-        # R = R_i(a) R_j(b) R_k(c): R[i,k] = s sin b, R[i,i] = cos b cos c, R[i,j] = -s cos b sin c,
-        # R[k,k] = cos a cos b, R[j,k] = -s sin a cos b
+        # R = R_i(a) R_j(b) R_k(c): R[i,k] = s sin b, R[i,i] = cos b cos c,
+        # R[i,j] = -s cos b sin c, R[k,k] = cos a cos b, R[j,k] = -s sin a cos b
         sin_b = s * m(i, k)
         cos_b = _safe_sqrt(xp, m(i, i) * m(i, i) + m(i, j) * m(i, j))
         lock = cos_b < tol

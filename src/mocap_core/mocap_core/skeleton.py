@@ -1,4 +1,4 @@
-"""The single skeleton definition of the pipeline (DESIGN §2, §3).
+"""The single skeleton definition of the pipeline (docs/design.md §2, §3).
 
 Everything that names a joint or a keypoint imports it from here:
 
@@ -28,7 +28,7 @@ from typing import Dict, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 # ---------------------------------------------------------------------------------------------
-# 2D keypoint layout (DESIGN §2): COCO-WholeBody body + feet, 23 points.
+# 2D keypoint layout (docs/design.md §2): COCO-WholeBody body + feet, 23 points.
 # ---------------------------------------------------------------------------------------------
 KEYPOINT_NAMES: Tuple[str, ...] = (
     'nose', 'left_eye', 'right_eye', 'left_ear', 'right_ear',
@@ -89,7 +89,7 @@ BLAZEPOSE_TO_LAYOUT: Tuple[int, ...] = (
     0, 2, 5, 7, 8, 11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28, 31, -1, 29, 32, -1, 30)
 
 # ---------------------------------------------------------------------------------------------
-# 3D skeleton (DESIGN §2): fixed joint names, root = pelvis.
+# 3D skeleton (docs/design.md §2): fixed joint names, root = pelvis.
 # ---------------------------------------------------------------------------------------------
 JOINT_NAMES: Tuple[str, ...] = (
     'pelvis',

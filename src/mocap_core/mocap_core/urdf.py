@@ -1,7 +1,7 @@
 """Skeleton -> URDF with anthropometric masses and inertias.
 
-The URDF is what `/mocap/skeleton/urdf` carries (DESIGN §2): robot_state_publisher, RViz and
-Pinocchio load it. Its structure:
+The URDF is what `/mocap/skeleton/urdf` carries (docs/design.md §2): robot_state_publisher,
+RViz and Pinocchio load it. Its structure:
 
 * the root link is ``pelvis``; a consumer that needs the floating base adds it (Pinocchio:
   ``buildModelFromXML(urdf, JointModelFreeFlyer())``);

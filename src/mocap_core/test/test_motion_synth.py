@@ -145,7 +145,8 @@ def test_mirror_keypoints_swaps_sides():
 def test_corruption_follows_the_confidence_model():
     model = ConfidenceModel.default()
     assert model.frames > 1000 and 'OpenPose' in model.source
-    assert model.zero_prob[KEYPOINT_INDEX['left_ear']] > model.zero_prob[KEYPOINT_INDEX['left_hip']]
+    zero = model.zero_prob
+    assert zero[KEYPOINT_INDEX['left_ear']] > zero[KEYPOINT_INDEX['left_hip']]
     rng = np.random.default_rng(3)
     clean = np.zeros((4000, NUM_KEYPOINTS, 3))
     clean[..., 0] = 300

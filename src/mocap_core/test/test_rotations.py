@@ -345,7 +345,8 @@ def test_quat_from_two_vectors():
     ub = b / np.linalg.norm(b, axis=-1, keepdims=True)
     np.testing.assert_allclose(rot.quat_rotate(q, ua), ub, atol=1e-12)
     # minimal: rotation angle == angle between the vectors, axis perpendicular to both
-    expected_angle = np.arctan2(np.linalg.norm(np.cross(ua, ub), axis=-1), np.sum(ua * ub, axis=-1))
+    expected_angle = np.arctan2(np.linalg.norm(np.cross(ua, ub), axis=-1),
+                                np.sum(ua * ub, axis=-1))
     angle = np.linalg.norm(rot.quat_to_axis_angle(q), axis=-1)
     np.testing.assert_allclose(angle, expected_angle, atol=1e-9)
     np.testing.assert_allclose(np.sum(rot.quat_to_axis_angle(q) * ua, axis=-1), 0.0, atol=1e-9)

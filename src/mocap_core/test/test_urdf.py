@@ -36,7 +36,7 @@ def test_body_mass_scales_linearly():
 
 
 def test_inertias_are_physical():
-    for mass, com, inertia in link_inertials(Skeleton.default()).values():
+    for mass, _com, inertia in link_inertials(Skeleton.default()).values():
         assert mass > 0
         ev = np.linalg.eigvalsh(inertia)
         assert np.all(ev > 0)

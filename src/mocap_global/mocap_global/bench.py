@@ -8,7 +8,7 @@ pass over the window, accumulation; the ROS conversions are not included): media
 max, for the shipped weights (or, when they do not exist yet, a randomly initialised network
 of the shipped size: the time does not depend on the weights) at several look-aheads and
 window lengths, with and without the static-camera fusion and with test-time augmentation
-(2 or 4 windows per pass). Goal (issue): <= 5 ms per frame at the node's defaults.
+(2 or 4 windows per pass). The goal and past figures: ``docs/global.md``.
 
 Writes a Markdown report (default ``docs/benchmarks/gmr.md``) and a JSON file next to it.
 """
@@ -56,13 +56,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument('--repeat', type=int, default=3, help='times the bag is replayed')
     ap.add_argument('--output', type=Path, default=ROOT / 'docs' / 'benchmarks' / 'gmr.md')
     args = ap.parse_args(argv)
-    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')
 
     import torch
 
-    from .evaluate import read_groundtruth_bag
-    from .model import GMR, GMRConfig, load_weights, with_tta
-    from .node import default_weights
+    from .bags import read_groundtruth_bag
+    from .model import GMR, GMRConfig, with_tta
+    from .weights import default_weights, load_weights
 
     try:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -91,8 +90,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                   'tta': tta})
         rows.append(r)
         print(f"look-ahead {lookahead:2d}, window {r['window']:3d}, fusion {fusion!s:5s}, "
-              f"test-time augmentation {tta:6s}: median {r['median_ms']:.2f} ms, p95 {r['p95_ms']:.2f} ms, max "
-              f"{r['max_ms']:.2f} ms ({r['frames']} frames)", flush=True)
+              f"test-time augmentation {tta:6s}: median {r['median_ms']:.2f} ms, "
+              f"p95 {r['p95_ms']:.2f} ms, max {r['max_ms']:.2f} ms ({r['frames']} frames)",
+              flush=True)
     res = {'date': datetime.datetime.now().strftime('%Y-%m-%d %H:%M'), 'weights': source,
            'model': f'{cfg.layers} x {cfg.hidden} bi-GRU, projection {cfg.projection}',
            'machine': f'{platform.machine()}, {os.cpu_count()} CPU cores, '

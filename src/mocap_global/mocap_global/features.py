@@ -1,26 +1,23 @@
 """GMR input features, body-frame joint positions, mirroring and input noise (no ROS imports).
 
-Input of the network per frame (§3.1, §4.4 Table 1: unit quaternions are the best input):
+Input of the network per frame (§3.1; C = :func:`num_features` values, float32):
 
-* the local pose, either (``pose_input='quat'``, the paper's) the local rotations of the 17
-  non-root joints relative to their parents (unit quaternions x, y, z, w in the ``w >= 0``
-  hemisphere, so one rotation has one code), 68 values, or (``'positions'``, beyond the
-  paper) the 17 joint positions in the root's frame given by FK of those rotations with the
-  skeleton, 51 values. Positions do not change with the twist of a bone about its own axis,
-  which a lifter cannot see (the shipped MotioNet's local rotations are 60-80 deg off on the
-  committed bags while its root-frame joints are within 45 mm on the walks). The root's
-  global orientation is **not** an input (the paper discards it, §4.1): it is in the camera
-  frame, which moves;
-* the skeleton's 10 bone-group lengths (m). Beyond the paper (``skeleton_input``, on by
-  default): SMPL poses do not carry the body size, but the distance a stride covers scales
-  with the legs, and the pipeline knows the skeleton (it is in every motion message);
-* optionally (``root_input='up'``, beyond the paper, not the shipped configuration): the
-  world's up direction in the root's frame, ``R^T e_z`` (3 values). It holds the root's tilt
-  (pitch and roll) relative to gravity, which the local pose only partly determines, and not
-  its heading; at run time it needs the up direction of the input's frame (a level camera, a
-  floor frame). The default (``'none'``) is the paper's camera-agnostic input, and the model
-  *estimates* this up vector as an extra output instead (used for the gravity-aligned first
-  pose and, optionally, to correct the tilt drift of the accumulation).
+* the local pose, either (``pose_input='quat'``, the paper's, §4.4 Table 1) the local
+  rotations of the 17 non-root joints relative to their parents as unit quaternions
+  (x, y, z, w) in the ``w >= 0`` hemisphere (one code per rotation), 68 values, or
+  (``'positions'``, the shipped configuration) the 17 non-root joint positions in the root's
+  own frame (root at the origin, identity orientation; m) by forward kinematics of those
+  rotations with the skeleton, 51 values. The root's global orientation is never an input
+  (§4.1): it is expressed in the camera frame, which moves;
+* with ``skeleton_input``: the skeleton's 10 bone-group lengths (m);
+* with ``root_input='up'`` (not shipped): the world's up direction in the root's frame,
+  ``R^T e_z`` (3 values), which needs the up direction of the input's frame at run time.
+  With ``'none'`` (the paper's input) the model estimates this vector as an extra output.
+
+Also here: :func:`body_joint_positions` (the root-frame joints used by the features, the
+joint-motion loss and metric), left/right mirroring of motions (y -> -y) and the lifter-like
+noise model of the training augmentation and the evaluation. The reasons for the choices
+beyond the paper: ``docs/global.md``.
 """
 
 from __future__ import annotations

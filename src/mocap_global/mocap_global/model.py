@@ -1,37 +1,34 @@
 """The global motion regressor (GMR, §3.3 and Fig. 4; PyTorch, no ROS imports).
 
-Temporal encoder: a bidirectional multi-layer GRU over the per-frame input features
-(:mod:`.features`), its forward and backward hidden states concatenated (2H per frame), then a
-linear projection to P features (§4.1: 4 x 2048 GRU, 2048 projection). Motion regression layer:
-one linear layer per frame that outputs the global motion ``dG_i = (dA_i, dT_i)`` between
-frames i and i + 1 in the body frame of frame i (axis-angle, metres; the output at the last
-frame of a sequence has no motion to predict and is ignored), scaled by fixed output
-statistics of the training data. Beyond the paper the same layer also outputs the world's up
-direction in the body frame (3 values, normalised): the root's tilt, which the node uses for a
-gravity-aligned first pose and optional tilt correction.
+Input ``x`` (B, T, C): the per-frame features of :mod:`.features` (C =
+:attr:`GMRConfig.num_features`). Temporal encoder: a bidirectional multi-layer GRU
+(:class:`BiGRU`, 2H features per frame), then a linear projection to P features with a ReLU.
+Motion regression layer: one linear layer per frame with 9 outputs,
 
-Differences from the paper (documented choices): a ReLU between the projection and the
-regression layer (two linear layers in a row would be one linear map); input/output
-normalisation by training statistics; by default the local pose as joint positions in the
-root frame instead of quaternions (``pose_input='positions'``: blind to the bone twists a
-lifter cannot see, :mod:`.features`), the bone-group lengths (``skeleton_input``) and the
-forward differences of the pose features (``velocity_input``: joint velocities in the root
-frame, computed inside the network so that a window never looks beyond its end) as extra
-inputs. :meth:`GMRConfig.paper` is the paper's input (quaternions only).
+* ``dG_i = (dA_i, dT_i)``: the global motion from frame i to frame i + 1 in the body frame
+  of frame i (axis-angle in rad, translation in m; eq. 2-4 of :mod:`.se3`), de-normalised by
+  fixed output statistics ``out_mean``, ``out_std``; the output at the last frame of a
+  sequence has no motion to predict and is ignored;
+* ``u_i``: the world's up direction (+z) in the body frame of frame i (unit vector,
+  ``R_i^T e_z``), predicted as an offset from (0, 0, 1) and normalised.
 
-Test-time augmentation (``tta``, inference only, beyond the paper): the two augmentations the
-network is trained with are exact symmetries of the task, so the motion can also be read off
-the mirrored sequence (left/right swapped, reflected back) and off the time-reversed sequence
-(its motions inverted and put back in order); ``'mirror'``, ``'reverse'`` or ``'both'``
-(all four combinations) average these estimates (axis-angle and translation means: the
-per-frame motions are small rotations), at 2 or 4 times the compute in one batched pass.
+The input is normalised by ``feature_mean``, ``feature_std``; with ``velocity_input`` the
+forward differences of the local-pose features are appended inside the network.
+:meth:`GMRConfig.paper` is the paper's configuration; the choices beyond the paper and their
+reasons are in ``docs/global.md``.
+
+Test-time augmentation (``tta``, inference only): the motion is also read off the mirrored
+sequence (y -> -y in the root frame, left and right swapped; reflected back: axis-angle
+``(-x, y, -z)``, translation and up ``(x, -y, z)``) and off the time-reversed sequence (motion
+j of the reversal is ``dG_{n-2-j}^-1``); ``'mirror'``, ``'reverse'`` or ``'both'`` (all four
+combinations) average the estimates (arithmetic means of axis-angle and translation), at 2 or
+4 times the compute in one batched pass.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
-from typing import Dict, List, Optional, Union
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional
 
 import numpy as np
 import torch
@@ -90,8 +87,8 @@ def reverse_padded(x: torch.Tensor, lengths: Optional[torch.Tensor]) -> torch.Te
 class BiGRU(nn.Module):
     """A stack of bidirectional GRU layers for padded batches: each layer runs a forward GRU
     on the sequences and a second GRU on the sequences reversed within their lengths, and
-    concatenates both (2H per frame). The same as ``nn.GRU(bidirectional=True)`` on packed
-    sequences, without the packing, whose backward pass is very slow on the CPU."""
+    concatenates both. (B, T, C) -> (B, T, 2H). The same as ``nn.GRU(bidirectional=True)`` on
+    packed sequences, without the packing (``docs/global.md``)."""
 
     def __init__(self, inputs: int, hidden: int, layers: int) -> None:
         super().__init__()
@@ -113,7 +110,7 @@ class BiGRU(nn.Module):
 
     def _fused(self, x: torch.Tensor) -> torch.Tensor:
         """Inference without padding: the same weights through PyTorch's fused bidirectional
-        GRU kernel (what ``nn.GRU(bidirectional=True)`` calls; ~10 % faster per window)."""
+        GRU kernel (what ``nn.GRU(bidirectional=True)`` calls)."""
         from torch import _VF
         weights = []
         for f, b in zip(self.fwd, self.bwd):
@@ -264,24 +261,3 @@ class Augmented(nn.Module):
 def with_tta(model: GMR, tta: str) -> nn.Module:
     """``model`` itself for ``tta='none'``, else an :class:`Augmented` wrapper."""
     return model if tta == 'none' else Augmented(model, tta)
-
-
-def save_weights(model: GMR, path: Union[str, Path], info: Optional[Dict] = None) -> None:
-    """Inference weights: state dict + configuration (+ free-form info)."""
-    torch.save({'model': model.state_dict(), 'config': asdict(model.cfg), 'info': info or {}},
-               path)
-
-
-def load_weights(path: Union[str, Path], device: str = 'cpu') -> GMR:
-    """Load :func:`save_weights` output; raises ValueError for a file that is not GMR
-    weights."""
-    try:
-        state = torch.load(path, map_location=device, weights_only=False)
-        cfg = GMRConfig(**state['config'])
-    except (KeyError, TypeError, RuntimeError, EOFError) as exc:
-        raise ValueError(f'{path}: not GMR weights ({type(exc).__name__}: {exc})') from None
-    model = GMR(cfg).to(device)
-    model.load_state_dict(state['model'])
-    model.eval()
-    model.info = state.get('info', {})
-    return model

@@ -23,23 +23,41 @@ Bad input never stops the node: a malformed or NaN message is dropped with a war
 joint set that does not match the model is reported with the joints it needs, a stamp that
 does not advance is dropped, a gap longer than ``max_gap_s`` restarts the accumulation (logged
 and counted), and nothing is published until ``lookahead + 1`` frames have arrived (said
-once).
+once). A non-finite network output never enters the accumulated world pose: the last finite
+motion is held for that frame (:mod:`mocap_global.online`; counted as ``nonfinite_outputs``
+on ``/diagnostics``). A callback that raises drops its frame (:func:`mocap_core.guard.guarded`).
+Weights that are missing, damaged or not plain tensors (a crafted pickle is never executed)
+end the start with one line ``gmr: error: ...`` and exit status 2.
 """
 
 from __future__ import annotations
 
-import functools
 import sys
 import time
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Sequence
 
 import numpy as np
+import torch
+from nav_msgs.msg import Odometry, Path as PathMsg
+from rclpy.node import Node
+from sensor_msgs.msg import JointState, PointCloud2
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import MarkerArray
 
+from mocap_core import ros_conversions as rc
+from mocap_core import topics
+from mocap_core.diagnostics import NodeDiagnostics
+from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
+from mocap_core.qos import STREAM_QOS, input_qos
+
+from .model import TTA_MODES, with_tta
+from .online import OnlineGMR, StaticCameraFusion, WorldFrame
+from .weights import default_weights, load_weights
 
 PARAMETERS = (
-    ParamSpec('motion_topic', '/mocap/physics/motion', 'Input motion '
+    ParamSpec('motion_topic', topics.PHYSICS_MOTION, 'Input motion '
               '(MultiDOFJointTrajectory): the physics or the lifter stage', read_only=True),
     ParamSpec('weights', '', 'GMR weights file; empty = the shipped weights '
               '(share/mocap_global/weights/gmr.pt)', read_only=True),
@@ -83,18 +101,6 @@ PARAMETERS = (
 )
 
 
-def default_weights() -> Path:
-    """The shipped weights, from the package share directory (or the source tree)."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        path = Path(get_package_share_directory('mocap_global')) / 'weights' / 'gmr.pt'
-        if path.exists():
-            return path
-    except Exception:  # noqa: BLE001 - not installed through ament: use the source tree
-        pass
-    return Path(__file__).resolve().parents[1] / 'weights' / 'gmr.pt'
-
-
 def parse_up(text: str) -> Optional[np.ndarray]:
     """'x y z' (or 'x,y,z') -> unit vector; raises ValueError."""
     try:
@@ -107,235 +113,231 @@ def parse_up(text: str) -> Optional[np.ndarray]:
     return v / np.linalg.norm(v)
 
 
+
+class GMRNode(Node):
+    """The ``gmr`` node (module docstring). Keyword arguments go to ``rclpy.node.Node``
+    (``context``, ``parameter_overrides``, ...).
+
+    Raises (at construction): FileNotFoundError for missing weights, ValueError (also
+    :class:`~mocap_core.checkpoint.WeightsError`) for unusable weights or a bad parameter.
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('gmr', **kwargs)
+        self.p = p = declare_parameters(self, PARAMETERS)
+        torch.set_num_threads(int(p['threads']))
+        path = Path(p['weights']) if p['weights'] else default_weights()
+        if not path.exists():
+            raise FileNotFoundError(f'weights not found: {path} (train them with '
+                                    '`mocap train gmr --install`)')
+        if p['test_time_augmentation'] not in TTA_MODES:
+            raise ValueError(f"test_time_augmentation must be one of {TTA_MODES}, got "
+                             f"{p['test_time_augmentation']!r}")
+        self.model = with_tta(load_weights(path, p['device']), p['test_time_augmentation'])
+        cfg = self.model.cfg
+        self.fps = cfg.fps
+        if p['input_up'] not in ('auto', 'estimate'):
+            parse_up(p['input_up'])              # fail early on a malformed vector
+        window = p['window'] or cfg.window
+        if p['lookahead'] + p['chunk'] > window - 1:
+            raise ValueError(f"lookahead + chunk ({p['lookahead']} + {p['chunk']}) must be "
+                             f'at most window - 1 ({window - 1})')
+        self.online: Optional[OnlineGMR] = None   # built at the first frame (frame_id)
+        self.last_stamp = -1
+        self.last_input = time.monotonic()
+        self.said_waiting = False
+        self.restarts = 0
+        self.restart_time: Optional[float] = None
+        self.intervals: List[float] = []
+        self.rate_checked = False
+        self.nonfinite_reported = 0
+        self.path = PathMsg()
+        self.pub = {
+            'motion': self.create_publisher(MultiDOFJointTrajectory, topics.WORLD_MOTION,
+                                            STREAM_QOS),
+            'joints3d': self.create_publisher(PointCloud2, topics.WORLD_JOINTS3D, STREAM_QOS),
+            'joint_states': self.create_publisher(JointState, topics.WORLD_JOINT_STATES,
+                                                  STREAM_QOS),
+            'odom': self.create_publisher(Odometry, topics.WORLD_ODOM, STREAM_QOS),
+            'path': self.create_publisher(PathMsg, topics.WORLD_PATH, STREAM_QOS),
+            'markers': self.create_publisher(MarkerArray, topics.WORLD_MARKERS, STREAM_QOS),
+        }
+        self.diag = NodeDiagnostics(self, 'gmr', hardware_id=path.name)
+        self.diag.set_value('model', f'GMR {cfg.layers}x{cfg.hidden} bi-GRU, '
+                            f'{cfg.fps:g} fps, window {window}, '
+                            f"test-time augmentation {p['test_time_augmentation']}")
+        self.diag.set_value('lookahead_frames', p['lookahead'])
+        self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
+        self.diag.set_value('static_camera', p['static_camera'])
+        self.diag.set_value('nonfinite_outputs', 0)
+        self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'],
+                                 guarded(self, self.on_motion, 'motion'),
+                                 input_qos(STREAM_QOS, p['queue_depth']))
+        self.create_timer(0.1, guarded(self, self.on_idle, 'idle'))
+        self.get_logger().info(
+            f"gmr ready: {path} ({cfg.layers}x{cfg.hidden} GRU at {cfg.fps:g} fps), input "
+            f"{p['motion_topic']}, look-ahead {p['lookahead']} frames "
+            f"({p['lookahead'] / cfg.fps:.2f} s), static camera {p['static_camera']}")
+
+    def _make_online(self, frame_id: str) -> OnlineGMR:
+        p = self.p
+        fusion = None
+        up = None
+        if p['input_up'] == 'auto':
+            up = None if 'optical' in frame_id else np.array([0.0, 0.0, 1.0])
+        elif p['input_up'] != 'estimate':
+            up = parse_up(p['input_up'])
+        if p['static_camera']:
+            fusion = StaticCameraFusion(
+                self.fps, p['fusion_init_s'], p['fusion_position_time_constant_s'],
+                p['fusion_orientation_time_constant_s'], input_up=up)
+            self.get_logger().info(
+                'static camera: fusing with the input root trajectory ('
+                + ('input frame up = ' + np.array2string(up, precision=3)
+                   if up is not None else
+                   f"up of '{frame_id}' estimated over {p['fusion_init_s']:g} s") + ')')
+        model_up = None
+        if self.model.cfg.root_input == 'up':
+            model_up = up if up is not None else np.array([0.0, -1.0, 0.0])
+        return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
+                         p['tilt_correction'], fusion, model_up, p['device'],
+                         chunk=p['chunk'])
+
+    def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
+        """One input frame: convert, check the stamp, push to :class:`OnlineGMR`, publish
+        the frames that became ready."""
+        self.diag.input.tick()
+        names = self.model.cfg.joint_names
+        try:
+            pose = rc.motion_to_pose(msg, names)
+        except rc.MessageError as exc:
+            self.diag.errors += 1
+            if 'lacks joint' in str(exc):
+                self.diag.error('joint set does not match the model')
+                self.get_logger().error(
+                    f'dropping motion: joint set does not match the GMR model ({exc}); '
+                    f'the model needs {len(names)} joints: {", ".join(names)}',
+                    throttle_duration_sec=2.0)
+            else:
+                self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
+            return
+        stamp = rc.stamp_to_ns(msg.header.stamp)
+        if self.last_stamp - stamp > self.p['max_gap_s'] * 1e9:
+            # a new stream (e.g. a bag played again): the accumulation restarts below
+            self.get_logger().warn(
+                f'motion stamps jumped back by {(self.last_stamp - stamp) * 1e-9:.1f} s '
+                '(a bag restarted?): starting a new stream')
+            self.last_stamp = -1
+        if stamp <= self.last_stamp:
+            self.diag.dropped += 1
+            self.get_logger().warn('motion stamp did not advance; frame dropped',
+                                   throttle_duration_sec=2.0)
+            return
+        if self.online is None:
+            self.online = self._make_online(msg.header.frame_id)
+        gap = (stamp - self.last_stamp) * 1e-9 if self.last_stamp >= 0 else 0.0
+        self.last_stamp = stamp
+        self._check_rate(gap)
+        try:
+            with self.diag.processing():
+                frames, event = self.online.push(stamp, pose)
+        except ValueError as exc:
+            self.diag.errors += 1
+            self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
+            return
+        self.diag.error(None)
+        self.last_input = time.monotonic()
+        if event:
+            self.restart_time = time.monotonic()
+            self.restarts += 1
+            self.diag.set_value('restarts', self.restarts)
+            self.diag.warn(f'accumulation restarted ({event})')
+            self.get_logger().warn(f'time gap of {gap:.3f} s (> max_gap_s): world pose '
+                                   'accumulation restarted from a new gravity-aligned pose')
+        if not frames and self.online.pending() and not self.said_waiting:
+            self.said_waiting = True
+            self.get_logger().info(
+                f'waiting for {self.online.frames_needed()} frames (look-ahead) before the '
+                'first world pose')
+        self._publish(frames)
+
+    def _check_rate(self, dt: float) -> None:
+        """Warn once when the input rate is not the model's (the motions per frame would be
+        wrong by the ratio)."""
+        if self.rate_checked or not 0 < dt <= self.p['max_gap_s']:
+            return
+        self.intervals.append(dt)
+        if len(self.intervals) >= 30:
+            self.rate_checked = True
+            rate = 1.0 / float(np.median(self.intervals))
+            self.diag.set_value('input_stamp_rate_hz', f'{rate:.1f}')
+            if abs(rate / self.fps - 1.0) > 0.2:
+                msg = (f'input rate {rate:.1f} Hz differs from the model rate {self.fps:g} '
+                       'fps: the per-frame motions will be off by that ratio')
+                self.diag.warn(msg)
+                self.get_logger().warn(msg)
+
+    def on_idle(self) -> None:
+        """Emit the frames waiting for look-ahead when the input pauses; clear the restart
+        warning on /diagnostics after 5 s."""
+        if self.restart_time is not None and time.monotonic() - self.restart_time > 5.0:
+            self.restart_time = None
+            self.diag.warn(None)
+        if self.online is not None and self.online.pending() and \
+                time.monotonic() - self.last_input > self.p['flush_after_s']:
+            self._publish(self.online.flush())
+
+    def flush(self) -> None:
+        """End of the input (offline processing): emit the frames waiting for look-ahead."""
+        if self.online is not None and self.online.pending():
+            self._publish(self.online.flush())
+
+    def _publish(self, frames: Sequence[WorldFrame]) -> None:
+        for f in frames:
+            pose = f.pose
+            if not (np.all(np.isfinite(pose.rotations))
+                    and np.all(np.isfinite(pose.root_position))):
+                self.diag.errors += 1
+                self.get_logger().error('world pose not finite; frame dropped',
+                                        throttle_duration_sec=2.0)
+                continue
+            header = rc.make_header(f.stamp_ns, self.p['frame_id'])
+            self.pub['motion'].publish(rc.pose_to_motion(pose, header))
+            self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(), header))
+            self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
+            odom = rc.root_to_odometry(pose.root_position, pose.rotations[0], header,
+                                       linear_velocity=f.linear_velocity,
+                                       angular_velocity=f.angular_velocity)
+            self.pub['odom'].publish(odom)
+            if f.first:
+                self.path.poses = []             # a new segment: a new path
+            rc.append_to_path(self.path, odom, self.p['path_length'])
+            self.pub['path'].publish(self.path)
+            self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='world'))
+            self.diag.output.tick()
+        if self.online is not None:
+            self._report_nonfinite(self.online.nonfinite_outputs)
+            fusion = self.online.fusion
+            self.diag.set_value('segments', self.online.segments)
+            if fusion is not None:
+                self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
+
+    def _report_nonfinite(self, count: int) -> None:
+        """Diagnostics and a rate-limited warning for frames whose network output was not
+        finite (held: :mod:`mocap_global.online`)."""
+        if count == self.nonfinite_reported:
+            return
+        self.nonfinite_reported = count
+        self.diag.set_value('nonfinite_outputs', count)
+        self.get_logger().warn(f'network output not finite ({count} frames so far): the last '
+                               'finite motion was held for those frames',
+                               throttle_duration_sec=2.0)
+
+
 def main(args: Optional[List[str]] = None) -> int:
     if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
-    return spin_node(node_class(), args, 'gmr')
-
-
-@functools.lru_cache(maxsize=None)
-def node_class():
-    """The node class (``GMRNode``; rclpy is imported here, not at module import, so
-    ``--help`` stays fast). Keyword arguments of the constructor go to
-    ``rclpy.node.Node`` (``context``, ``parameter_overrides``, ...)."""
-    import os
-    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')   # see mocap_global.cli
-
-    import torch
-    from rclpy.node import Node
-    from nav_msgs.msg import Odometry, Path as PathMsg
-    from sensor_msgs.msg import JointState, PointCloud2
-    from trajectory_msgs.msg import MultiDOFJointTrajectory
-    from visualization_msgs.msg import MarkerArray
-
-    from mocap_core import ros_conversions as rc
-    from mocap_core.diagnostics import NodeDiagnostics
-    from mocap_core.qos import STREAM_QOS, input_qos
-
-    from .model import TTA_MODES, load_weights, with_tta
-    from .online import OnlineGMR, StaticCameraFusion
-
-    class GMRNode(Node):
-        def __init__(self, **kwargs) -> None:
-            super().__init__('gmr', **kwargs)
-            self.p = p = declare_parameters(self, PARAMETERS)
-            torch.set_num_threads(int(p['threads']))
-            path = Path(p['weights']) if p['weights'] else default_weights()
-            if not path.exists():
-                raise FileNotFoundError(f'weights not found: {path} (train them with '
-                                        '`mocap train gmr --install`)')
-            if p['test_time_augmentation'] not in TTA_MODES:
-                raise ValueError(f"test_time_augmentation must be one of {TTA_MODES}, got "
-                                 f"{p['test_time_augmentation']!r}")
-            self.model = with_tta(load_weights(path, p['device']), p['test_time_augmentation'])
-            cfg = self.model.cfg
-            self.fps = cfg.fps
-            if p['input_up'] not in ('auto', 'estimate'):
-                parse_up(p['input_up'])              # fail early on a malformed vector
-            window = p['window'] or cfg.window
-            if p['lookahead'] + p['chunk'] > window - 1:
-                raise ValueError(f"lookahead + chunk ({p['lookahead']} + {p['chunk']}) must be "
-                                 f'at most window - 1 ({window - 1})')
-            self.online: Optional[OnlineGMR] = None   # built at the first frame (frame_id)
-            self.last_stamp = -1
-            self.last_input = time.monotonic()
-            self.said_waiting = False
-            self.restarts = 0
-            self.restart_time: Optional[float] = None
-            self.intervals: List[float] = []
-            self.rate_checked = False
-            self.path = PathMsg()
-            self.pub = {
-                'motion': self.create_publisher(MultiDOFJointTrajectory, '/mocap/world/motion',
-                                                STREAM_QOS),
-                'joints3d': self.create_publisher(PointCloud2, '/mocap/world/joints3d',
-                                                  STREAM_QOS),
-                'joint_states': self.create_publisher(JointState, '/mocap/world/joint_states',
-                                                      STREAM_QOS),
-                'odom': self.create_publisher(Odometry, '/mocap/world/odom', STREAM_QOS),
-                'path': self.create_publisher(PathMsg, '/mocap/world/path', STREAM_QOS),
-                'markers': self.create_publisher(MarkerArray, '/mocap/world/markers',
-                                                 STREAM_QOS),
-            }
-            self.diag = NodeDiagnostics(self, 'gmr', hardware_id=path.name)
-            self.diag.set_value('model', f'GMR {cfg.layers}x{cfg.hidden} bi-GRU, '
-                                f'{cfg.fps:g} fps, window {p["window"] or cfg.window}, '
-                                f"test-time augmentation {p['test_time_augmentation']}")
-            self.diag.set_value('lookahead_frames', p['lookahead'])
-            self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
-            self.diag.set_value('static_camera', p['static_camera'])
-            self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'],
-                                     self.on_motion, input_qos(STREAM_QOS, p['queue_depth']))
-            self.create_timer(0.1, self.on_idle)
-            self.get_logger().info(
-                f"gmr ready: {path} ({cfg.layers}x{cfg.hidden} GRU at {cfg.fps:g} fps), input "
-                f"{p['motion_topic']}, look-ahead {p['lookahead']} frames "
-                f"({p['lookahead'] / cfg.fps:.2f} s), static camera {p['static_camera']}")
-
-        def _make_online(self, frame_id: str) -> OnlineGMR:
-            p = self.p
-            fusion = None
-            up = None
-            if p['input_up'] == 'auto':
-                up = None if 'optical' in frame_id else np.array([0.0, 0.0, 1.0])
-            elif p['input_up'] != 'estimate':
-                up = parse_up(p['input_up'])
-            if p['static_camera']:
-                fusion = StaticCameraFusion(
-                    self.fps, p['fusion_init_s'], p['fusion_position_time_constant_s'],
-                    p['fusion_orientation_time_constant_s'], input_up=up)
-                self.get_logger().info(
-                    'static camera: fusing with the input root trajectory ('
-                    + ('input frame up = ' + np.array2string(up, precision=3)
-                       if up is not None else
-                       f"up of '{frame_id}' estimated over {p['fusion_init_s']:g} s") + ')')
-            model_up = None
-            if self.model.cfg.root_input == 'up':
-                model_up = up if up is not None else np.array([0.0, -1.0, 0.0])
-            return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
-                             p['tilt_correction'], fusion, model_up, p['device'],
-                             chunk=p['chunk'])
-
-        def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
-            self.diag.input.tick()
-            names = self.model.cfg.joint_names
-            try:
-                pose = rc.motion_to_pose(msg, names)
-            except rc.MessageError as exc:
-                self.diag.errors += 1
-                if 'lacks joint' in str(exc):
-                    self.diag.error('joint set does not match the model')
-                    self.get_logger().error(
-                        f'dropping motion: joint set does not match the GMR model ({exc}); '
-                        f'the model needs {len(names)} joints: {", ".join(names)}',
-                        throttle_duration_sec=2.0)
-                else:
-                    self.get_logger().error(f'dropping motion: {exc}',
-                                            throttle_duration_sec=2.0)
-                return
-            stamp = rc.stamp_to_ns(msg.header.stamp)
-            if self.last_stamp - stamp > self.p['max_gap_s'] * 1e9:
-                # a new stream (e.g. a bag played again): the accumulation restarts below
-                self.get_logger().warn(
-                    f'motion stamps jumped back by {(self.last_stamp - stamp) * 1e-9:.1f} s '
-                    '(a bag restarted?): starting a new stream')
-                self.last_stamp = -1
-            if stamp <= self.last_stamp:
-                self.diag.dropped += 1
-                self.get_logger().warn('motion stamp did not advance; frame dropped',
-                                       throttle_duration_sec=2.0)
-                return
-            if self.online is None:
-                self.online = self._make_online(msg.header.frame_id)
-            gap = (stamp - self.last_stamp) * 1e-9 if self.last_stamp >= 0 else 0.0
-            self.last_stamp = stamp
-            self._check_rate(gap)
-            try:
-                with self.diag.processing():
-                    frames, event = self.online.push(stamp, pose)
-            except ValueError as exc:
-                self.diag.errors += 1
-                self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
-                return
-            self.diag.error(None)
-            self.last_input = time.monotonic()
-            if event:
-                self.restart_time = time.monotonic()
-                self.restarts += 1
-                self.diag.set_value('restarts', self.restarts)
-                self.diag.warn(f'accumulation restarted ({event})')
-                self.get_logger().warn(f'time gap of {gap:.3f} s (> max_gap_s): world pose '
-                                       'accumulation restarted from a new gravity-aligned '
-                                       'pose')
-            if not frames and self.online.pending() and not self.said_waiting:
-                self.said_waiting = True
-                self.get_logger().info(
-                    f'waiting for {self.online.frames_needed()} frames (look-ahead) before '
-                    'the first world pose')
-            self._publish(frames)
-
-        def _check_rate(self, dt: float) -> None:
-            """Warn once when the input rate is not the model's (the motions per frame would
-            be wrong by the ratio)."""
-            if self.rate_checked or not 0 < dt <= self.p['max_gap_s']:
-                return
-            self.intervals.append(dt)
-            if len(self.intervals) >= 30:
-                self.rate_checked = True
-                rate = 1.0 / float(np.median(self.intervals))
-                self.diag.set_value('input_stamp_rate_hz', f'{rate:.1f}')
-                if abs(rate / self.fps - 1.0) > 0.2:
-                    msg = (f'input rate {rate:.1f} Hz differs from the model rate '
-                           f'{self.fps:g} fps: the per-frame motions will be off by that ratio')
-                    self.diag.warn(msg)
-                    self.get_logger().warn(msg)
-
-        def on_idle(self) -> None:
-            """Emit the frames waiting for look-ahead when the input pauses; clear the
-            restart warning on /diagnostics after 5 s."""
-            if self.restart_time is not None and time.monotonic() - self.restart_time > 5.0:
-                self.restart_time = None
-                self.diag.warn(None)
-            if self.online is not None and self.online.pending() and \
-                    time.monotonic() - self.last_input > self.p['flush_after_s']:
-                self._publish(self.online.flush())
-
-        def flush(self) -> None:
-            """End of the input (offline processing): emit the frames waiting for
-            look-ahead."""
-            if self.online is not None and self.online.pending():
-                self._publish(self.online.flush())
-
-        def _publish(self, frames) -> None:
-            for f in frames:
-                pose = f.pose
-                if not (np.all(np.isfinite(pose.rotations))
-                        and np.all(np.isfinite(pose.root_position))):
-                    self.diag.errors += 1
-                    self.get_logger().error('world pose not finite; frame dropped')
-                    continue
-                header = rc.make_header(f.stamp_ns, self.p['frame_id'])
-                self.pub['motion'].publish(rc.pose_to_motion(pose, header))
-                self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(),
-                                                                   header))
-                self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
-                odom = rc.root_to_odometry(pose.root_position, pose.rotations[0], header,
-                                           linear_velocity=f.linear_velocity,
-                                           angular_velocity=f.angular_velocity)
-                self.pub['odom'].publish(odom)
-                if f.first:
-                    self.path.poses = []             # a new segment: a new path
-                rc.append_to_path(self.path, odom, self.p['path_length'])
-                self.pub['path'].publish(self.path)
-                self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='world'))
-                self.diag.output.tick()
-            if self.online is not None:
-                fusion = self.online.fusion
-                self.diag.set_value('segments', self.online.segments)
-                if fusion is not None:
-                    self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
-
-    return GMRNode
+    return spin_node(GMRNode, args, 'gmr')
 
 
 if __name__ == '__main__':

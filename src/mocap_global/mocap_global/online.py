@@ -2,28 +2,34 @@
 
 :class:`OnlineGMR` keeps the last ``window`` frames of one person's local poses. When frame
 ``n`` arrives it emits frame ``k = n - lookahead``: the GRU runs over the window ending at
-``n`` (so the motion ``dG_{k-1}`` into frame ``k`` sees ``lookahead + 1`` future frames; a
-bidirectional model needs them, and the delay is ``lookahead / fps`` seconds), and the world
-pose is accumulated, ``G_k = G_{k-1} dG_{k-1}`` (eq. 2-4). ``lookahead = 0`` is the causal
-option: the newest frame is emitted at once.
+``n`` (so the motion ``dG_{k-1}`` into frame ``k`` sees ``lookahead + 1`` future frames; the
+delay is ``lookahead / fps`` seconds), and the world pose is accumulated,
+``G_k = G_{k-1} dG_{k-1}`` (eq. 2-4: ``R_k = R_{k-1} dR_{k-1}``,
+``T_k = R_{k-1} dT_{k-1} + T_{k-1}``). ``lookahead = 0`` is the causal option: the newest
+frame is emitted at once.
 
-World frame (§3.6, adapted): the paper starts from ``G_1 = I``. Here the first pose of a
-segment is gravity-aligned: its tilt is the model's estimate of the up direction in the body
-frame (an extra output, :mod:`.model`), its heading 0 (facing +x), its root above the origin
-at the height that puts the lowest foot contact point on the floor z = 0. Optionally
-(``tilt_correction`` > 0, beyond the paper) every accumulated orientation is pulled towards
-the estimated tilt by that fraction per frame, which removes the pitch/roll part of the drift
-(the heading and the position drift remain).
+World frame (z up, m; §3.6 adapted): the first pose of a segment is gravity-aligned: its tilt
+is the model's estimate of the up direction in the body frame (:mod:`.model`), its heading 0
+(facing +x), its root above the origin at the height that puts the lowest foot contact point
+on the floor z = 0. With ``tilt_correction`` = a > 0, every accumulated orientation is turned
+by the fraction a of the rotation that takes its body-frame up ``R_k^T e_z`` to the
+estimated up (pitch and roll only; heading and position are not corrected).
 
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
 Until ``lookahead + 1`` frames of a segment exist nothing is emitted (:meth:`frames_needed`).
 
-Static camera (``fusion``, beyond the paper, :class:`StaticCameraFusion`): the input's root
-trajectory in its own frame (the camera frame of the lifter, a floor frame of the physics
-stage) is fixed to the world when the camera does not move. GMR keeps the trajectory smooth
-and consistent; the input root removes the drift.
+Non-finite network outputs: before a frame's outputs enter the accumulation they are checked.
+If the motion into the frame (or the pose accumulated from it) is not finite, the last finite
+motion of the segment is used instead (constant velocity; zero motion before the first one);
+a non-finite up estimate is replaced by the last finite one (+z before the first). The frame
+is still emitted, marked ``held``, and counted in :attr:`OnlineGMR.nonfinite_outputs`; the
+accumulated pose stays finite and the following frames use the network again.
+
+Static camera (``fusion``, :class:`StaticCameraFusion`): the input's root trajectory in its
+own frame (the camera frame of the lifter, the floor frame of the physics stage) is fixed to
+the world when the camera does not move, and each accumulated pose is pulled towards it.
 """
 
 from __future__ import annotations
@@ -57,6 +63,7 @@ class WorldFrame:
     angular_velocity: np.ndarray    # (3,) rad/s in the root frame
     first: bool                     # first frame of a segment (accumulation (re)started)
     fused: bool                     # the static-camera fusion corrected this frame
+    held: bool = False              # the network output was not finite: last motion held
 
 
 class StaticCameraFusion:
@@ -178,6 +185,8 @@ class OnlineGMR:
         self.device = device
         self.joint_names = tuple(self.cfg.joint_names)
         self.segments = 0
+        #: Frames whose network output was not finite and was replaced (module docstring).
+        self.nonfinite_outputs = 0
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -192,6 +201,8 @@ class OnlineGMR:
         self._R: Optional[np.ndarray] = None
         self._T: Optional[np.ndarray] = None
         self._cache: Optional[Tuple[int, dict]] = None
+        self._last_motion: Tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))
+        self._last_up = _EZ.copy()
         if self.fusion is not None:
             self.fusion.reset()
 
@@ -268,13 +279,29 @@ class OnlineGMR:
                                             for k, v in out.items()})
         return self._cache[1]
 
+    def _frame_up(self, out: dict, pos: int) -> Tuple[np.ndarray, bool]:
+        """The up estimate of a window position, or the last finite one (module docstring).
+        Returns (up (3,), replaced)."""
+        up = out['up'][pos]
+        if np.all(np.isfinite(up)):
+            self._last_up = up
+            return up, False
+        return self._last_up, True
+
+    def _step(self, aa: np.ndarray, dT: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """``G_k = G_{k-1} dG_{k-1}``: axis-angle ``aa`` (3,) rad and ``dT`` (3,) m in the body
+        frame of frame k - 1 -> (R (3, 3), T (3,)) in the world."""
+        R = self._R @ axis_angle_to_matrix(aa)          # eq. 3
+        T = self._R @ dT + self._T                      # eq. 4
+        return R, T
+
     def _emit(self) -> WorldFrame:
         k = self._emitted                               # segment index of the frame
         first_in_buffer = self._received - len(self._stamps)
         pos = k - first_in_buffer                       # its position in the window
         out = self._outputs()
         pose = self._poses[pos]
-        up = out['up'][pos]
+        up, held = self._frame_up(out, pos)
         lin = np.zeros(3)
         ang = np.zeros(3)
         fused = False
@@ -285,10 +312,14 @@ class OnlineGMR:
                                                         pose.rotations[1:]]), T)
             T[2] = -min(p[2] for p in probe.contact_positions().values())
         else:
-            dR = axis_angle_to_matrix(out['axis_angle'][pos - 1])
+            aa = out['axis_angle'][pos - 1]
             dT = out['translation'][pos - 1]
-            R = self._R @ dR                            # eq. 3
-            T = self._R @ dT + self._T                  # eq. 4
+            R, T = self._step(aa, dT)
+            if np.all(np.isfinite(R)) and np.all(np.isfinite(T)):
+                self._last_motion = (aa, dT)
+            else:                                       # hold the last finite motion
+                held = True
+                R, T = self._step(*self._last_motion)
             if self.tilt_correction > 0:
                 b = R.T @ _EZ
                 corr = matrix_to_axis_angle(quat_to_matrix(quat_from_two_vectors(up, b)))
@@ -307,9 +338,10 @@ class OnlineGMR:
             R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
         self._R, self._T = R, T
         self._emitted += 1
+        self.nonfinite_outputs += int(held)
         if k == 0:
             self.segments += 1
         rot = np.array(pose.rotations)
         rot[0] = matrix_to_quat(R)
         return WorldFrame(self._stamps[pos], Pose(pose.skeleton, rot, T), lin, ang, k == 0,
-                          fused)
+                          fused, held)

@@ -13,14 +13,14 @@ from mocap_core.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_m
 from mocap_core.skeleton import NUM_JOINTS, Skeleton
 
 from mocap_global import features as F
-from mocap_global import metrics as M
-from mocap_global.model import (GMR, GMRConfig, TTA_MODES, load_weights, reverse_padded,
-                                 save_weights, with_tta)
+from mocap_global.model import GMR, GMRConfig, TTA_MODES, reverse_padded, with_tta
 from mocap_global.online import OnlineGMR, StaticCameraFusion
-from mocap_global.samples import Augmentation, WindowSampler
 from mocap_global.se3 import (accumulate, align_yaw_translation, compose_steps, invert_motion,
                               relative_motion, time_reverse_motion, tilt_rotation, up_in_body)
-from mocap_global.train import TrainConfig, losses, total_loss
+from mocap_global.training import metrics as M
+from mocap_global.training.samples import Augmentation, WindowSampler
+from mocap_global.training.train import TrainConfig, losses, total_loss
+from mocap_global.weights import load_weights, save_weights
 
 EZ = np.array([0.0, 0.0, 1.0])
 
@@ -201,7 +201,7 @@ def test_model_shapes_padding_and_weights_roundtrip(tmp_path):
         assert torch.allclose(again(x)['translation'], model(x)['translation'])
     assert again.info == {'note': 'test'}
     (tmp_path / 'bad.pt').write_bytes(b'not weights')
-    with pytest.raises(Exception):
+    with pytest.raises(ValueError):
         load_weights(tmp_path / 'bad.pt')
 
 
@@ -244,7 +244,7 @@ def test_test_time_augmentation_is_mirror_and_time_reversal_equivariant(pose_inp
         assert torch.allclose(with_tta(model, 'both')(f[None])['translation'],
                               model(f[None], tta='both')['translation'])
     assert with_tta(model, 'none') is model
-    from mocap_global.cli import TTA_CHOICES
+    from mocap_global.training.cli import TTA_CHOICES
     assert TTA_CHOICES == TTA_MODES                     # `mocap eval gmr --tta` offers them all
     with pytest.raises(ValueError, match='tta'):
         model(f[None], tta='sideways')
@@ -387,7 +387,7 @@ def test_static_camera_fusion_removes_drift():
     c = np.array([0.3, 1.0, 4.0])
     R_in, T_in = C.T @ R, (T - c) @ C                   # x_world = C x_in + c
     up = up_in_body(R)
-    from mocap_global.evaluate import fuse_sequence
+    from mocap_global.training.evaluate import fuse_sequence
     _, T_gmr = fuse_sequence(R[0], T[0], dR, biased, up, R_in, T_in, None)
     for fusion in (StaticCameraFusion(30.0), StaticCameraFusion(30.0, input_up=C.T @ EZ)):
         _, T_f = fuse_sequence(R[0], T[0], dR, biased, up, R_in, T_in, fusion)

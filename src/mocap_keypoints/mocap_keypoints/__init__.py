@@ -1,1 +1,2 @@
-"""2D body keypoints with confidences (23-point layout) from a camera, a video file, an image topic or OpenPose JSON."""
+"""2D body keypoints with confidences (23-point layout) from a camera, a video file, an image
+topic or OpenPose JSON."""

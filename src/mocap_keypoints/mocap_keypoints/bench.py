@@ -287,7 +287,8 @@ def render(results: Dict) -> str:
              f"noise of 10-20 %. Load average (1 min) before / after the run: "
              f"{results['load'][0]:.2f} / {results['load'][1]:.2f}.", '',
              '## Detector time per frame', '',
-             '| mode | cores | median ms | p95 ms | max ms | frames |', '|---|---|---|---|---|---|']
+             '| mode | cores | median ms | p95 ms | max ms | frames |',
+             '|---|---|---|---|---|---|']
     for d in results['detector']:
         s = d['stats']
         lines.append(f"| {d['mode']} | {d['cores']} | {s['median_ms']:.1f} | {s['p95_ms']:.1f} "

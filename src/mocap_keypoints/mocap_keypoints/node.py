@@ -1,6 +1,6 @@
 """``ros2 run mocap_keypoints keypoints``: 2D body keypoints with confidences, live.
 
-Publishes for every processed frame, stamped with the image's stamp (DESIGN §2):
+Publishes for every processed frame, stamped with the image's stamp (docs/design.md §2):
   * ``/mocap/keypoints2d`` (sensor_msgs/PointCloud2, sensor-data QoS): height = persons
     (``max_persons``), width = 23 keypoints, float32 ``u, v, confidence``; when nobody is found
     the cloud is still published, with all confidences 0;
@@ -127,7 +127,8 @@ PARAMETERS = (
               'of the worker thread (offline replay: no frame dropped, the callback blocks)',
               read_only=True),
     ParamSpec('wait_for_subscribers', 0, 'Before the first frame, wait until this many '
-              'subscribers listen on /mocap/keypoints2d (e.g. 1 for a recorder); 0 = start at once',
+              'subscribers listen on /mocap/keypoints2d (e.g. 1 for a recorder); 0 = start at '
+              'once',
               min_value=0),
     ParamSpec('wait_timeout_s', 10.0, 'Longest wait for those subscribers, seconds',
               min_value=0.0),

@@ -1,7 +1,8 @@
 """Lifter benchmark (``python -m mocap_lifter.bench``): per-frame latency of the online lifter
 (ring buffer + network, as the node runs it) and offline throughput of one pass over a whole
-clip, for MotioNet (windowed, causal) and VTM (windowed), on the shipped weights, with real keypoints from a committed bag. Prints the figures
-and writes a Markdown report (default ``docs/benchmarks/lifter.md``)."""
+clip, for MotioNet (windowed, causal) and VTM (windowed), on the shipped weights, with real
+keypoints from a committed bag. Prints the figures and writes a Markdown report (default
+``docs/benchmarks/lifter.md``)."""
 
 from __future__ import annotations
 
@@ -13,21 +14,22 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .node import default_weights
+from .features import lifter_features
 from .online import OnlineLifter
-from .train import load_weights
+from .weights import default_weights, load_weights
 
 ROOT = Path(__file__).resolve().parents[3]
 
 
 def _keypoints(bag: Path):
+    from mocap_core import topics
     from mocap_core.bag_io import BagReader, deserialize
     from mocap_core.ros_conversions import camera_info_to_intrinsics, cloud_to_keypoints
     kp, intr = [], None
     with BagReader(bag) as reader:
-        for m in reader.messages(topics=['/mocap/keypoints2d', '/mocap/camera_info']):
+        for m in reader.messages(topics=[topics.KEYPOINTS, topics.CAMERA_INFO]):
             msg = deserialize(m.data, m.msgtype)
-            if m.topic == '/mocap/camera_info':
+            if m.topic == topics.CAMERA_INFO:
                 intr = camera_info_to_intrinsics(msg)
             else:
                 kp.append(cloud_to_keypoints(msg)[0])
@@ -35,7 +37,7 @@ def _keypoints(bag: Path):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(prog='mocap bench lifter', description=__doc__)
     ap.add_argument('--bag', default=str(ROOT / 'bags' / 'gt_bandai_walk_exhausted'))
     ap.add_argument('--threads', type=int, default=1)
     ap.add_argument('--repeat', type=int, default=3, help='passes over the clip')
@@ -57,7 +59,6 @@ def main(argv=None) -> int:
                 t = time.perf_counter()
                 online.push(1 + i * 33_333_333, k, intr)
                 lat.append(time.perf_counter() - t)
-        from .features import lifter_features
         feats, root, scale, _ = lifter_features(kp, intr)
         x = torch.as_tensor(feats[None])
         r = torch.as_tensor(root[None]).float()
@@ -79,7 +80,8 @@ def main(argv=None) -> int:
              f'{torch.get_num_threads()} torch thread(s), {len(kp)} real keypoint frames of '
              f'`{Path(args.bag).name}`, {args.repeat} passes (the first pass is warm-up for the '
              'online figures). Medians and 95th percentiles; the machine is shared.', '',
-             '| model, mode | online per frame (ring buffer + network), median | p95 | offline: network + FK, one pass per clip | '
+             '| model, mode | online per frame (ring buffer + network), median | p95 | '
+             'offline: network + FK, one pass per clip | '
              'look-ahead |', '|---|---|---|---|---|']
     lines += [f'| {m} | {a:.2f} ms | {b:.2f} ms | {c:.0f} frames/s | {d} frames |'
               for m, a, b, c, d in rows]

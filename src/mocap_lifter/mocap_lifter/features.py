@@ -2,21 +2,20 @@
 
 Per frame (MotioNet §3.3 and §4 with neural PhysCap's canonicalisation, §3.2):
 
-* keypoints are canonicalised with the camera intrinsics, ``((u - cx) / fx, (v - cy) / fy)``,
-  so the networks never see the training cameras' focal lengths;
+* keypoints are canonicalised with the camera intrinsics, ``((u - cx) / fx, (v - cy) / fy)``
+  (:func:`mocap_core.keypoint_geometry.canonicalize`);
 * the root keypoint is the midpoint of the two hips (the pelvis of the pipeline skeleton is
   the midpoint of the hip joints); every keypoint is expressed relative to it;
 * unseen keypoints (confidence 0) are zeros; the confidences themselves are input channels;
 * the root-relative keypoints are divided by the person's 2D scale ``s`` (the RMS distance of
-  the seen keypoints from the root, canonical units), so the pose features do not depend on
-  the distance to the camera; ``log s`` is a channel of its own;
+  the seen keypoints from the root, canonical units); ``log s`` is a channel of its own;
 * the global 2D velocity of the root keypoint, also divided by ``s``, is appended.
 
 Layout of the (T, C) feature matrix, C = 23*2 + 23 + 2 + 1 = 72: scaled root-relative x, y of
 each keypoint (interleaved), the 23 confidences, root velocity x, y, log s. The root keypoint
 (canonical, (T, 2)) and the scale (T,) are returned separately: the network predicts the
-depth as ``Z = exp(d) / s`` (a body of a given size looks 1/Z as large), and the root
-position is ``Z * (root_x, root_y, 1)`` in the camera frame.
+depth as ``Z = exp(d) / s`` (m), and the root position is ``Z * (root_x, root_y, 1)`` in the
+camera optical frame (m).
 
 A frame where a hip is unseen takes the root of the nearest frame where both are seen (the
 root keypoint is held, then back-filled), so the root stays defined through short gaps.
@@ -29,7 +28,7 @@ from typing import Tuple
 import numpy as np
 
 from mocap_core.camera import CameraIntrinsics
-from mocap_core.data.synth2d import canonicalize
+from mocap_core.keypoint_geometry import canonicalize
 from mocap_core.skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
 
 NUM_FEATURES = NUM_KEYPOINTS * 3 + 3

@@ -4,15 +4,13 @@ discriminators (no ROS imports).
 Shapes: B = batch, T = frames, C = channels, J = 18 joints, G = 10 bone groups.
 
 * :class:`RotationEncoder` (E_Q, §3.1 and appendix Table 4): a 1x1 channel expansion, then
-  ``fusion_blocks`` information-fusion blocks, each three parallel temporal convolutions with
-  kernel sizes 5, 3 and 1 summed (the paper's parallel branches; their outputs keep the
-  sequence length, which the paper achieves with adaptive average pooling and we with
-  padding), and a 1x1 shrink to per-frame outputs: J unit quaternions (x, y, z, w; joint 0 is
-  the root orientation in the camera frame), the root depth, and heel/toe contact logits.
-  Several fusion blocks with growing dilation give the receptive field the paper gets from
-  its 2048-wide layers; the width and depth are configuration (:class:`LifterConfig`).
-  ``causal=True`` pads on the left only, so output t never depends on inputs after t
-  (the paper's "casual conv" variant for live use); otherwise the window is centred.
+  ``fusion_blocks`` information-fusion blocks b = 0, 1, ..., each three parallel temporal
+  convolutions with kernel sizes 5, 3 and 1 and dilation 2^b, summed, with a residual, padded
+  to keep the sequence length; then a 1x1 shrink to per-frame outputs: J unit quaternions
+  (x, y, z, w; joint 0 is the root orientation in the camera frame), the log of depth times
+  scale, and heel/toe contact logits. Receptive field ``1 + sum_b 4 * 2^b`` frames.
+  ``causal=True`` pads on the left only, so output t never depends on inputs after t;
+  otherwise the window is centred.
 * :class:`SkeletonEncoder` (E_S): sequential temporal convolutions, adaptive max pooling over
   time, and a 1x1 layer to one length per bone group -- one symmetric skeleton by
   construction (pairs share a length).
@@ -43,8 +41,7 @@ NUM_CONTACTS = 4
 
 @dataclass
 class LifterConfig:
-    """Network size and behaviour. The paper's size is ``channels=2048, fusion_blocks=1``;
-    the default trains on a 2-core CPU in well under an hour."""
+    """Network size and behaviour (sizes: ``docs/lifter.md``)."""
 
     channels: int = 256
     fusion_blocks: int = 3

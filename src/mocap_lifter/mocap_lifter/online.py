@@ -18,12 +18,20 @@ The skeleton (bone lengths) is estimated by E_S over the growing buffer until
 ``skeleton_frames`` frames were seen, then held for this person. A gap longer than
 ``max_gap_s``, a stamp going backwards or a change of camera intrinsics resets the buffer
 and the skeleton.
+
+:class:`LifterStream` is the node's per-message logic around it: the tracked person's row
+of each (P, 23, 3) keypoint message; frames without that person go through the network as
+all-unseen keypoints once the person was seen in this segment (before that they are
+dropped); stamps jumping back by ``max_gap_s`` or more start a new stream; the intrinsics
+come from :class:`mocap_lifter.intrinsics.StreamIntrinsics`, and while its keypoint estimate
+is still collecting (the first frames of a stream without camera_info) the frames wait in
+arrival order and are lifted once it is fixed.
 """
 
 from __future__ import annotations
 
 import collections
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Deque, Dict, List, Optional, Tuple
 
 import numpy as np
@@ -32,8 +40,10 @@ import torch
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.pose import Pose
 from mocap_core.skeleton import NUM_KEYPOINTS, Skeleton
+from mocap_core.streams import StampOrder
 
 from .features import lifter_features
+from .intrinsics import StreamIntrinsics
 from .model import MotioNet
 
 
@@ -221,3 +231,107 @@ class OnlineLifter:
             lengths = self._estimate_lengths(*self._features()[:2])
         self._lengths_at[push] = lengths
         return lengths, False
+
+
+@dataclass
+class StreamStep:
+    """What one keypoint message (or a flush) did, for the node's log and diagnostics."""
+
+    frames: List[LiftedFrame] = field(default_factory=list)   # lifted frames now ready
+    resets: List[str] = field(default_factory=list)   # buffer and skeleton resets (reasons)
+    errors: List[str] = field(default_factory=list)   # frames the network pass rejected
+    jumped_back_s: float = 0.0    # > 0: the stamps jumped back this far, a new stream began
+    dropped: str = ''             # why the message was not used ('' = it was)
+    nobody: bool = False          # the tracked person is not in the message
+
+
+class LifterStream:
+    """A keypoint stream to lifted frames (module docstring).
+
+    Args:
+        lifter: the ring-buffered network.
+        intrinsics: the intrinsics of the stream (camera info or approximate).
+        person: row of the keypoint messages to track.
+        max_gap_s: stamps jumping back by this much or more start a new stream
+            (:class:`mocap_core.streams.StampOrder`); a smaller step back is dropped.
+    """
+
+    def __init__(self, lifter: OnlineLifter, intrinsics: StreamIntrinsics, person: int = 0,
+                 max_gap_s: float = 1.0) -> None:
+        self.lifter = lifter
+        self.intrinsics = intrinsics
+        self.person = int(person)
+        self.stamps = StampOrder(max(float(max_gap_s), 1e-9))
+        # frames waiting for the intrinsics: (stamp ns, (23, 3) keypoints)
+        self._held: Deque[Tuple[int, np.ndarray]] = collections.deque()
+
+    def pending(self) -> int:
+        """Frames received but not yet returned (waiting for intrinsics or look-ahead)."""
+        return len(self._held) + self.lifter.pending()
+
+    def push(self, stamp_ns: int, people: np.ndarray) -> StreamStep:
+        """One keypoint message: (P, 23, 3) pixels + confidence, P >= 0 people."""
+        step = StreamStep()
+        last = self.stamps.last_ns
+        verdict = self.stamps.check(stamp_ns)
+        if verdict == 'stale':
+            step.dropped = 'keypoint stamp did not advance'
+            return step
+        if verdict == 'restart':
+            step.jumped_back_s = (last - stamp_ns) * 1e-9
+            self._release(step, force=True)
+            step.frames.extend(self.lifter.flush())
+            self.lifter.reset()
+            step.resets.append('backwards')
+            self.intrinsics.restart()
+        kp = self._person(people)
+        if kp is None:
+            step.nobody = True
+            if self.lifter.frames_seen == 0 and not self._held:
+                step.dropped = 'nobody seen yet'
+                return step
+            kp = np.zeros((NUM_KEYPOINTS, 3))
+        else:
+            self.intrinsics.observe(kp)
+        self._held.append((int(stamp_ns), kp))
+        self._release(step)
+        return step
+
+    def flush(self) -> StreamStep:
+        """End of the input or a pause: the frames waiting for intrinsics (the keypoint
+        estimate is fixed from the frames seen), then those waiting for look-ahead."""
+        step = StreamStep()
+        self._release(step, force=True)
+        step.frames.extend(self.lifter.flush())
+        return step
+
+    def _person(self, people: np.ndarray) -> Optional[np.ndarray]:
+        """The tracked person's (23, 3) keypoints, or None if absent or all unseen."""
+        people = np.asarray(people, dtype=np.float64)
+        if people.ndim != 3 or self.person >= len(people) or \
+                not np.any(people[self.person, :, 2] > 0):
+            return None
+        return people[self.person]
+
+    def _release(self, step: StreamStep, force: bool = False) -> None:
+        """Lift the held frames once intrinsics are known (``force``: fix the keypoint
+        estimate now)."""
+        if not self._held:
+            return
+        if force and not self.intrinsics.freeze():
+            step.dropped = f'{len(self._held)} frame(s) without intrinsics'
+            self._held.clear()
+            return
+        intr = self.intrinsics.current
+        if intr is None:
+            return
+        while self._held:
+            stamp, kp = self._held.popleft()
+            try:
+                frames, event = self.lifter.push(stamp, kp, intr)
+            except ValueError as exc:   # e.g. a non-finite network output
+                step.errors.append(str(exc))
+                continue
+            if event:
+                step.resets.append(event)
+            step.frames.extend(frames)

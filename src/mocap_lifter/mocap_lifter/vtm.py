@@ -14,9 +14,8 @@ virtual one times the **bone ratios** ``b`` (G,) (one per group: left and right 
 statistics:
 
 * root (12 channels): 6D root orientation, root position as its projection x/z, y/z and
-  log depth z, and the velocities of those three (the paper has x, y, z: the projection is
-  what the keypoints show, and a body of a given size looks 1/z as large, so log depth is
-  linear in the log of the 2D scale the visual side sees);
+  log depth (log z), and the velocities of those three (the paper has x, y, z; reasons in
+  ``docs/lifter.md``);
 * each non-root joint (12 channels): 6D local rotation, position relative to the root on the
   virtual skeleton (3) and its velocity (3).
 
@@ -27,9 +26,9 @@ MotioNet).
 **TPMAE** (§3.2): motion encoders ``enc_m_u`` / ``enc_m_l`` over the upper / lower body joints
 (both with the root channels) give latents Z_u (B, 128, W/4) and Z_l (B, 64, W/4); decoders
 ``dec_u`` / ``dec_l``, an aggregation layer ``aggregate`` (1D convolution) to the non-root
-channels, a root decoder ``dec_r`` from Z_u (+) Z_l. Architecture (the paper's supplementary
-is not available): strided-convolution encoders with dilated residual blocks, two stride-2
-stages (T -> T/4), mirrored by nearest-neighbour upsampling decoders.
+channels, a root decoder ``dec_r`` from Z_u (+) Z_l. Encoders: strided convolutions with
+dilated residual blocks, two stride-2 stages (T -> T/4); decoders mirror them with
+nearest-neighbour upsampling.
 
 **TPVE** (§3.3), keypoints only (the paper's VTM-w/o_V): keypoint feature extractors
 ``key_u`` / ``key_l`` (three-layer CNNs over each part's keypoints: root-relative position
@@ -39,8 +38,8 @@ log size), fusion residual blocks ``fuse_u`` / ``fuse_l``, visual encoders ``enc
 aggregation modules, :class:`CTCA`), and the bone-ratio encoder ``enc_b`` on the fused
 features of both parts. At inference the visual latents go through the TPMAE decoders.
 
-Beyond the paper: a contact head (``contact``: heel/toe contact logits from the decoded
-features of both parts), because the physics stage needs contacts; the paper's VTM has none.
+Contact head ``contact`` (not in the paper): heel/toe contact logits (B, T, 4) from the
+decoded features of both parts.
 
 Inference over any length T (:meth:`VTM.forward`): overlapping windows of W frames (hop
 W/2, the last window ends at the last frame), each frame taken from the window where it is
@@ -57,9 +56,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from mocap_core.data.synth2d import JOINT_KEYPOINTS
+from mocap_core.keypoint_geometry import JOINT_KEYPOINTS
 from mocap_core.rotations import quat_to_rot6d, rot6d_to_quat
-from mocap_core.skeleton import (END_EFFECTORS, JOINT_INDEX, KEYPOINT_INDEX, NUM_BONE_GROUPS,
+from mocap_core.skeleton import (JOINT_INDEX, KEYPOINT_INDEX, NUM_BONE_GROUPS,
                                  NUM_JOINTS, NUM_KEYPOINTS)
 
 from .model import NUM_CONTACTS, fk_layer

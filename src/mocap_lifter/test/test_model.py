@@ -5,9 +5,10 @@ import torch
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.skeleton import JOINT_MIRROR, NUM_BONE_GROUPS, NUM_JOINTS, Skeleton
 from mocap_lifter.features import NUM_FEATURES, lifter_features, root_keypoint
-from mocap_lifter.metrics import (bone_length_spread_mm, mpjpe_mm, n_mpjpe_mm, pa_mpjpe_mm)
 from mocap_lifter.model import LifterConfig, MotioNet, fk_layer, offsets_from_lengths
 from mocap_lifter.online import OnlineLifter
+from mocap_lifter.training.metrics import (bone_length_spread_mm, mpjpe_mm, n_mpjpe_mm,
+                                           pa_mpjpe_mm)
 
 SMALL = dict(channels=32, fusion_blocks=2, skeleton_channels=16, dropout=0.0)
 
@@ -191,7 +192,7 @@ def test_evaluate_real_openpose_sequence_measures_plausibility():
     """The real-detection evaluation (no ground truth) on the committed OpenPose example."""
     from pathlib import Path
 
-    from mocap_lifter.evaluate import evaluate_real
+    from mocap_lifter.training.evaluate import evaluate_real
 
     seq = Path(__file__).resolve().parents[3] / 'data' / 'openpose_example' / 'seq1'
     model = MotioNet(LifterConfig(**SMALL, causal=False)).eval()
@@ -210,8 +211,8 @@ def test_tpose_windows_and_their_loss():
     zero for the exact rotations, positive otherwise, and only counts T-pose windows."""
     from mocap_core.data.motion import Motion
     from mocap_core.rotations import axis_angle_to_quat as quat_from_axis_angle
-    from mocap_lifter.samples import Augmentation, make_sample
-    from mocap_lifter.train import TrainConfig, losses
+    from mocap_lifter.training.samples import Augmentation, make_sample
+    from mocap_lifter.training.train import TrainConfig, losses
 
     rng = np.random.default_rng(0)
     sk = Skeleton.default()

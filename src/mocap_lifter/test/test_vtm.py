@@ -84,7 +84,7 @@ def test_motion_representation_channels():
 
 
 def test_virtual_skeleton_is_the_mean_and_ratios_reproduce_the_training_skeletons():
-    from mocap_lifter.vtm_train import virtual_skeleton
+    from mocap_lifter.training.vtm_train import virtual_skeleton
     rng = np.random.default_rng(1)
     base = Skeleton.default().group_lengths()
     skeletons = [Skeleton.from_group_lengths(base * rng.uniform(0.85, 1.15, NUM_BONE_GROUPS))
@@ -180,8 +180,7 @@ def test_online_lifter_runs_vtm_windowed_only():
 
 
 def test_load_weights_refuses_causal_vtm(tmp_path):
-    from mocap_lifter.train import load_weights
-    from mocap_lifter.vtm_train import load_vtm, save_vtm
+    from mocap_lifter.weights import load_vtm, load_weights, save_vtm
     model = _model()
     path = tmp_path / 'vtm.pt'
     save_vtm(model, path, {'stage': 'test'})
@@ -191,7 +190,7 @@ def test_load_weights_refuses_causal_vtm(tmp_path):
     assert isinstance(again, VTM)
     assert torch.equal(again.virtual_lengths, model.virtual_lengths.half().float())
     from mocap_lifter.model import LifterConfig, MotioNet
-    from mocap_lifter.train import save_weights
+    from mocap_lifter.weights import save_weights
     save_weights(MotioNet(LifterConfig(channels=16, fusion_blocks=1, skeleton_channels=8)),
                  tmp_path / 'm.pt')
     with pytest.raises(ValueError, match='no VTM weights'):
@@ -201,7 +200,8 @@ def test_load_weights_refuses_causal_vtm(tmp_path):
 def test_two_training_stages_reduce_their_losses_and_resume(tmp_path):
     """Stage tpmae on motion alone, then tpve jointly from its weights: each stage's loss on
     the same validation windows goes down; a finished stage resumes without training."""
-    from mocap_lifter.vtm_train import VTMTrainConfig, load_vtm, train_stage
+    from mocap_lifter.training.vtm_train import VTMTrainConfig, train_stage
+    from mocap_lifter.weights import load_vtm
     train = [_motion(90, seed=i, name=f'walk{i}') for i in range(3)]
     val = [_motion(90, seed=10, name='val')]
     model_cfg = dict(SMALL)

@@ -3,9 +3,10 @@
     python -m mocap_physics.bench [--frames 600] [--substeps 6] [--root-residual 1.0]
 
 Runs a synthetic standing motion with smooth random joint motion, root sway and frame jitter
-(feet on the floor, contact probabilities flickering) through :class:`PhysicsCycle` at 30 fps
-and prints the median and 95th percentile of the time per frame, with the time spent in the
-two QP solvers. Pin it to one core for the figure of the issue: ``taskset -c 0 python -m ...``.
+(feet on the floor, contact probabilities flickering; the input is in the floor frame) through
+the node's streaming logic (:class:`~mocap_physics.online.OnlinePhysics`) at 30 fps and prints
+the median and 95th percentile of the cycle's time per frame (ms), with the time spent in the
+two QP solvers. Pin it to one core for comparable figures: ``taskset -c 0 python -m ...``.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import Iterator, List, Optional, Tuple
 
 import numpy as np
 
@@ -20,11 +22,14 @@ from mocap_core.pose import Pose
 from mocap_core.rotations import axis_angle_to_quat
 from mocap_core.skeleton import JOINT_INDEX, Skeleton
 
-from .cycle import PhysicsCycle, PhysicsParams
+from .cycle_params import PhysicsParams
+from .online import OnlinePhysics
 
 
-def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0):
-    """Standing motion with smooth random joint rotations and jitter, feet near the floor."""
+def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0
+                     ) -> Iterator[Tuple[float, Pose, np.ndarray]]:
+    """Standing motion with smooth random joint rotations and jitter, feet near the floor
+    (floor frame): yields (time s, pose, contact probabilities (4,))."""
     rng = np.random.default_rng(seed)
     rest = Pose.rest(skeleton)
     t = np.arange(n) / fps
@@ -42,7 +47,7 @@ def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0):
         yield t[k], Pose(skeleton, axis_angle_to_quat(aa), root), probs
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--frames', type=int, default=600)
     ap.add_argument('--fps', type=float, default=30.0)
@@ -51,10 +56,15 @@ def main(argv=None) -> int:
     ap.add_argument('--json', action='store_true', help='print the figures as JSON')
     args = ap.parse_args(argv)
     sk = Skeleton.default()
-    cyc = PhysicsCycle(sk, PhysicsParams(substeps=args.substeps, root_residual=args.root_residual))
+    online = OnlinePhysics(PhysicsParams(substeps=args.substeps,
+                                         root_residual=args.root_residual), skeleton=sk)
+    cyc = online.cycle
     total, grf, pen = [], [], []
     for t, pose, probs in synthetic_motion(sk, args.frames, args.fps):
-        r = cyc.step(pose, t, probs)
+        out = online.step(int(round(t * 1e9)), pose, probabilities=probs, time_s=t)
+        if out is None:
+            continue
+        r = out.result
         total.append(r.time_total)
         grf.append(r.time_grf_qp)
         pen.append(r.time_penetration_qp)

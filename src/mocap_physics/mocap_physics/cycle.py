@@ -1,94 +1,70 @@
-"""The dynamic cycle of neural PhysCap (Shimada et al. 2021, §3.4) with fixed gains.
+"""The dynamic cycle of neural PhysCap (Shimada et al. 2021, §3.4) on Pinocchio (no ROS imports).
 
-No ROS imports. One :class:`PhysicsCycle` keeps the simulated state (q, qdot) of one person
-between frames; :meth:`PhysicsCycle.step` takes the frame's kinematic target pose q_hat (in the
-floor frame: z up, floor z = 0, see :mod:`mocap_physics.floor`) with the foot-contact
-probabilities and runs ``k`` sub-steps (paper: 6) of ``dt = frame period / k``:
+One :class:`PhysicsCycle` keeps the simulated state (q, qdot) of one person between frames;
+:meth:`PhysicsCycle.step` takes the frame's kinematic target pose q_hat (in the floor frame:
+z up, floor z = 0, gravity (0, 0, -9.81), see :mod:`mocap_physics.floor`) with the
+foot-contact probabilities (4,) and runs ``n = max(k, ceil(frame_dt / max_substep))``
+sub-steps (k = ``substeps``, paper: 6) of ``dt = frame_dt / n``. Layout of q (nq) and
+qdot (nv): :mod:`mocap_physics.model`; parameters: :class:`~.cycle_params.PhysicsParams`;
+outputs: :class:`~.results.FrameResult`. Why the defaults are what they are, with the
+measurements behind them: ``docs/physics.md``.
 
-1. **PD force vector**, eq. 7, inertia-scaled (see below)::
+1. **PD force vector**, eq. 7, inertia-scaled::
 
        tau = M(q) (kp o d(q_hat, q) - kd o qdot) + alpha + h(q, qdot)
 
-   ``d`` is the tangent-space difference: ``pinocchio.difference`` for the ball joints (the
-   rotation vector of q^-1 q_hat in the joint frame); for the free-flyer root, the translation
-   error R^T (p_hat - p) and the rotation vector log(R^T R_hat), both in the root frame (the
-   frame of the root velocity). alpha = 0 with fixed gains; with learned gains
-   (``gains_mode='learned'``, :mod:`mocap_physics.dynet`) DyNet gives kp, kd and alpha per
-   sub-step from (q_hat, q, qdot, diag M, e).
+   kp (s^-2), kd (s^-1) per DoF; ``d`` is the tangent-space difference: ``pinocchio.difference``
+   for the ball joints (the rotation vector of q^-1 q_hat in the joint frame); for the
+   free-flyer root, the translation error R^T (p_hat - p) and the rotation vector
+   log(R^T R_hat), both in the root frame (the frame of the root velocity). alpha (nv,) = 0
+   with fixed gains; with learned gains (``gains_mode='learned'``, :mod:`mocap_physics.dynet`)
+   DyNet gives kp, kd and alpha per sub-step from (q_hat, q, qdot, diag M, e). Every DoF then
+   follows ``e'' = -kp e - kd e'`` without contact forces.
 2. **Ground reaction forces** (eq. 8, 9, 11): contact points whose probability exceeds
-   ``contact_probability_threshold`` *and* that lie within ``contact_height`` of the floor in
-   the simulated state get a force lambda_c from :class:`~mocap_physics.qp.GrfQP`, which
-   explains the root part tau_root of tau by contact forces inside the friction pyramid as well
-   as it can. A solver failure gives lambda = 0 for the sub-step (counted, reported).
-3. **Forward dynamics**, eq. 13: ``qddot = M^-1 (tau* + J^T lambda - h)`` with
-   ``tau* = tau - J^T lambda`` (paper): the joint torques are compensated for the contact
-   forces, and the root keeps the *residual* direct actuation ``tau_root - J_1^T lambda``,
-   minimised by step 2. ``root_residual`` scales that residual: 1 (default) is the paper;
-   0 drops it, so the root is moved only by the contact forces and gravity (a body with no
-   contact then falls freely; the joint torques absorb the changed root acceleration so the
-   joints still follow the PD). Computed with ``pinocchio.aba``. With 0 the body has only
-   its four foot points to balance on: a target that is not balanced over its feet (e.g.
-   standing on one leg with the pelvis centred, or lifter noise) makes it fall over, so 1 is
-   the default for motion capture.
-4. **Pose update** (eq. 14-16): ``qdot += dt qddot``; the penetration QP
-   (:class:`~mocap_physics.qp.PenetrationQP`; metric diag(M) by default, the plain norm of
-   eq. 15 or the kinetic-energy metric M on request) makes
-   contact points at or below the floor move up or stay, and keeps points above it from
-   crossing it within the step; then ``q = pinocchio.integrate(q, dt qdot)`` (semi-implicit).
-   **Foot stick** (``foot_stick``, on by default; not in the paper): the same QP also holds
-   the contact points that take a force (probability above the threshold, near the floor)
-   at an anchor on the floor: equality rows ``J_c,xy qdot* = k_s (anchor_c - p_c,xy)``
-   (capped at ``stick_speed``), the no-slip counterpart of eq. 15-16 at velocity level. The
-   anchor is where the point touched down; when the kinematic target's point moves more
-   than ``stick_release`` m away from it (a sliding foot, a wrong contact), the anchor is
-   dragged along so that it stays within that distance. The stick is kinematic like eq. 15:
-   the GRF QP still keeps the forces in the friction cone.
-   Metric: the plain norm of eq. 15 treats a root velocity change (a whole body of 70 kg)
-   like a toe's; with the stick rows active in every sub-step that feeds a correction into
-   the root that the PD then fights (on the ground-truth bags: residual root force 3-25
-   times body weight, and with ``root_residual = 0`` a standing body tips over), while
-   diag(M) puts the correction where the inertia is small (residual 0.6 / 2.4 body weights
-   clean / with lifter noise, lower jitter, see docs/benchmarks/physics_eval.md).
-   The stick acts only with ``root_residual = 1``: on a passive root (0) these velocity
-   projections are not momentum-consistent (diag M) or whip the light links (M: toe speeds
-   of 50-100 rad/s), and a body dropped onto the floor bounces instead of landing.
-   A stuck point's vertical velocity is an equality too (the one the dynamics gave it, or
-   the no-penetration bound): otherwise the horizontal correction lifts the foot.
+   ``contact_probability_threshold`` *and* that lie within ``contact_height`` (m) of the
+   floor get a force lambda_c (3,) N from :class:`~mocap_physics.qp.GrfQP`: the root part
+   tau_root (6,) of tau is explained by contact forces inside the friction pyramid
+   (mu = ``friction``) as well as possible. A solver failure gives lambda = 0 for the
+   sub-step (counted, reported).
+3. **Forward dynamics**, eq. 13::
 
-Gains (``PhysicsParams``). Eq. 7 multiplies per-DoF gains with the error (Hadamard). Here the
-gains are per-DoF *accelerations* multiplied by the joint-space inertia M(q) (a
-computed-torque law; DyNet takes M as an input for the same reason): every DoF follows the same
-second-order error dynamics ``e'' = -kp e - kd e'`` (without contact forces), independent of
-its inertia. Plain torque gains cannot be both stiff enough to track 30 fps motion on the
-heavy DoF (root, hips) and stable at dt = 5.6 ms on the light ones (hands, toes): the
-eigenvalues of M^-1 diag(M) of this body span 0.2 to 210. Defaults for the ball joints:
-kp = 3600 s^-2, kd = 120 s^-1, i.e. natural frequency 60 rad/s (9.5 Hz), critically damped:
-the delay of a critically damped tracker is about 2/omega = 33 ms (one 30 fps frame), motion up
-to ~3 Hz keeps over 90 % of its amplitude, frame-rate jitter (10-15 Hz) is attenuated 2-3.5
-times, and omega dt = 0.33 at 180 Hz keeps the semi-implicit Euler integration accurate and
-stable. The root is softer: kp = 400 s^-2, kd = 40 s^-1 (20 rad/s, critically damped). With
-the joints' 60 rad/s on the root too, a root error of 1 cm asks for 3.7 g, the GRF QP can only
-push (lambda_n >= 0), so it rectifies that fluctuating demand: on the ground-truth walks the
-mean vertical GRF was 2.5-2.8 body weights and the residual root force 0.6 (clean) to 2.4
-(lifter noise) body weights; with 20 rad/s they are 1.06-1.11 and 0.06 / 0.96, with less
-jitter, at the price of a root lag of about 2/omega = 100 ms (global position error on clean
-walking 48 mm instead of 15 mm; docs/benchmarks/physics_eval.md). ``kp_ini`` of DyNet
-(appendix A) are these values.
+       qddot = M^-1 (tau* + J^T lambda - h),     tau* = tau - J^T lambda
 
-Robustness: the first frame and a time jump (a gap over ``max_frame_gap`` or stamps going
+   J (3C, nv): the contact Jacobians (LOCAL_WORLD_ALIGNED). The root keeps the residual
+   direct actuation ``tau_root - J_1^T lambda`` scaled by ``root_residual`` (1 = paper;
+   0 = root moved by the contact forces and gravity only, the joint torques absorbing the
+   changed root acceleration so that the joints still follow the PD). Computed with
+   ``pinocchio.aba``.
+4. **Pose update** (eq. 14-16): ``qdot += dt qddot``; the velocity QP
+   (:class:`~mocap_physics.qp.PenetrationQP`) finds the qdot* closest to qdot in the metric
+   W (``penetration_metric``: diag(M), identity = eq. 15, or M) with, per contact point c
+   at height z_c::
+
+       J_c,z qdot* >= min(-z_c / dt, recovery_speed)
+
+   for the points within ``contact_height`` of the floor now or after the step (a point at
+   or below the floor moves up or stays; one above it does not cross it within the step).
+
+   **Foot stick** (``foot_stick``, not in the paper; only with ``root_residual = 1``): the
+   points that take a force are held at an anchor a_c on the floor (where they touched
+   down) by equality rows ``J_c,xy qdot* = k_s (a_c - p_c,xy)`` (k_s = ``stick_gain``
+   1/s, capped at ``stick_speed`` m/s) and keep their vertical velocity; the anchor is
+   dragged along to stay within ``stick_release`` m of the target's point. Then
+   ``q = pinocchio.integrate(q, dt qdot*)`` (semi-implicit Euler).
+
+Robustness: the first frame and a time jump (a gap over ``max_frame_gap`` s or stamps going
 backwards) re-initialise q from the target (lifted so that no contact point is below the
-floor) with qdot = 0. A skeleton change (bones off by more than ``skeleton_tolerance``)
+floor) with qdot = 0. A skeleton change (bones off by more than ``skeleton_tolerance`` m)
 rebuilds the model and keeps the state (lifted out of the floor). A non-finite or malformed
-target holds the last valid one. A failed or inaccurate penetration QP or a non-finite /
-exploding state falls back to the (lifted) kinematic target for that frame and continues from
-it with the target's velocity. Every event is counted in :attr:`PhysicsCycle.stats` and named
-in the frame's ``status``. No NaN is ever returned.
+target holds the last valid one. A failed penetration QP or a non-finite / exploding state
+(|qdot| above ``max_speed``) falls back to the (lifted) kinematic target for that frame and
+continues from it with the target's velocity. Every event is counted in
+:attr:`PhysicsCycle.stats` and named in the frame's ``status``. No NaN is ever returned.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -96,10 +72,12 @@ import pinocchio as pin
 from scipy.linalg import cho_factor, cho_solve
 
 from mocap_core.pose import Pose
-from mocap_core.skeleton import Skeleton
+from mocap_core.skeleton import JOINT_NAMES, Skeleton
 
-from .model import PhysicsModel, SkeletonError
+from .cycle_params import PhysicsParams
+from .model import PhysicsModel
 from .qp import GrfQP, PenetrationQP
+from .results import CycleStats, FootWrench, FrameResult
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -108,166 +86,32 @@ class InvalidInput(ValueError):
     """The cycle cannot run on this input (no skeleton yet, malformed target, ...)."""
 
 
-@dataclass
-class PhysicsParams:
-    """Parameters of the dynamic cycle (the node exposes each as a ROS parameter).
-
-    Gains are accelerations per unit error (see the module docstring): kp in s^-2, kd in s^-1.
-    """
-
-    body_mass: float = 70.0               # kg
-    substeps: int = 6                     # k of the paper
-    frame_period: float = 1.0 / 30.0      # s, used when frames carry no stamps
-    max_substep: float = 1.0 / 120.0      # s; longer frames get more sub-steps
-    kp_root: float = 400.0                # root translation and orientation, s^-2
-    kd_root: float = 40.0                 # s^-1
-    kp_joint: float = 3600.0              # ball joints, s^-2
-    kd_joint: float = 120.0               # s^-1
-    velocity_feedforward: bool = False    # kd o (qdot_hat - qdot) instead of -kd o qdot
-    friction: float = 0.8                 # mu (eq. 9)
-    contact_probability_threshold: float = 0.5
-    contact_height: float = 0.03          # m: a contact point must be this close to the floor
-    grf_smoothness: float = 0.1           # w_s of eq. 11 relative to eq. 8
-    grf_moment_weight: float = 1.0        # w_m: root moment rows of eq. 8 vs force rows
-    root_residual: float = 1.0            # 1: paper (residual root actuation kept), 0: none
-    penetration_metric: str = 'diagonal'  # 'diagonal' (diag M), 'identity' (paper), 'mass' (M)
-    recovery_speed: float = 0.5           # m/s: max upward speed that undoes a penetration
-    max_frame_gap: float = 0.25           # s: a longer gap (or stamps going back) re-initialises
-    max_speed: float = 200.0              # any |qdot| entry above it counts as a blow-up
-    skeleton_tolerance: float = 0.005     # m: bone offsets changing less keep the model
-    gains_mode: str = 'fixed'             # 'fixed' or 'learned' (DyNet, dynet_weights)
-    dynet_weights: str = ''               # DyNet weights file (mocap train physics)
-    foot_stick: bool = True               # hold contact points in contact at their anchor
-    stick_gain: float = 10.0              # 1/s: horizontal velocity = gain * (anchor - p)
-    stick_speed: float = 0.2              # m/s: cap of that velocity
-    stick_release: float = 0.05           # m: the anchor stays this close to the target
-
-    def validate(self) -> None:
-        """Raise ValueError naming every bad value."""
-        bad: List[str] = []
-        if not (np.isfinite(self.body_mass) and self.body_mass > 0):
-            bad.append(f'body_mass={self.body_mass} (must be > 0)')
-        if int(self.substeps) != self.substeps or self.substeps < 1:
-            bad.append(f'substeps={self.substeps} (integer >= 1)')
-        for name in ('frame_period', 'max_substep', 'max_frame_gap', 'friction',
-                     'contact_height', 'recovery_speed', 'max_speed', 'skeleton_tolerance',
-                     'stick_gain', 'stick_speed', 'stick_release'):
-            val = getattr(self, name)
-            if not (np.isfinite(val) and val > 0):
-                bad.append(f'{name}={val} (must be > 0)')
-        for name in ('kp_root', 'kd_root', 'kp_joint', 'kd_joint', 'grf_smoothness'):
-            val = getattr(self, name)
-            if not (np.isfinite(val) and val >= 0):
-                bad.append(f'{name}={val} (must be >= 0)')
-        if not 0.0 <= self.contact_probability_threshold <= 1.0:
-            bad.append(f'contact_probability_threshold={self.contact_probability_threshold}')
-        if not 0.0 <= self.root_residual <= 1.0:
-            bad.append(f'root_residual={self.root_residual} (in [0, 1])')
-        if self.gains_mode not in ('fixed', 'learned'):
-            bad.append(f"gains_mode={self.gains_mode!r} ('fixed' or 'learned')")
-        elif self.gains_mode == 'learned' and not self.dynet_weights:
-            bad.append('gains_mode learned needs dynet_weights (a file from mocap train '
-                       'physics)')
-        if self.penetration_metric not in ('mass', 'diagonal', 'identity'):
-            bad.append(f'penetration_metric={self.penetration_metric!r} '
-                       '(mass | diagonal | identity)')
-        if bad:
-            raise ValueError('bad physics parameters: ' + '; '.join(bad))
-
-    def gains(self, nv: int) -> Tuple[np.ndarray, np.ndarray]:
-        """Per-DoF (kp, kd) vectors of length nv (root first)."""
-        kp = np.full(nv, float(self.kp_joint))
-        kd = np.full(nv, float(self.kd_joint))
-        kp[:6] = self.kp_root
-        kd[:6] = self.kd_root
-        return kp, kd
-
-
-@dataclass
-class FootWrench:
-    """Ground reaction wrench of one foot in the floor frame.
-
-    force: (3,) N (sum over the foot's contact points); moment: (3,) N m about ``point``;
-    point: (3,) the foot's reference point (midpoint of heel and toe contact points);
-    cop: (3,) centre of pressure on the floor (NaN-free: equals ``point`` with no load).
-    """
-
-    force: np.ndarray
-    moment: np.ndarray
-    point: np.ndarray
-    cop: np.ndarray
-    in_contact: bool
-
-
-@dataclass
-class FrameResult:
-    """Output of :meth:`PhysicsCycle.step` for one frame (all in the floor frame).
-
-    Forces and torques are averages over the frame's sub-steps (the impulse over the frame
-    divided by its duration).
-    """
-
-    stamp: float
-    pose: Pose                      # physics-corrected pose
-    q: np.ndarray                   # (nq,) configuration
-    v: np.ndarray                   # (nv,) generalised velocity
-    torques: np.ndarray             # (nv,) tau* = tau - J^T lambda: [root residual (6), joints]
-    contact_forces: np.ndarray      # (C, 3) lambda per contact point, N
-    contact_active: np.ndarray      # (C,) bool: had a contact force in some sub-step
-    feet: Dict[str, FootWrench]     # 'left', 'right'
-    center_of_mass: np.ndarray      # (3,)
-    residual_root: np.ndarray       # (6,) tau_root - J_1^T lambda (force N, moment N m)
-    residual_ratio: float           # |residual root force| / body weight
-    contact_heights: np.ndarray     # (C,) height of each contact point after the frame, m
-    status: str                     # 'ok' or the events of this frame (comma separated)
-    messages: List[str] = field(default_factory=list)
-    contact_stuck: Optional[np.ndarray] = None  # (C,) bool: held by the foot stick (last
-    #                                             sub-step)
-    cone_violations: int = 0        # sub-step forces outside the true friction cone
-    grf_failures: int = 0
-    penetration_solves: int = 0
-    substeps: int = 0
-    time_total: float = 0.0         # s, the whole step
-    time_grf_qp: float = 0.0        # s, in the GRF solver
-    time_penetration_qp: float = 0.0
-
-    @property
-    def joint_torques(self) -> np.ndarray:
-        """(nv - 6,) torques of the ball joints (3 per joint, joint frames), N m."""
-        return self.torques[6:]
-
-
-@dataclass
-class CycleStats:
-    """Counters since the cycle was created."""
-
-    frames: int = 0
-    reinitialisations: int = 0
-    time_jumps: int = 0
-    fallbacks: int = 0
-    invalid_inputs: int = 0
-    grf_failures: int = 0
-    penetration_failures: int = 0
-    penetration_solves: int = 0
-    model_builds: int = 0
-    cone_violations: int = 0
-    frame_changes: int = 0
-    stick_failures: int = 0
-    last_event: str = ''
-
-
 class PhysicsCycle:
     """Physics-based correction of a kinematic motion, one person (module docstring).
 
     Args:
         skeleton: the skeleton (a model is built now); None: built from the first target.
         params: :class:`PhysicsParams`.
+
+    Raises:
+        ValueError: a bad parameter; with ``gains_mode='learned'``,
+            :class:`mocap_core.checkpoint.WeightsError` (a ValueError with a one-line
+            message) for a missing, corrupt or crafted ``dynet_weights`` file or one that
+            does not fit the skeleton's joint tree: the weights are loaded here, not at the
+            first frame.
     """
 
     def __init__(self, skeleton: Optional[Skeleton] = None,
                  params: Optional[PhysicsParams] = None) -> None:
         self.params = params if params is not None else PhysicsParams()
         self.params.validate()
+        self._dynet_net = None
+        self.dynet = None
+        if self.params.gains_mode == 'learned':
+            from .dynet import DyNet      # torch only when learned gains are used
+            self._dynet_net = DyNet.load(self.params.dynet_weights)
+            self._dynet_net.check_fits(len(skeleton.joint_names) if skeleton is not None
+                                       else len(JOINT_NAMES), self.params.dynet_weights)
         self.stats = CycleStats()
         self.model: Optional[PhysicsModel] = None
         self.grf = GrfQP(4, self.params.friction, self.params.grf_smoothness,
@@ -353,9 +197,9 @@ class PhysicsCycle:
         self.stats.model_builds += 1
         self._kp, self._kd = self.params.gains(model.nv)
         self.dynet = None
-        if self.params.gains_mode == 'learned':
-            from .dynet import LearnedGains      # torch only when learned gains are used
-            self.dynet = LearnedGains(self.params.dynet_weights, model)
+        if self._dynet_net is not None:
+            from .dynet import LearnedGains
+            self.dynet = LearnedGains(self._dynet_net, model, self.params.dynet_weights)
         if old is None or old.nq != model.nq or old.skeleton.parents != skeleton.parents:
             self.reset()
         elif self._q is not None:
@@ -494,9 +338,7 @@ class PhysicsCycle:
         v_ff = v_hat if (p.velocity_feedforward and v_hat is not None) else None
         if self._stick_on:
             # drag the anchors along with a target that moves away from them; the points
-            # then follow at up to stick_speed (a faster drag, following the target's
-            # velocity, lets a noisy target's jitter through: lifter-noise skating 32 instead
-            # of 19 mm/frame on the ground-truth bags)
+            # then follow at up to stick_speed (why not faster: docs/physics.md)
             tgt = self.model.contact_positions(q_hat)[:, :2]
             d = tgt - self._anchor
             dist = np.linalg.norm(d, axis=1)
@@ -743,5 +585,4 @@ class _Fallback(RuntimeError):
     """Internal: abandon the frame and fall back to the kinematic target."""
 
 
-__all__ = ['PhysicsCycle', 'PhysicsParams', 'FrameResult', 'FootWrench', 'CycleStats',
-           'InvalidInput', 'SkeletonError', 'stick_rows']
+__all__ = ['PhysicsCycle', 'InvalidInput', 'stick_rows']

@@ -54,32 +54,51 @@ below the camera): p_floor = R p_camera + (0, 0, camera height).
 Bad input never stops the node: malformed or NaN motion is logged and dropped (or held by the
 cycle), a non-increasing stamp is dropped, a degenerate skeleton is reported and skipped, a
 solver failure falls back to the kinematic target for that frame, a time jump re-initialises
-the simulation; all are counted on /diagnostics.
+the simulation; all are counted on /diagnostics. A callback that raises drops its frame
+(:func:`mocap_core.guard.guarded`). The streaming logic (contacts matched by stamp, floor,
+cycle) is :class:`mocap_physics.online.OnlinePhysics`; this module only converts messages.
+Unusable ``gains_mode: learned`` weights (missing, corrupt, crafted, wrong size) end the node
+at start with exit status 2 and one line ``physics: error: ...``.
 """
+
 
 from __future__ import annotations
 
-import collections
-import functools
 import os
 import sys
 import time
-from typing import Deque, List, Optional, Tuple
+from typing import Dict, List, Optional
 
 import numpy as np
+from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState, PointCloud2
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+from visualization_msgs.msg import MarkerArray
 
+from mocap_core import topics
+from mocap_core.diagnostics import NodeDiagnostics
+from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
+from mocap_core.qos import STREAM_QOS, input_qos
+from mocap_core.ros_conversions import (MessageError, make_header, motion_to_pose,
+                                        msg_to_contacts, pose_to_joint_state, pose_to_markers,
+                                        pose_to_motion, positions_to_cloud, stamp_to_ns,
+                                        wrench_to_msg)
 
-from .cycle import PhysicsParams
-from .floor import FloorTrackerParams
+from .cycle_params import PhysicsParams
+from .floor import FloorFrame, FloorTracker, FloorTrackerParams
+from .markers import floor_transform_msg, friction_cone_marker
+from .model import revolute_efforts
+from .online import FloorSource, Notice, OnlinePhysics, PhysicsFrame
 
 _D = PhysicsParams()
 _F = FloorTrackerParams()
 
 PARAMETERS = (
-    ParamSpec('motion_topic', '/mocap/lifter/motion', 'Input motion (kinematic target), '
+    ParamSpec('motion_topic', topics.LIFTER_MOTION, 'Input motion (kinematic target), '
               'MultiDOFJointTrajectory', read_only=True),
-    ParamSpec('contacts_topic', '/mocap/lifter/contacts', 'Input foot contact probabilities '
+    ParamSpec('contacts_topic', topics.LIFTER_CONTACTS, 'Input foot contact probabilities '
               '(JointState: heel/toe, left/right); empty = none', read_only=True),
     ParamSpec('contacts_wait_s', 0.05, 'Longest wait (wall clock) of a motion frame for the '
               'contacts with its stamp', min_value=0.0, max_value=5.0),
@@ -153,318 +172,242 @@ PARAMETERS = (
     ParamSpec('publish_markers', True, 'Publish /mocap/physics/markers', read_only=True),
 )
 
-OUT = '/mocap/physics'
+FLOOR_SOURCES = ('estimate', 'camera_params', 'input')
+
+
+def default_dynet_weights() -> str:
+    """The package's DyNet weights (``weights/dynet.pt``, installed by ``mocap train physics
+    --install``)."""
+    from .dynet import WEIGHTS_DIR
+    return str(WEIGHTS_DIR / 'dynet.pt')
+
+
+class PhysicsNode(Node):
+    """The physics node (module docstring). Keyword arguments go to ``rclpy.node.Node``
+    (``context``, ``parameter_overrides``, ...).
+
+    Raises:
+        ValueError: a bad parameter, or unusable learned-gain weights
+            (``mocap_core.checkpoint.WeightsError``, one line).
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('physics', **kwargs)
+        self.p = p = declare_parameters(self, PARAMETERS)
+        learned = p['gains_mode'] == 'learned'
+        weights = p['dynet_weights'] or (default_dynet_weights() if learned else '')
+        if learned and not os.path.isfile(weights):
+            raise ValueError(f'gains_mode learned: no DyNet weights at {weights} (train '
+                             'them with `mocap train physics --install`)')
+        self.params = PhysicsParams(
+            body_mass=p['body_mass'], substeps=p['substeps'], kp_root=p['kp_root'],
+            kd_root=p['kd_root'], kp_joint=p['kp_joint'], kd_joint=p['kd_joint'],
+            friction=p['friction'], contact_probability_threshold=p['contact_threshold'],
+            contact_height=p['contact_height'], grf_smoothness=p['grf_smoothness'],
+            root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
+            max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'],
+            foot_stick=p['foot_stick'], stick_release=p['stick_release'],
+            gains_mode=p['gains_mode'], dynet_weights=weights if learned else '')
+        self._limited: Dict[str, float] = {}
+        self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
+        contacts_topic = p['contacts_topic']
+        self.online = OnlinePhysics(
+            self.params, self._floor_source(), frame_id=p['frame_id'],
+            contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
+            contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
+                               if contacts_topic else None),
+            report=self._report, record_time=self.diag.latency.add)
+        self.pub_motion = self.create_publisher(MultiDOFJointTrajectory, topics.PHYSICS_MOTION,
+                                                STREAM_QOS)
+        self.pub_joints = self.create_publisher(PointCloud2, topics.PHYSICS_JOINTS3D,
+                                                STREAM_QOS)
+        self.pub_states = self.create_publisher(JointState, topics.PHYSICS_JOINT_STATES,
+                                                STREAM_QOS)
+        self.pub_grf = {'left': self.create_publisher(WrenchStamped, topics.PHYSICS_GRF_LEFT,
+                                                      STREAM_QOS),
+                        'right': self.create_publisher(WrenchStamped, topics.PHYSICS_GRF_RIGHT,
+                                                       STREAM_QOS)}
+        self.pub_com = self.create_publisher(PointStamped, topics.PHYSICS_COM, STREAM_QOS)
+        self.pub_floor = (self.create_publisher(TransformStamped, topics.PHYSICS_FLOOR,
+                                                STREAM_QOS)
+                          if p['floor_source'] != 'input' else None)
+        self.pub_markers = (self.create_publisher(MarkerArray, topics.PHYSICS_MARKERS,
+                                                  STREAM_QOS)
+                            if p['publish_markers'] else None)
+        self.diag.set_value('gains', 'fixed' if not learned else f'learned ({weights})')
+        self.diag.set_value('model', 'none yet (waiting for the first motion)')
+        qos = input_qos(STREAM_QOS, p['queue_depth'])
+        self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'],
+                                 guarded(self, self.on_motion, 'motion'), qos)
+        self.contacts_sub = None
+        if contacts_topic:
+            self.contacts_sub = self.create_subscription(
+                JointState, contacts_topic, guarded(self, self.on_contacts, 'contacts'), qos)
+        self.create_timer(0.01, guarded(self, self.on_timer, 'process'))
+        self.create_timer(1.0, guarded(self, self.refresh_diagnostics, 'diagnostics'))
+        self.get_logger().info(
+            f"physics on {p['motion_topic']} (contacts: {contacts_topic or 'none'}); "
+            f"k={p['substeps']}, kp={p['kp_joint']:g}, kd={p['kd_joint']:g}, "
+            f"mu={p['friction']:g}, floor: {p['floor_source']}")
+
+    def _floor_source(self) -> FloorSource:
+        """The floor of ``floor_source`` (module docstring); raises ValueError."""
+        p = self.p
+        if p['floor_source'] == 'input':
+            return None
+        if p['floor_source'] == 'camera_params':
+            return FloorFrame.from_camera_height_pitch(p['camera_height'],
+                                                       np.deg2rad(p['camera_pitch_deg']))
+        if p['floor_source'] == 'estimate':
+            return FloorTracker(FloorTrackerParams(
+                window=p['floor_window'], update_every=p['floor_update_every'],
+                contact_threshold=p['floor_contact_threshold'], prior=p['floor_prior'],
+                freeze_after=p['floor_freeze_after']))     # validates them
+        raise ValueError(f"floor_source {p['floor_source']!r}: use "
+                         f"{', '.join(FLOOR_SOURCES[:-1])} or {FLOOR_SOURCES[-1]}")
+
+    # -- logging and counting -----------------------------------------------------------------
+    def _warn_limited(self, key: str, text: str, period_s: float = 5.0) -> None:
+        now = time.monotonic()
+        if now - self._limited.get(key, -1e9) >= period_s:
+            self._limited[key] = now
+            self.get_logger().warn(text)
+
+    def _problem(self, key: str, text: str) -> None:
+        self.diag.errors += 1
+        self.diag.warn(text)
+        self._warn_limited(key, text)
+
+    def _report(self, notice: Notice) -> None:
+        """Log and count a :class:`~mocap_physics.online.Notice` of the streaming logic."""
+        if notice.dropped:
+            self.diag.dropped += 1
+        if notice.level == 'problem':
+            self._problem(notice.key, notice.text)
+        elif notice.level == 'status':
+            self.diag.warn(notice.text)
+        elif notice.level == 'info':
+            self.get_logger().info(notice.text, throttle_duration_sec=notice.period_s)
+        else:
+            self._warn_limited(notice.key, notice.text, notice.period_s)
+
+    # -- input ---------------------------------------------------------------------------------
+    def on_contacts(self, msg: JointState) -> None:
+        try:
+            probs = msg_to_contacts(msg)
+        except MessageError as exc:
+            self._problem('contacts', f"ignoring {self.p['contacts_topic']}: {exc}")
+            return
+        self._publish(self.online.add_contacts(stamp_to_ns(msg.header.stamp), probs))
+
+    def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
+        self.diag.input.tick()
+        stamp = stamp_to_ns(msg.header.stamp)
+        accepted, frames = self.online.admit(stamp)     # before decoding, as documented
+        self._publish(frames)
+        if not accepted:
+            return
+        try:
+            pose = motion_to_pose(msg)
+        except MessageError as exc:
+            self.diag.dropped += 1
+            self._problem('motion', f'dropping a motion message: {exc}')
+            return
+        self._publish(self.online.add_motion(stamp, pose, msg.header.frame_id))
+
+    def on_timer(self) -> None:
+        """Frames whose contacts did not come in time go now."""
+        self._publish(self.online.process())
+
+    def flush(self) -> None:
+        """End of the input (offline processing): step every waiting frame now, with the
+        contacts that arrived (no more waiting for late ones)."""
+        self._publish(self.online.flush())
+
+    # -- output --------------------------------------------------------------------------------
+    def _publish(self, frames: List[PhysicsFrame]) -> None:
+        for frame in frames:
+            self._publish_frame(frame)
+            self.diag.output.tick()
+
+    def _publish_frame(self, frame: PhysicsFrame) -> None:
+        res = frame.result
+        header = make_header(frame.stamp_ns, frame.frame_id)
+        pose = res.pose
+        self.pub_motion.publish(pose_to_motion(pose, header))
+        self.pub_joints.publish(positions_to_cloud(pose.joint_positions(), header))
+        efforts = revolute_efforts(pose.revolute_angles(), res.joint_torques.reshape(-1, 3))
+        self.pub_states.publish(pose_to_joint_state(pose, header, efforts))
+        for foot, pub in self.pub_grf.items():
+            w = res.feet[foot]
+            pub.publish(wrench_to_msg(w.force, w.moment, header))
+        com = PointStamped(header=header)
+        com.point.x, com.point.y, com.point.z = (float(c) for c in res.center_of_mass)
+        self.pub_com.publish(com)
+        if self.pub_markers is not None:
+            names = self.online.cycle.model.contact_names
+            # every contact point always has its arrow (ids 10-13 stay the same; zero
+            # length without force)
+            forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
+            markers = pose_to_markers(
+                pose, header, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
+                contacts=res.contact_active.astype(float), forces=forces)
+            cps = pose.contact_positions()
+            loaded = [cps[n] for i, n in enumerate(names) if res.contact_forces[i, 2] > 1e-6]
+            markers.markers.append(friction_cone_marker(header, np.array(loaded),
+                                                        self.params.friction))
+            self.pub_markers.publish(markers)
+        if self.pub_floor is not None and frame.floor is not None:
+            self.pub_floor.publish(floor_transform_msg(
+                make_header(frame.stamp_ns, frame.input_frame), frame.floor, frame.frame_id))
+
+    def refresh_diagnostics(self) -> None:
+        online = self.online
+        st = online.cycle.stats
+        d = self.diag
+        model = online.cycle.model
+        if model is not None:
+            d.set_value('model', f'{model.nv} DoF, {model.body_mass:g} kg')
+        d.set_value('fallbacks', st.fallbacks)
+        d.set_value('grf_solver_failures', st.grf_failures)
+        d.set_value('penetration_solver_failures', st.penetration_failures)
+        d.set_value('penetration_qp_solves', st.penetration_solves)
+        d.set_value('reinitialisations', st.reinitialisations)
+        d.set_value('time_jumps', st.time_jumps)
+        d.set_value('invalid_inputs', st.invalid_inputs)
+        d.set_value('model_builds', st.model_builds)
+        d.set_value('friction_cone_violations', st.cone_violations)
+        d.set_value('stick_failures', st.stick_failures)
+        floor = online.floor
+        if online.tracker is not None:
+            tr = online.tracker
+            d.set_value('floor', 'ready' if tr.ready else
+                        f'provisional ({tr.contact_frames}/{tr.params.min_frames} contact '
+                        'frames)')
+            if floor is not None:
+                d.set_value('floor_camera_height_m', f'{floor.height:.3f}')
+                d.set_value('floor_normal_in_camera', ' '.join(f'{x:.4f}' for x in floor.normal))
+            if tr.fit is not None:
+                d.set_value('floor_fit', f'{tr.fit.inliers}/{tr.fit.points} inliers, rms '
+                            f'{tr.fit.rms * 1e3:.1f} mm, {tr.fit.source}')
+            d.set_value('floor_changes', tr.changes)
+        elif floor is not None:
+            d.set_value('floor_camera_height_m', f'{floor.height:.3f}')
+        r = online.last_result
+        if r is not None:
+            d.set_value('last_status', r.status)
+            d.set_value('residual_root_force_over_weight', f'{r.residual_ratio:.4f}')
+            d.set_value('grf_qp_ms', f'{r.time_grf_qp * 1e3:.3f}')
+            d.set_value('penetration_qp_ms', f'{r.time_penetration_qp * 1e3:.3f}')
+            d.set_value('substeps', r.substeps)
+        if r is not None and r.status == 'ok' and not online.pending:
+            d.warn(None)
 
 
 def main(args: Optional[List[str]] = None) -> int:
     if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
-    return spin_node(node_class(), args, 'physics')
-
-
-@functools.lru_cache(maxsize=None)
-def node_class():
-    """The node class (``PhysicsNode``; rclpy is imported here, not at module import, so
-    ``--help`` stays fast). Keyword arguments of the constructor go to
-    ``rclpy.node.Node`` (``context``, ``parameter_overrides``, ...)."""
-
-    from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
-    from rclpy.node import Node
-    from sensor_msgs.msg import JointState, PointCloud2
-    from trajectory_msgs.msg import MultiDOFJointTrajectory
-    from visualization_msgs.msg import MarkerArray
-
-    from mocap_core.diagnostics import NodeDiagnostics
-    from mocap_core.qos import STREAM_QOS, input_qos
-    from mocap_core.ros_conversions import (MessageError, make_header, motion_to_pose,
-                                            msg_to_contacts, pose_to_joint_state,
-                                            pose_to_markers, pose_to_motion,
-                                            positions_to_cloud, stamp_to_ns, wrench_to_msg)
-
-    from .cycle import InvalidInput, PhysicsCycle
-    from .floor import FloorFrame, FloorTracker
-    from .markers import floor_transform_msg, friction_cone_marker
-    from .model import SkeletonError, revolute_efforts
-
-    class PhysicsNode(Node):
-        def __init__(self, **kwargs) -> None:
-            super().__init__('physics', **kwargs)
-            self.p = p = declare_parameters(self, PARAMETERS)
-            weights = p['dynet_weights']
-            if p['gains_mode'] == 'learned' and not weights:
-                from .dynet import WEIGHTS_DIR
-                weights = str(WEIGHTS_DIR / 'dynet.pt')
-            if p['gains_mode'] == 'learned' and not os.path.isfile(weights):
-                raise ValueError(f'gains_mode learned: no DyNet weights at {weights} (train '
-                                 'them with `mocap train physics --install`)')
-            self.params = PhysicsParams(
-                body_mass=p['body_mass'], substeps=p['substeps'], kp_root=p['kp_root'],
-                kd_root=p['kd_root'], kp_joint=p['kp_joint'], kd_joint=p['kd_joint'],
-                friction=p['friction'], contact_probability_threshold=p['contact_threshold'],
-                contact_height=p['contact_height'], grf_smoothness=p['grf_smoothness'],
-                root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
-                max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'],
-                foot_stick=p['foot_stick'], stick_release=p['stick_release'],
-                gains_mode=p['gains_mode'],
-                dynet_weights=weights if p['gains_mode'] == 'learned' else '')
-            self.cycle = PhysicsCycle(params=self.params)      # validates the parameters
-            self.tracker: Optional[FloorTracker] = None
-            self.floor: Optional[FloorFrame] = None
-            if p['floor_source'] == 'input':
-                pass
-            elif p['floor_source'] == 'camera_params':
-                self.floor = FloorFrame.from_camera_height_pitch(
-                    p['camera_height'], np.deg2rad(p['camera_pitch_deg']))
-            elif p['floor_source'] == 'estimate':
-                self.tracker = FloorTracker(FloorTrackerParams(
-                    window=p['floor_window'], update_every=p['floor_update_every'],
-                    contact_threshold=p['floor_contact_threshold'], prior=p['floor_prior'],
-                    freeze_after=p['floor_freeze_after']))     # validates them
-            else:
-                raise ValueError(f"floor_source {p['floor_source']!r}: use estimate, "
-                                 'camera_params or input')
-            self.pub_motion = self.create_publisher(MultiDOFJointTrajectory, OUT + '/motion',
-                                                    STREAM_QOS)
-            self.pub_joints = self.create_publisher(PointCloud2, OUT + '/joints3d', STREAM_QOS)
-            self.pub_states = self.create_publisher(JointState, OUT + '/joint_states',
-                                                    STREAM_QOS)
-            self.pub_grf = {f: self.create_publisher(WrenchStamped, f'{OUT}/grf/{f}', STREAM_QOS)
-                            for f in ('left', 'right')}
-            self.pub_com = self.create_publisher(PointStamped, OUT + '/com', STREAM_QOS)
-            self.pub_floor = (self.create_publisher(TransformStamped, OUT + '/floor', STREAM_QOS)
-                              if p['floor_source'] != 'input' else None)
-            self.pub_markers = (self.create_publisher(MarkerArray, OUT + '/markers', STREAM_QOS)
-                                if p['publish_markers'] else None)
-            self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
-            self.diag.set_value('gains', p['gains_mode'] if p['gains_mode'] == 'fixed'
-                                else f'learned ({weights})')
-            self.diag.set_value('model', 'none yet (waiting for the first motion)')
-            self.pending: Deque[Tuple[int, object, str, float]] = collections.deque()
-            self.contacts: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
-            self.last_stamp = -1
-            self.last_result = None
-            self._limited = {}
-            self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'], self._on_motion,
-                                     input_qos(STREAM_QOS, p['queue_depth']))
-            self.contacts_sub = None
-            if p['contacts_topic']:
-                self.contacts_sub = self.create_subscription(
-                    JointState, p['contacts_topic'], self._on_contacts,
-                    input_qos(STREAM_QOS, p['queue_depth']))
-            self.create_timer(0.01, self._process)
-            self.create_timer(1.0, self._refresh_diagnostics)
-            self.get_logger().info(
-                f"physics on {p['motion_topic']} (contacts: {p['contacts_topic'] or 'none'}); "
-                f"k={p['substeps']}, kp={p['kp_joint']:g}, kd={p['kd_joint']:g}, "
-                f"mu={p['friction']:g}, floor: {p['floor_source']}")
-
-        # -- helpers -------------------------------------------------------------------------
-        def _warn_limited(self, key: str, text: str, period_s: float = 5.0) -> None:
-            now = time.monotonic()
-            if now - self._limited.get(key, -1e9) >= period_s:
-                self._limited[key] = now
-                self.get_logger().warn(text)
-
-        def _problem(self, key: str, text: str) -> None:
-            self.diag.errors += 1
-            self.diag.warn(text)
-            self._warn_limited(key, text)
-
-        # -- input ---------------------------------------------------------------------------
-        def _on_contacts(self, msg: JointState) -> None:
-            try:
-                probs = msg_to_contacts(msg)
-            except MessageError as exc:
-                self._problem('contacts', f"ignoring {self.p['contacts_topic']}: {exc}")
-                return
-            self.contacts[stamp_to_ns(msg.header.stamp)] = probs
-            while len(self.contacts) > 256:
-                self.contacts.popitem(last=False)
-            self._process()
-
-        def _on_motion(self, msg: MultiDOFJointTrajectory) -> None:
-            self.diag.input.tick()
-            stamp = stamp_to_ns(msg.header.stamp)
-            newest = self.pending[-1][0] if self.pending else self.last_stamp
-            if newest - stamp > max(self.p['max_frame_gap_s'], 1.0) * 1e9:
-                # a new stream (e.g. a bag played again): finish the old one, then the cycle
-                # re-initialises at the time jump
-                self._process(wait=False)
-                for old in [s for s in self.contacts if s > stamp + 1_000_000_000]:
-                    del self.contacts[old]
-                self.last_stamp = -1
-                self.get_logger().warn(
-                    f'motion stamps jumped back by {(newest - stamp) * 1e-9:.1f} s (a bag '
-                    'restarted?): starting a new stream')
-            if stamp <= self.last_stamp or (self.pending and stamp <= self.pending[-1][0]):
-                self.diag.dropped += 1
-                self._problem('order', f'motion stamp {stamp} ns is not after the previous '
-                              'one (time went backwards or a duplicate): dropped')
-                return
-            try:
-                pose = motion_to_pose(msg)
-            except MessageError as exc:
-                self.diag.dropped += 1
-                self._problem('motion', f'dropping a motion message: {exc}')
-                return
-            self.pending.append((stamp, pose, msg.header.frame_id, time.monotonic()))
-            self._process()
-
-        def _contacts_for(self, stamp: int, waited: float) -> Tuple[bool, Optional[np.ndarray]]:
-            """(ready, probabilities) for a motion frame."""
-            if stamp in self.contacts:
-                return True, self.contacts[stamp]
-            expecting = (self.contacts_sub is not None
-                         and self.count_publishers(self.p['contacts_topic']) > 0)
-            if expecting and waited < self.p['contacts_wait_s'] and \
-                    not any(s > stamp for s in self.contacts):
-                return False, None
-            older = [s for s in self.contacts if s < stamp]
-            if older and stamp - max(older) <= self.p['contacts_max_age_s'] * 1e9:
-                return True, self.contacts[max(older)]
-            return True, None
-
-        def _process(self, wait: bool = True) -> None:
-            while self.pending:
-                stamp, pose, frame_id, t_in = self.pending[0]
-                waited = time.monotonic() - t_in if wait else float('inf')
-                ready, probs = self._contacts_for(stamp, waited)
-                if not ready:
-                    return
-                self.pending.popleft()
-                self._step(stamp, pose, frame_id, probs)
-
-        def flush(self) -> None:
-            """End of the input (offline processing): step every waiting frame now, with
-            the contacts that arrived (no more waiting for late ones)."""
-            self._process(wait=False)
-
-        # -- the cycle -----------------------------------------------------------------------
-        def _step(self, stamp: int, pose, frame_id: str, probs) -> None:
-            if probs is None and self.contacts_sub is not None:
-                self._warn_limited('nocontacts', 'no contact probabilities for this frame: '
-                                   'contacts from the kinematics only', 10.0)
-            source_frame = frame_id or 'camera_optical_frame'
-            if self.tracker is not None:
-                try:
-                    new, changed = self.tracker.update(pose, probs)
-                except ValueError as exc:      # no finite contact point: keep the last floor
-                    new, changed = self.floor, False
-                    self._warn_limited('floor', f'floor estimate not updated: {exc}')
-                if new is None:
-                    self.diag.dropped += 1
-                    self._problem('floor', 'no floor estimate yet (no valid foot point): '
-                                  'frame skipped')
-                    return
-                if changed and self.floor is not None:
-                    delta = new.compose(self.floor.inverse())
-                    self.cycle.change_frame(delta.rotation, delta.translation)
-                    self.get_logger().info(
-                        'floor re-estimated: camera height %.3f m, normal %s (%d inliers of '
-                        '%d points)' % (new.height, np.round(new.normal, 4).tolist(),
-                                        self.tracker.fit.inliers, self.tracker.fit.points),
-                        throttle_duration_sec=5.0)
-                self.floor = new
-            if self.floor is not None:
-                pose = self.floor.transform_pose(pose)
-                frame_id = self.p['frame_id'] or 'floor'
-            else:
-                frame_id = self.p['frame_id'] or frame_id or 'world'
-            try:
-                with self.diag.processing():
-                    res = self.cycle.step(pose, stamp * 1e-9, probs)
-            except (InvalidInput, SkeletonError) as exc:
-                self.diag.dropped += 1
-                self._problem('skeleton', f'skipping a frame: {exc}')
-                return
-            except Exception as exc:  # never die on one frame
-                self.diag.dropped += 1
-                self._problem('step', f'physics step failed ({type(exc).__name__}: {exc}); '
-                              'frame skipped')
-                return
-            for m in res.messages:
-                self._warn_limited(m.split(':')[0], m)
-            if res.status not in ('ok', 'first_frame'):
-                self.diag.warn(f'{res.status}: {"; ".join(res.messages)}'
-                               if res.messages else res.status)
-            self.last_stamp = stamp
-            self.last_result = res
-            self._publish(stamp, frame_id, res)
-            if self.pub_floor is not None and self.floor is not None:
-                self.pub_floor.publish(floor_transform_msg(make_header(stamp, source_frame),
-                                                           self.floor, frame_id))
-            self.diag.output.tick()
-
-        def _publish(self, stamp: int, frame_id: str, res) -> None:
-            header = make_header(stamp, frame_id)
-            pose = res.pose
-            self.pub_motion.publish(pose_to_motion(pose, header))
-            self.pub_joints.publish(positions_to_cloud(pose.joint_positions(), header))
-            efforts = revolute_efforts(pose.revolute_angles(), res.joint_torques.reshape(-1, 3))
-            self.pub_states.publish(pose_to_joint_state(pose, header, efforts))
-            for foot, pub in self.pub_grf.items():
-                w = res.feet[foot]
-                pub.publish(wrench_to_msg(w.force, w.moment, header))
-            com = PointStamped(header=header)
-            com.point.x, com.point.y, com.point.z = (float(c) for c in res.center_of_mass)
-            self.pub_com.publish(com)
-            if self.pub_markers is not None:
-                names = self.cycle.model.contact_names
-                # every contact point always has its arrow (ids 10-13 stay the same; zero
-                # length without force)
-                forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
-                markers = pose_to_markers(
-                    pose, header, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
-                    contacts=res.contact_active.astype(float), forces=forces)
-                cps = pose.contact_positions()
-                loaded = [cps[n] for i, n in enumerate(names)
-                          if res.contact_forces[i, 2] > 1e-6]
-                markers.markers.append(friction_cone_marker(header, np.array(loaded),
-                                                            self.params.friction))
-                self.pub_markers.publish(markers)
-
-        def _refresh_diagnostics(self) -> None:
-            st = self.cycle.stats
-            d = self.diag
-            if self.cycle.model is not None:
-                d.set_value('model', f'{self.cycle.model.nv} DoF, '
-                            f'{self.cycle.model.body_mass:g} kg')
-            d.set_value('fallbacks', st.fallbacks)
-            d.set_value('grf_solver_failures', st.grf_failures)
-            d.set_value('penetration_solver_failures', st.penetration_failures)
-            d.set_value('penetration_qp_solves', st.penetration_solves)
-            d.set_value('reinitialisations', st.reinitialisations)
-            d.set_value('time_jumps', st.time_jumps)
-            d.set_value('invalid_inputs', st.invalid_inputs)
-            d.set_value('model_builds', st.model_builds)
-            d.set_value('friction_cone_violations', st.cone_violations)
-            d.set_value('stick_failures', st.stick_failures)
-            if self.tracker is not None:
-                tr = self.tracker
-                d.set_value('floor', 'ready' if tr.ready else
-                            f'provisional ({tr.contact_frames}/{tr.params.min_frames} contact '
-                            'frames)')
-                if self.floor is not None:
-                    d.set_value('floor_camera_height_m', f'{self.floor.height:.3f}')
-                    d.set_value('floor_normal_in_camera', ' '.join(
-                        f'{x:.4f}' for x in self.floor.normal))
-                if tr.fit is not None:
-                    d.set_value('floor_fit', f'{tr.fit.inliers}/{tr.fit.points} inliers, rms '
-                                f'{tr.fit.rms * 1e3:.1f} mm, {tr.fit.source}')
-                d.set_value('floor_changes', tr.changes)
-            elif self.floor is not None:
-                d.set_value('floor_camera_height_m', f'{self.floor.height:.3f}')
-            r = self.last_result
-            if r is not None:
-                d.set_value('last_status', r.status)
-                d.set_value('residual_root_force_over_weight', f'{r.residual_ratio:.4f}')
-                d.set_value('grf_qp_ms', f'{r.time_grf_qp * 1e3:.3f}')
-                d.set_value('penetration_qp_ms', f'{r.time_penetration_qp * 1e3:.3f}')
-                d.set_value('substeps', r.substeps)
-            if r is not None and r.status == 'ok' and not self.pending:
-                d.warn(None)
-
-    return PhysicsNode
+    return spin_node(PhysicsNode, args, 'physics')
 
 
 if __name__ == '__main__':

@@ -13,13 +13,10 @@ Ground reaction forces (neural PhysCap eq. 8, 9, 11), :class:`GrfQP`
   ``J_1^T lambda`` = sum_c J_c[:, :6]^T lambda_c is the generalised root force that the contact
   forces produce (``J_c``: 3 x nv linear Jacobian of the contact point, world-aligned axes).
   ``Wm = diag(1, 1, 1, w_m, w_m, w_m)`` weighs the root moment (N m) against the root force
-  (N); eq. 8 is w_m = 1. With one foot point on the floor, the moment that the PD asks of
-  the root (dominated by the swing leg's desired acceleration) can only come from large
-  forces at a lever arm, and matching it inflates the vertical force to allow the friction
-  the moment needs: on the ground-truth walks w_m = 1 gives a mean vertical GRF of 1.7-2.5
-  body weights (walking is ~1.0), so the cycle uses a smaller w_m (``grf_moment_weight``).
-  The friction cone of eq. 9 (mu = 0.8) is replaced by its inscribed four-sided pyramid,
-  mu' = mu / sqrt(2): every force inside the pyramid is inside the true cone (conservative).
+  (N); eq. 8 is w_m = 1 (``grf_moment_weight`` of the cycle, default 1; see
+  ``docs/physics.md``). The friction cone of eq. 9 (mu = 0.8) is replaced by its inscribed
+  four-sided pyramid, mu' = mu / sqrt(2): every force inside the pyramid is inside the true
+  cone (conservative).
   The problem is solved in units of body weight (lambda / m g) for good conditioning; w_s
   (temporal smoothness, eq. 11, relative to the residual term) and a tiny w_r (makes the problem
   strictly convex; picks the least internal force) are dimensionless. The solution is finally
@@ -28,16 +25,14 @@ Ground reaction forces (neural PhysCap eq. 8, 9, 11), :class:`GrfQP`
 Penetration (neural PhysCap eq. 15-16), :class:`PenetrationQP`
     minimise   1/2 || qdot* - qdot ||_W^2
     subject to A qdot* >= b
-  W = I (the plain norm of eq. 15, default of the cycle), W = M(q) (kinetic-energy metric) or
-  W = diag(M(q)).
+  W = I (the plain norm of eq. 15, this class's default), W = M(q) (kinetic-energy metric) or
+  W = diag(M(q)) (the cycle's default, ``penetration_metric``; the choice: ``docs/physics.md``),
   with one row per contact point near the floor: ``A_c = J_c,z`` (vertical velocity of the
   point) and ``b_c = min(-z_c / dt, v_recover)``: a point at or below the floor may not move
   down (and climbs back at most at ``v_recover``), a point above it may not cross it within the
   step (z + dt zdot >= 0). With W = M the correction ``qdot* - qdot = M^-1 A^T y`` is the
   velocity change of vertical contact impulses ``y >= 0`` (an inelastic impact on a passive
-  body: measured on noisy standing motion it whips the light toe links up to 30 rad/s, while
-  W = I keeps every joint below 3 rad/s at the same jitter; hence I is the default). OSQP solves
-  the dual, which has one variable per row (at most 4) instead of nv:
+  body). OSQP solves the dual, which has one variable per row (at most 4) instead of nv:
     minimise   1/2 y^T (A W^-1 A^T) y + (A qdot - b)^T y    subject to  y >= 0
   and ``qdot* = qdot + W^-1 A^T y``. When ``qdot`` already satisfies every row, it is the
   solution and no solver runs.

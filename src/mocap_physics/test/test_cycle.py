@@ -6,7 +6,8 @@ import pytest
 from mocap_core.pose import Pose
 from mocap_core.rotations import axis_angle_to_quat, quat_to_axis_angle
 from mocap_core.skeleton import JOINT_INDEX, Skeleton
-from mocap_physics.cycle import InvalidInput, PhysicsCycle, PhysicsParams
+from mocap_physics.cycle import InvalidInput, PhysicsCycle
+from mocap_physics.cycle_params import PhysicsParams
 from mocap_physics.model import SkeletonError
 
 FPS = 30.0

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocap_physics.cycle import PhysicsParams
-from mocap_physics.evaluate import (evaluate_clip, lifter_noise, load_gt_bag, motion_metrics,
-                                    procrustes, summarize)
+from mocap_physics.cycle_params import PhysicsParams
+from mocap_physics.training.evaluate import (evaluate_clip, lifter_noise, load_gt_bag,
+                                             motion_metrics, procrustes, summarize)
 
 BAGS = Path(__file__).resolve().parents[3] / 'bags'
 
@@ -48,7 +48,7 @@ def test_groundtruth_bag_and_noise(clip):
 
 
 def test_metrics_of_ground_truth_are_zero_errors(clip):
-    from mocap_physics.evaluate import _world
+    from mocap_physics.training.evaluate import _world
     from mocap_core.kinematics import forward_kinematics
     rot, root = _world(clip, clip.rotations, clip.root_positions)
     joints = forward_kinematics(clip.skeleton.parents, clip.skeleton.offsets, rot,
@@ -61,7 +61,7 @@ def test_evaluate_clip_clean_and_noisy(clip):
     rows = [evaluate_clip(clip, PhysicsParams(), 'gt'),
             evaluate_clip(lifter_noise(clip, 1), PhysicsParams(), 'estimate')]
     for r in rows:
-        o, i, p = r['output'], r['input'], r['physics']
+        o, p = r['output'], r['physics']
         assert p['cone_violations'] == 0 and p['fallbacks'] == 0
         assert p['penetration_own_floor_max_mm'] < 1.0
         assert all(np.isfinite(v) for v in o.values())
@@ -79,7 +79,8 @@ def test_evaluate_clip_clean_and_noisy(clip):
 
 def test_mocap_eval_physics_cli(tmp_path):
     out = tmp_path / 'report'
-    res = subprocess.run([sys.executable, '-m', 'mocap_physics.cli', 'eval', 'physics',
+    res = subprocess.run([sys.executable, '-m', 'mocap_physics.training.cli', 'eval',
+                          'physics',
                           '--bags', str(BAGS / 'gt_cmu_walk_12_02'), '--dataset-clips', '0',
                           '--noise', 'none', '--quick', '--out', str(out)],
                          capture_output=True, text=True, timeout=300)

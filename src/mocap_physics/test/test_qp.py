@@ -129,8 +129,8 @@ def test_penetration_matches_cvxpy(model, metric):
         chol = cho_factor(M)
         d = np.diag(M).copy()
         W, solve_metric, scale = {
-            'mass': (M, lambda X: cho_solve(chol, X), 70.0),
-            'diagonal': (np.diag(d), lambda X: X / d[:, None], 70.0),
+            'mass': (M, lambda X, _c=chol: cho_solve(_c, X), 70.0),
+            'diagonal': (np.diag(d), lambda X, _d=d: X / _d[:, None], 70.0),
             'identity': (np.eye(model.nv), None, 1.0)}[metric]
         qp = PenetrationQP(metric=metric)
         res = qp.solve(v, A, b, solve_metric=solve_metric, scale=scale)
@@ -169,7 +169,7 @@ def test_penetration_with_stick_rows_matches_cvxpy(model, metric):
         M = model.mass_matrix(q)
         d = np.diag(M).copy()
         W, solve_metric, scale = {
-            'diagonal': (np.diag(d), lambda X: X / d[:, None], 70.0),
+            'diagonal': (np.diag(d), lambda X, _d=d: X / _d[:, None], 70.0),
             'identity': (np.eye(model.nv), None, 1.0)}[metric]
         res = PenetrationQP(metric=metric).solve(v, A, b, solve_metric=solve_metric,
                                                  scale=scale, A_eq=E, b_eq=e)

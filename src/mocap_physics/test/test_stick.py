@@ -6,7 +6,8 @@ import pytest
 from mocap_core.pose import Pose
 from mocap_core.rotations import axis_angle_to_quat
 from mocap_core.skeleton import Skeleton
-from mocap_physics.cycle import PhysicsCycle, PhysicsParams
+from mocap_physics.cycle import PhysicsCycle
+from mocap_physics.cycle_params import PhysicsParams
 from mocap_physics.floor import FloorFrame
 from mocap_physics.markers import friction_cone_lines
 
@@ -23,7 +24,7 @@ def _jittered_standing(skeleton, n=90, seed=0):
     rng = np.random.default_rng(seed)
     rest = Pose.rest(skeleton)
     out = []
-    for i in range(n):
+    for _ in range(n):
         root = rest.root_position + np.array([0.015, 0.015, 0.0]) * rng.normal(size=3)
         rot = np.array(rest.rotations)
         rot[0] = axis_angle_to_quat(np.radians(2.0) * rng.normal(size=3))

@@ -9,7 +9,9 @@ export and bench sub-commands).
     mocap data build|report|split|to-bag|from-openpose|fit-confidence
                                       # motion-capture data (see mocap_core.cli.mocap_data)
     mocap export bvh <bag> -o out.bvh # a motion topic as BVH for animation tools
-    mocap train lifter | mocap eval lifter   # models (see mocap_lifter.cli)
+    mocap train|eval MODEL            # models: commands registered by the node packages
+                                      # (entry points mocap.commands, mocap_core.plugins)
+    mocap process | report | bench    # the pipeline offline, its report, benchmarks
 """
 
 from __future__ import annotations
@@ -109,6 +111,18 @@ def cmd_doctor(args: argparse.Namespace) -> int:
             ok = False
             print(f'{mod:11s} MISSING ({type(exc).__name__}: {exc})')
     print(f"AMENT_PREFIX_PATH {'set' if os.environ.get('AMENT_PREFIX_PATH') else 'NOT SET'}")
+    from .. import plugins
+    found = plugins.nodes()
+    for stage in plugins.PIPELINE:
+        if stage in found:
+            n = found[stage]
+            print(f'node {stage:9s} ros2 run {n.package} {n.executable} '
+                  f'({n.entry_point.value})')
+        else:
+            ok = False
+            print(f'node {stage:9s} MISSING (no package registers it under {plugins.NODE_GROUP})')
+    for name, ep in plugins.benches().items():
+        print(f'bench {name:8s} {ep.value}')
     return 0 if ok else 1
 
 
@@ -242,7 +256,7 @@ def cmd_report(args: argparse.Namespace) -> int:
                      '`pipeline_frames.png`')
     (out / 'report.md').write_text(report_markdown(run, plaus, acc, args.title, notes,
                                                    args.wall_seconds))
-    for key, path in sorted(written.items()):
+    for _key, path in sorted(written.items()):
         print(f'wrote {path}')
     print(f"wrote {out / 'report.md'}")
     return 0

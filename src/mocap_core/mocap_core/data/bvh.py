@@ -28,8 +28,8 @@ World frame (:func:`bvh_fk`)
 ----------------------------
 BVH files are y-up and right-handed; in all the data used here the subject's rest pose faces
 +z_bvh with its left side towards +x_bvh (e.g. the CMU ``LeftUpLeg`` offset has x > 0 and the
-toes have z > 0). The pipeline world frame (DESIGN §3) is z up, and the body frame is x forward,
-y left. The conversion is the cyclic axis permutation (a proper rotation, det = +1)::
+toes have z > 0). The pipeline world frame (docs/design.md §3) is z up, and the body frame is
+x forward, y left. The conversion is the cyclic axis permutation (a proper rotation, det = +1)::
 
     (x, y, z)_world = (z, x, y)_bvh          i.e.  p_world = BVH_TO_WORLD @ p_bvh
 

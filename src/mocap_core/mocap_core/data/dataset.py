@@ -703,7 +703,7 @@ def report_markdown(r: dict) -> str:
             row('---', *(['---'] * (1 + len(r['bone_lengths_m_per_format']))))]
     for g, st in r['bone_lengths_m'].items():
         cells = [f"{st['min']:.3f} / {st['median']:.3f} / {st['max']:.3f}"]
-        for f, per in r['bone_lengths_m_per_format'].items():
+        for per in r['bone_lengths_m_per_format'].values():
             s2 = per[g]
             cells.append(f"{s2['min']:.3f} / {s2['median']:.3f} / {s2['max']:.3f}")
         out.append(row(g, *cells))

@@ -11,7 +11,7 @@ topic                              type                                 frame (`
 ``/mocap/keypoints2d``             sensor_msgs/PointCloud2 (1 x 23:     camera optical frame
                                    u, v, confidence)
 ``/mocap/groundtruth/motion``      trajectory_msgs/                     camera optical frame
-                                   MultiDOFJointTrajectory (DESIGN §2)
+                                   MultiDOFJointTrajectory (docs/design.md §2)
 ``/mocap/groundtruth/joints3d``    sensor_msgs/PointCloud2 (1 x 18:     camera optical frame
                                    x, y, z, metres)
 ``/mocap/groundtruth/contacts``    sensor_msgs/JointState (name =       camera optical frame

@@ -181,7 +181,7 @@ def process_motion(name: str, skeleton: Skeleton, rotations: np.ndarray,
 
     The floor plane (:func:`floor_plane`) is removed under the subject: each frame is shifted
     vertically by the plane height at the root's xy, so a sloping capture floor becomes the
-    level floor z = 0 of the world frame (DESIGN §3).
+    level floor z = 0 of the world frame (docs/design.md §3).
     """
     rot, root = resample(rotations, root_positions, fps_in, fps_out)
     pts = contact_point_positions(skeleton, rot, root)

@@ -21,7 +21,7 @@ Pipeline for one training sample (issue "motion data pipeline", part 4):
 5. :func:`mirror_motion` — left-right flip of the 3D motion (MotioNet §4 augmentation (3)).
 6. :func:`canonicalize` — neural PhysCap §3.2 canonical keypoints K^-1 [u, v, 1].
 
-World frame: z up (DESIGN §3). Camera: optical frame (x right, y down, z forward).
+World frame: z up (docs/design.md §3). Camera: optical frame (x right, y down, z forward).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from ..camera import CameraIntrinsics
+from ..keypoint_geometry import JOINT_KEYPOINTS, canonicalize  # noqa: F401 (re-exported)
 from ..kinematics import forward_kinematics
 from ..rotations import matrix_to_quat, quat_multiply
 from ..skeleton import (JOINT_INDEX, JOINT_MIRROR, KEYPOINT_INDEX, KEYPOINT_MIRROR,
@@ -57,10 +58,6 @@ FOOT_POINTS: Dict[str, Tuple[str, Tuple[float, float, float]]] = {
     'right_big_toe': ('right_toe', (0.35, 0.08, 0.0)),
     'right_small_toe': ('right_toe', (0.15, -0.30, 0.0)),
 }
-#: Layout keypoints that are joints of the pipeline skeleton (same name, same point).
-JOINT_KEYPOINTS: Tuple[str, ...] = ('left_shoulder', 'right_shoulder', 'left_elbow', 'right_elbow',
-                    'left_wrist', 'right_wrist', 'left_hip', 'right_hip', 'left_knee',
-                    'right_knee', 'left_ankle', 'right_ankle')
 
 
 def keypoints_3d(skeleton: Skeleton, rotations: np.ndarray,
@@ -203,17 +200,6 @@ def motion_to_camera(rotations: np.ndarray, root_positions: np.ndarray,
     rot = np.array(rotations, dtype=np.float64)
     rot[:, 0] = quat_multiply(camera.quaternion(), rot[:, 0])
     return rot, camera.world_to_camera(root_positions)
-
-
-def canonicalize(keypoints: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
-    """Neural PhysCap §3.2: (..., 3) pixel keypoints (u, v, c) -> canonical
-    ((u - cx) / fx, (v - cy) / fy, c), independent of the camera intrinsics; points with
-    c = 0 stay (0, 0, 0)."""
-    kp = np.array(keypoints, dtype=np.float64)
-    seen = kp[..., 2] > 0
-    kp[..., 0] = np.where(seen, (kp[..., 0] - intrinsics.cx) / intrinsics.fx, 0.0)
-    kp[..., 1] = np.where(seen, (kp[..., 1] - intrinsics.cy) / intrinsics.fy, 0.0)
-    return kp
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""``mocap train lifter`` and ``mocap eval lifter`` (also ``python -m mocap_lifter.cli``).
+"""``mocap train lifter`` and ``mocap eval lifter`` (also ``python -m mocap_lifter.training.cli``).
 
     mocap train lifter [--config cfg.json] [--mode windowed|causal] [--steps N]
                        [--run-dir runs/lifter_windowed] [--device cpu|cuda] [--no-resume]
@@ -20,7 +20,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import List, Optional
 
-WEIGHTS_DIR = Path(__file__).resolve().parents[1] / 'weights'
+WEIGHTS_DIR = Path(__file__).resolve().parents[2] / 'weights'
 
 
 def add_train_parser(sub) -> None:
@@ -71,6 +71,7 @@ def _add_vtm_train_parser(sub) -> None:
 def cmd_train_vtm(args: argparse.Namespace) -> int:
     import shutil
 
+    from mocap_core.checkpoint import WeightsError
     from mocap_core.data.dataset import load_dataset
 
     from .vtm_train import VTMTrainConfig, train_stage
@@ -103,8 +104,12 @@ def cmd_train_vtm(args: argparse.Namespace) -> int:
                       '--stage tpmae first)', file=sys.stderr)
                 return 1
             cfg.init = str(init.resolve())
-        weights = train_stage(train_motions, val_motions, run_dir / stage, cfg,
-                              device=args.device, resume=not args.no_resume)
+        try:
+            weights = train_stage(train_motions, val_motions, run_dir / stage, cfg,
+                                  device=args.device, resume=not args.no_resume)
+        except WeightsError as exc:   # a damaged checkpoint or --init file
+            print(f'mocap train vtm: error: {exc}', file=sys.stderr)
+            return 2
         print(f'{stage} weights: {weights}', flush=True)
     if args.install and weights is not None:
         WEIGHTS_DIR.mkdir(exist_ok=True)
@@ -141,6 +146,7 @@ def add_eval_parser(sub) -> None:
 def cmd_train(args: argparse.Namespace) -> int:
     import shutil
 
+    from mocap_core.checkpoint import WeightsError
     from mocap_core.data.dataset import load_dataset
 
     from .train import TrainConfig, train
@@ -158,14 +164,18 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.clean_fraction is not None:
         cfg.clean_fraction = args.clean_fraction
     run_dir = Path(args.run_dir or f'runs/lifter_{args.mode}')
-    print(f'loading the dataset (train and validation splits) ...', flush=True)
+    print('loading the dataset (train and validation splits) ...', flush=True)
     t0 = time.time()
     train_motions = load_dataset('train')
     val_motions = load_dataset('validation')
     print(f'{len(train_motions)} training clips, {len(val_motions)} validation clips '
           f'({time.time() - t0:.0f} s)', flush=True)
-    weights = train(train_motions, val_motions, run_dir, cfg, device=args.device,
-                    resume=not args.no_resume)
+    try:
+        weights = train(train_motions, val_motions, run_dir, cfg, device=args.device,
+                        resume=not args.no_resume)
+    except WeightsError as exc:   # a damaged checkpoint or --init file
+        print(f'mocap train lifter: error: {exc}', file=sys.stderr)
+        return 2
     print(f'weights: {weights}')
     if args.install:
         WEIGHTS_DIR.mkdir(exist_ok=True)
@@ -181,7 +191,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def default_real_sequences() -> List[str]:
     """The real OpenPose sequences of the shared data, or the committed example."""
-    repo = Path(__file__).resolve().parents[3]
+    repo = Path(__file__).resolve().parents[4]
     shared = repo.parent / 'shared' / 'data' / 'keypoints_real' / 'motionet_openpose'
     if shared.is_dir():
         return [str(d) for d in sorted(shared.iterdir()) if d.is_dir()]
@@ -190,11 +200,12 @@ def default_real_sequences() -> List[str]:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
+    from mocap_core.checkpoint import WeightsError
     from mocap_core.data.dataset import load_dataset
 
+    from ..weights import architecture, load_weights
     from .evaluate import (baseline_mean_pose, evaluate, evaluate_real,
                            groundtruth_plausibility, write_report)
-    from .train import load_weights
 
     if args.model == 'vtm' and args.mode == 'causal':
         print('mocap eval lifter: error: VTM is windowed only', file=sys.stderr)
@@ -204,8 +215,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if not weights.exists():
         print(f'mocap eval lifter: error: weights not found: {weights}', file=sys.stderr)
         return 1
-    model = load_weights(weights, args.device)
-    is_vtm = type(model).__name__ == 'VTM'
+    try:
+        model = load_weights(weights, args.device)
+    except WeightsError as exc:
+        print(f'mocap eval lifter: error: {exc}', file=sys.stderr)
+        return 2
+    is_vtm = architecture(model) == 'vtm'
     if is_vtm and args.vtm_root:
         model.cfg.root_from = args.vtm_root
     if is_vtm != (args.model == 'vtm'):
@@ -254,7 +269,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def main(argv: Optional[List[str]] = None) -> int:
     from mocap_core.cli.mocap import run_model_cli
-    return run_model_cli(sys.modules[__name__], 'python -m mocap_lifter.cli', argv)
+    return run_model_cli(sys.modules[__name__], 'python -m mocap_lifter.training.cli', argv)
 
 
 if __name__ == '__main__':

@@ -8,8 +8,8 @@ Losses (MotioNet §3.2, eq. 5-12, weights in :class:`TrainConfig`):
 * ``skeleton``: bone-group lengths vs the ground-truth skeleton (eq. 5);
 * ``contact``: heel/toe contact labels (BCE, eq. 10) and ``contact_velocity``: the velocity of
   the foot joints during labelled contact (eq. 11);
-* ``rotation`` (optional, the ablation the issue asks for): ``1 - |<q, q_gt>|`` per joint,
-  possible because the data pipeline expresses all rotations against one rest pose;
+* ``rotation`` (optional): ``1 - |<q, q_gt>|`` per joint (all rotations are against one
+  rest pose);
 * ``adversarial`` (optional): least-squares GAN on rotation velocities with per-joint
   discriminators (eq. 7);
 * ``tpose`` (optional): MotioNet's reference T-pose: a share ``tpose_fraction`` of the
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -34,11 +33,14 @@ import numpy as np
 import torch
 from torch import nn
 
+from mocap_core.checkpoint import WeightsError, load_checkpoint
 from mocap_core.data.motion import Motion
 from mocap_core.skeleton import END_EFFECTORS, JOINT_INDEX, NUM_JOINTS
 
-from .features import NUM_FEATURES
-from .model import LifterConfig, MotioNet, RotationDiscriminator
+from ..features import NUM_FEATURES
+from ..model import LifterConfig, MotioNet, RotationDiscriminator
+from ..weights import load_weights, plain_data, save_weights
+from .common import cosine_lr, plot_log, to_torch
 from .samples import Augmentation, WindowSampler
 
 _FOOT_JOINTS = [JOINT_INDEX[n] for n in ('left_ankle', 'left_toe', 'right_ankle', 'right_toe')]
@@ -76,10 +78,6 @@ class TrainConfig:
         d = dict(d)
         model = LifterConfig(**d.pop('model', {}))
         return cls(model=model, **d)
-
-
-def to_torch(batch: Dict[str, np.ndarray], device: str) -> Dict[str, torch.Tensor]:
-    return {k: torch.as_tensor(v, device=device) for k, v in batch.items()}
 
 
 def losses(out: Dict[str, torch.Tensor], gt: Dict[str, torch.Tensor], cfg: TrainConfig,
@@ -152,7 +150,8 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     step = 0
     ckpt = run_dir / 'last.pt'
     if resume and ckpt.exists():
-        state = torch.load(ckpt, map_location=device, weights_only=False)
+        state = load_checkpoint(ckpt, map_location=device,
+                                 required=('model', 'optimizer', 'step'))
         model.load_state_dict(state['model'])
         opt.load_state_dict(state['optimizer'])
         if disc is not None and 'disc' in state:
@@ -181,8 +180,7 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     t0 = time.time()
     bar = tqdm(total=cfg.steps, initial=step, disable=not progress, desc='train lifter')
     while step < cfg.steps:
-        lr = cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1 + math.cos(math.pi * step /
-                                                                           cfg.steps))
+        lr = cosine_lr(step, cfg.steps, cfg.lr, cfg.lr_final)
         for g in opt.param_groups:
             g['lr'] = lr
         model.train()
@@ -209,7 +207,7 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
             plot_log(log_path, run_dir / 'loss.png')
         if step % cfg.checkpoint_every == 0 or step == cfg.steps:
             state = {'model': model.state_dict(), 'optimizer': opt.state_dict(), 'step': step,
-                     'config': asdict(cfg)}
+                     'config': plain_data(asdict(cfg))}
             if disc is not None:
                 state.update(disc=disc.state_dict(), optimizer_d=opt_d.state_dict())
             torch.save(state, ckpt.with_suffix('.tmp'))
@@ -258,83 +256,15 @@ def _discriminator_step(disc, opt_d, fake_q, real_vel, rng, device) -> None:
     opt_d.step()
 
 
-def half_state(model: nn.Module) -> Dict[str, torch.Tensor]:
-    """The model's state dict with floating tensors as float16 (small shipped files)."""
-    return {k: (v.half() if v.is_floating_point() else v) for k, v in model.state_dict().items()}
-
-
-def load_half_state(model: nn.Module, state: Dict[str, torch.Tensor]) -> None:
-    """Load a :func:`half_state` dict (floating tensors back to float32)."""
-    model.load_state_dict({k: (v.float() if v.is_floating_point() else v)
-                           for k, v in state.items()})
-
-
-def save_weights(model: MotioNet, path: Path, info: Optional[Dict] = None) -> None:
-    """Inference weights: state dict (floating tensors stored as float16 to keep the shipped
-    file small) + network configuration (+ free-form info)."""
-    torch.save({'model': half_state(model), 'config': asdict(model.cfg), 'info': info or {}},
-               path)
-
-
 def export_checkpoint(checkpoint: Path, out: Path) -> Path:
     """Write inference weights from a training checkpoint (``last.pt``)."""
-    state = torch.load(checkpoint, map_location='cpu', weights_only=False)
-    cfg = TrainConfig.from_dict(state['config'])
-    model = MotioNet(cfg.model)
-    model.load_state_dict(state['model'])
+    state = load_checkpoint(checkpoint, required=('model', 'config', 'step'))
+    try:
+        cfg = TrainConfig.from_dict(state['config'])
+        model = MotioNet(cfg.model)
+        model.load_state_dict(state['model'])
+    except (TypeError, ValueError, KeyError, RuntimeError) as exc:
+        raise WeightsError(f'{checkpoint}: not a lifter training checkpoint '
+                           f'({type(exc).__name__}: {str(exc)[:160]})') from None
     save_weights(model, Path(out), {'steps': state['step'], 'from_checkpoint': True})
     return Path(out)
-
-
-def load_weights(path: Path, device: str = 'cpu', causal: Optional[bool] = None):
-    """Load lifter weights: MotioNet ones written by :func:`save_weights` (``causal``
-    overrides the mode: the padding changes, the weights are the same) or VTM ones
-    (:func:`mocap_lifter.vtm_train.save_vtm`; windowed only, ``causal=True`` is an error).
-    Returns the network in eval mode (:class:`MotioNet` or :class:`mocap_lifter.vtm.VTM`)."""
-    state = torch.load(path, map_location=device, weights_only=False)
-    if state.get('arch') == 'vtm':
-        if causal:
-            raise ValueError(f'{path} holds VTM weights, which are windowed only '
-                             '(bounded look-ahead): use mode windowed')
-        from .vtm_train import load_vtm
-        return load_vtm(path, device)
-    cfg = LifterConfig(**state['config'])
-    if causal is not None:
-        cfg.causal = causal
-    model = MotioNet(cfg).to(device)
-    load_half_state(model, state['model'])
-    model.eval()
-    return model
-
-
-def plot_log(log_path: Path, out: Path) -> None:
-    """Loss curves (train and validation joint error) from the CSV log."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-
-    rows = list(csv.DictReader(Path(log_path).open()))
-    if not rows:
-        return
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
-    for split, style in (('train', '-'), ('val', 'o-')):
-        r = [x for x in rows if x['split'] == split]
-        if not r:
-            continue
-        s = [int(x['step']) for x in r]
-        axes[0].plot(s, [float(x['loss']) for x in r], style, label=split)
-        axes[1].plot(s, [float(x['joints_mm']) for x in r], style, label=f'{split} joints')
-        axes[1].plot(s, [float(x['root_mm']) for x in r], style, alpha=0.5,
-                     label=f'{split} root')
-    axes[0].set_yscale('log')
-    axes[0].set_xlabel('step')
-    axes[0].set_ylabel('total loss')
-    axes[1].set_xlabel('step')
-    axes[1].set_ylabel('mm')
-    axes[1].set_yscale('log')
-    for a in axes:
-        a.legend(fontsize=8)
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out, dpi=90)
-    plt.close(fig)

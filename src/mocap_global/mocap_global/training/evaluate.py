@@ -9,18 +9,19 @@ Every validation clip is run at the model's frame rate in three ways:
 * ``causal``: the same with ``lookahead = 0``.
 
 Inputs: ``none`` = ground-truth local poses and bone lengths; ``lifter`` = lifter-like noisy
-ones (:func:`~.features.noisy_local_pose`, an assumed noise model, seeded per clip). Metrics
-(:mod:`.metrics`): OME, TME and joint motion error per step at the model rate and, for a
-30 fps model, at 10 fps (three 30 fps motions composed, the paper's rate, Table 4); tilt error
-of the estimated up direction; drift after 1, 5 and 10 s, RTE and ATE of the accumulated
-trajectory. Baselines on the same clips: zero motion, and a constant velocity equal to each
-clip's mean ground-truth motion (an oracle: it knows the true average speed and turn rate).
+ones (:func:`mocap_global.features.noisy_local_pose`, an assumed noise model, seeded per
+clip). Metrics (:mod:`.metrics`): OME, TME and joint motion error per step at the model rate
+and, for a 30 fps model, at 10 fps (three 30 fps motions composed, the paper's rate, Table 4);
+tilt error of the estimated up direction; drift after 1, 5 and 10 s, RTE and ATE of the
+accumulated trajectory. Baselines on the same clips: zero motion, and a constant velocity
+equal to each clip's mean ground-truth motion (an oracle: it knows the true average speed and
+turn rate).
 
-Static-camera fusion (:class:`~.online.StaticCameraFusion`): on the validation clips with a
-simulated static camera whose root measurements carry lifter-like errors (depth noise and
-scale error, see :data:`ROOT_NOISE`), and on the committed ground-truth bags through
-:class:`~.online.OnlineGMR` itself (the node's code), GMR alone vs fused vs the measurement
-alone, as ATE (4-DOF aligned) and root jitter.
+Static-camera fusion (:class:`mocap_global.online.StaticCameraFusion`): on the validation clips
+with a simulated static camera whose root measurements carry lifter-like errors (depth noise
+and scale error, see :data:`ROOT_NOISE`), and on the committed ground-truth bags through
+:class:`mocap_global.online.OnlineGMR` itself (the node's code), GMR alone vs fused vs the
+measurement alone, as ATE (4-DOF aligned) and root jitter.
 """
 
 from __future__ import annotations
@@ -37,13 +38,14 @@ from mocap_core.data.motion import Motion
 from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat,
                                   quat_to_matrix)
 
+from ..bags import read_groundtruth_bag
+from ..features import (body_joint_positions, gmr_features, noisy_lengths, noisy_local_pose,
+                        _smooth_noise)
+from ..model import GMR
+from ..online import OnlineGMR, StaticCameraFusion
+from ..se3 import compose_steps, relative_motion, up_in_body
 from . import metrics as M
-from .features import (body_joint_positions, gmr_features, noisy_lengths, noisy_local_pose,
-                       _smooth_noise)
-from .model import GMR
-from .online import StaticCameraFusion
 from .samples import frame_step
-from .se3 import compose_steps, relative_motion, up_in_body
 
 #: The node's default window (frames per GRU pass), used by the online and causal rows.
 NODE_WINDOW = 48
@@ -353,45 +355,14 @@ def _rigid_align(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
     return (P - pc) @ R.T + qc
 
 
-def read_groundtruth_bag(path: Path) -> Dict:
-    """Stamps, camera-frame poses, the static camera pose, and the keypoints and intrinsics
-    of a ground-truth bag."""
-    from mocap_core.bag_io import BagReader, deserialize
-    from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
-                                            motion_to_pose, stamp_to_ns)
-
-    stamps, poses, cam, keypoints, intr = [], [], None, [], None
-    with BagReader(path) as bag:
-        for msg in bag.messages(topics=['/mocap/groundtruth/motion',
-                                        '/mocap/groundtruth/camera_pose',
-                                        '/mocap/keypoints2d', '/mocap/camera_info']):
-            d = deserialize(msg.data, msg.msgtype)
-            if msg.topic == '/mocap/keypoints2d':
-                keypoints.append(cloud_to_keypoints(d)[0])
-            elif msg.topic == '/mocap/camera_info':
-                intr = camera_info_to_intrinsics(d)
-            elif msg.topic.endswith('camera_pose'):
-                q = d.pose.orientation
-                p = d.pose.position
-                cam = (quat_to_matrix(np.array([q.x, q.y, q.z, q.w])),
-                       np.array([p.x, p.y, p.z]))
-            else:
-                stamps.append(stamp_to_ns(d.header.stamp))
-                poses.append(motion_to_pose(d))
-    if cam is None or not poses:
-        raise ValueError(f'{path}: no camera pose or no ground-truth motion')
-    return {'stamps': stamps, 'poses': poses, 'camera': cam,
-            'keypoints': np.stack(keypoints) if keypoints else None, 'intrinsics': intr}
-
-
 def lifter_poses(keypoints: np.ndarray, intrinsics) -> Optional[tuple]:
     """The shipped MotioNet lifter (windowed) on a keypoint sequence, one pass: (rotations
     (T, J, 4) with the root in the camera frame, root positions (T, 3), bone-group lengths
     (10,)), or None when the lifter or its weights are not installed."""
     try:
         from mocap_lifter.features import lifter_features
-        from mocap_lifter.node import default_weights
-        from mocap_lifter.train import load_weights as load_lifter
+        from mocap_lifter.weights import default_weights
+        from mocap_lifter.weights import load_weights as load_lifter
     except ImportError:
         return None
     path = default_weights('windowed')
@@ -408,7 +379,7 @@ def lifter_poses(keypoints: np.ndarray, intrinsics) -> Optional[tuple]:
 
 def evaluate_bags(model: GMR, bags: Sequence[Path], noise: str, lookahead: int,
                   device: str = 'cpu', window: Optional[int] = None) -> List[Dict]:
-    """The node's algorithm (:class:`~.online.OnlineGMR`) on committed ground-truth bags
+    """The node's algorithm (:class:`mocap_global.online.OnlineGMR`) on committed ground-truth bags
     (static camera), at the model's rate (a 30 fps bag is subsampled for a 10 fps
     model): world root ATE (4-DOF aligned) and tilt error of GMR alone and fused with
     the camera-frame root. ``noise``: 'none' (ground truth), 'lifter' (simulated lifter-like
@@ -417,8 +388,6 @@ def evaluate_bags(model: GMR, bags: Sequence[Path], noise: str, lookahead: int,
     from mocap_core.pose import Pose
     from mocap_core.rotations import quat_angle
     from mocap_core.skeleton import Skeleton
-
-    from .online import OnlineGMR
 
     rows = []
     for path in bags:

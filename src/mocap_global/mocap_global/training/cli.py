@@ -1,4 +1,4 @@
-"""``mocap train gmr`` and ``mocap eval gmr`` (also ``python -m mocap_global.cli``).
+"""``mocap train gmr`` and ``mocap eval gmr`` (also ``python -m mocap_global.training.cli``).
 
     mocap train gmr [--config cfg.json] [--fps 30|10] [--size cpu|paper] [--steps N]
                     [--minutes M] [--run-dir runs/gmr_30fps] [--device cpu|cuda]
@@ -9,14 +9,14 @@
 
 Training reads the train split of the processed dataset (``mocap data build``; built on
 first use), evaluation the validation split (and the committed ground-truth bags for the
-static-camera fusion).
+static-camera fusion). A weights file that cannot be used ends ``mocap eval gmr`` with one
+line ``mocap eval gmr: error: ...`` and exit status 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import sys
 import time
@@ -24,21 +24,14 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import List, Optional
 
-WEIGHTS_DIR = Path(__file__).resolve().parents[1] / 'weights'
-#: ``--tta`` choices (:data:`.model.TTA_MODES`, repeated to keep ``--help`` free of torch).
+_PACKAGE = Path(__file__).resolve().parents[2]
+#: The package's weights directory (:data:`mocap_global.weights.WEIGHTS_DIR`; repeated here,
+#: like :data:`TTA_CHOICES`, to keep ``--help`` free of torch).
+WEIGHTS_DIR = _PACKAGE / 'weights'
+#: The committed ground-truth bags of the repository.
+BAGS_DIR = _PACKAGE.parents[1] / 'bags'
+#: ``--tta`` choices (:data:`mocap_global.model.TTA_MODES`).
 TTA_CHOICES = ('none', 'mirror', 'reverse', 'both')
-
-
-def passive_openmp() -> None:
-    """Idle OpenMP threads sleep instead of spinning (set before torch is imported). With the
-    default spinning, two torch threads on a 2-core machine that also runs other work were
-    measured 30x slower per training step."""
-    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')
-
-
-def weights_name(fps: float) -> str:
-    """Shipped weights file of a model rate: ``gmr.pt`` (30 fps), ``gmr_10fps.pt`` ..."""
-    return 'gmr.pt' if round(fps) == 30 else f'gmr_{int(round(fps))}fps.pt'
 
 
 def add_train_parser(sub) -> None:
@@ -86,7 +79,6 @@ def add_eval_parser(sub) -> None:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    passive_openmp()
     from mocap_core.data.dataset import load_dataset
 
     from .train import TrainConfig, train
@@ -121,7 +113,7 @@ def install(run_dir: Path, cfg, command: str) -> Path:
     """Copy a finished run's weights (``run_dir/gmr.pt``), loss curve and log into the package
     (``weights/gmr.pt`` for 30 fps, ``gmr_<fps>fps.pt`` otherwise) with a training record
     (``<stem>_train.json``: configuration, command, steps, time, validation figures)."""
-    import torch
+    from ..weights import read_info, weights_name
 
     weights = Path(run_dir) / 'gmr.pt'
     WEIGHTS_DIR.mkdir(exist_ok=True)
@@ -131,7 +123,7 @@ def install(run_dir: Path, cfg, command: str) -> Path:
     stem = Path(name).stem
     shutil.copy(Path(run_dir) / 'loss.png', WEIGHTS_DIR / f'{stem}_loss.png')
     shutil.copy(Path(run_dir) / 'log.csv', WEIGHTS_DIR / f'{stem}_log.csv')
-    info = torch.load(weights, map_location='cpu', weights_only=False)['info']
+    info = read_info(weights)
     (WEIGHTS_DIR / f'{stem}_train.json').write_text(json.dumps(
         {'config': asdict(cfg), 'command': command, 'steps': info.get('steps'),
          'train_seconds': info.get('train_seconds'),
@@ -140,27 +132,32 @@ def install(run_dir: Path, cfg, command: str) -> Path:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    passive_openmp()
+    import torch
+
+    from mocap_core.checkpoint import WeightsError
     from mocap_core.data.dataset import load_dataset
 
+    from ..model import with_tta
+    from ..weights import load_weights
     from .evaluate import evaluate_all, write_report
-    from .model import load_weights, with_tta
 
-    import torch
     torch.set_num_threads(args.threads)
     weights = Path(args.weights) if args.weights else WEIGHTS_DIR / 'gmr.pt'
     if not weights.exists():
         print(f'mocap eval gmr: error: weights not found: {weights} (train them with '
               '`mocap train gmr --install`)', file=sys.stderr)
         return 1
-    model = with_tta(load_weights(weights, args.device), args.tta)
+    try:
+        model = with_tta(load_weights(weights, args.device), args.tta)
+    except WeightsError as exc:
+        print(f'mocap eval gmr: error: {exc}', file=sys.stderr)
+        return 2
     val = load_dataset('validation')
     if args.max_clips:
         val = val[:args.max_clips]
     noises = ('none', 'lifter') if args.noise == 'both' else (args.noise,)
     t0 = time.time()
-    bags = None if args.no_bags else sorted((Path(__file__).resolve().parents[3] / 'bags')
-                                            .glob('gt_*'))
+    bags = None if args.no_bags else sorted(BAGS_DIR.glob('gt_*'))
     report = evaluate_all(model, val, noises, args.lookahead, args.device, bags=bags,
                           progress=True, window=args.window)
     report['eval_seconds'] = round(time.time() - t0, 1)
@@ -178,7 +175,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def main(argv: Optional[List[str]] = None) -> int:
     from mocap_core.cli.mocap import run_model_cli
-    return run_model_cli(sys.modules[__name__], 'python -m mocap_global.cli', argv)
+    return run_model_cli(sys.modules[__name__], 'python -m mocap_global.training.cli',
+                         argv)
 
 
 if __name__ == '__main__':

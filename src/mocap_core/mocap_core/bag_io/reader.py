@@ -1,4 +1,4 @@
-"""Read and write rosbag2 bags (MCAP storage) as raw CDR bytes.
+"""Read rosbag2 bags (MCAP or SQLite storage) and single ``.mcap`` files as raw CDR bytes.
 
 A *bag* here is what ``ros2 bag record`` writes: a folder with ``metadata.yaml`` and one or more
 ``.mcap`` files. :class:`BagReader` also opens
@@ -10,76 +10,29 @@ A *bag* here is what ``ros2 bag record`` writes: a folder with ``metadata.yaml``
   cannot index such a file, so it is read sequentially with the ``mcap`` package instead and
   every complete message before the damage is returned (a note is added to ``reader.warnings``).
 
-Everything is kept as serialised bytes, so copying a bag through :class:`BagReader` and
-:class:`BagWriter` is byte-identical. Deserialising is a separate step
-(:func:`mocap_core.ros_msgs.deserialize`).
-
-This module needs only ``rosbags`` (and ``mcap`` for the fallback); rclpy is imported lazily by
-the few helpers that build rclpy objects (:meth:`BagWriter.write_msg`, :func:`adapted_qos`).
+Messages stay serialised (:class:`BagMessage` ``.data``); time stamps are integer nanoseconds
+of the bag's (receive) clock.
 """
 
 from __future__ import annotations
 
 import heapq
 import os
-import shutil
 import struct
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from rosbags.interfaces import (
-    Qos,
-    QosDurability,
-    QosHistory,
-    QosLiveliness,
-    QosReliability,
-    QosTime,
-)
-from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
-from rosbags.rosbag2.metadata import dump_qos_v9, parse_qos
+from rosbags.interfaces import Qos
+from rosbags.rosbag2 import Reader, ReaderError
 
-from .ros_msgs import (
-    MessageTypeError,
-    deserialize,
-    get_message_class,
-    message_to_dict,
-    message_to_yaml,
-    msgtype_of,
-    normalize_msgtype,
-    serialize,
-    stamp_to_ns,
-)
+from .errors import BagError
+from .qos import parse_qos_text
+from .typestore import canonical_msgtype
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable, Iterator, Sequence
+    from collections.abc import Iterable, Iterator
 
-__all__ = [
-    'BagError',
-    'BagMessage',
-    'BagReader',
-    'BagWriter',
-    'TopicInfo',
-    'adapted_qos',
-    'deserialize',
-    'get_message_class',
-    'message_definition',
-    'message_to_dict',
-    'message_to_yaml',
-    'qos_to_bag',
-    'qos_to_dicts',
-    'stamp_to_ns',
-]
-
-_NS = 1_000_000_000
-_MAX_TIME = 2**63 - 1
-
-
-class BagError(Exception):
-    """A bag cannot be read or written; the message is one line that says what and why."""
-
-    def __init__(self, message: str) -> None:
-        super().__init__(' '.join(str(message).split()))
-
+__all__ = ['BagMessage', 'BagReader', 'TopicInfo']
 
 class TopicInfo(NamedTuple):
     """One topic of a bag."""
@@ -102,187 +55,9 @@ class BagMessage(NamedTuple):
     data: bytes
 
 
-# --- QoS -----------------------------------------------------------------------------------------
-
-def _enum(enum_cls: Any, value: Any, unknown: Any) -> Any:
-    if isinstance(value, enum_cls):
-        return value
-    raw = getattr(value, 'value', value)
-    if isinstance(raw, str):
-        return enum_cls.__members__.get(raw.upper(), unknown)
-    try:
-        return enum_cls(int(raw))
-    except (TypeError, ValueError):
-        return unknown
-
-
-def _qtime(value: Any) -> QosTime:
-    if isinstance(value, QosTime):
-        return value
-    if isinstance(value, dict):
-        return QosTime(int(value['sec']), int(value['nsec']))
-    ns = getattr(value, 'nanoseconds', value)  # rclpy Duration or int ns
-    sec, nsec = divmod(int(ns), _NS)
-    return QosTime(sec, nsec)
-
-
-def qos_to_bag(qos: Any) -> Qos:
-    """Convert one QoS profile to the rosbags ``Qos`` stored in bag metadata.
-
-    Accepts a rosbags ``Qos``, an rclpy ``QoSProfile`` (e.g. from
-    ``node.get_publishers_info_by_topic``) or a dict in rosbag2 metadata form.
-    """
-    if isinstance(qos, Qos):
-        return qos
-    if isinstance(qos, dict):
-        parsed = parse_qos([qos])  # type: ignore[list-item]
-        return parsed[0]
-    try:
-        return Qos(
-            _enum(QosHistory, qos.history, QosHistory.UNKNOWN),
-            int(qos.depth),
-            _enum(QosReliability, qos.reliability, QosReliability.UNKNOWN),
-            _enum(QosDurability, qos.durability, QosDurability.UNKNOWN),
-            _qtime(qos.deadline),
-            _qtime(qos.lifespan),
-            _enum(QosLiveliness, qos.liveliness, QosLiveliness.UNKNOWN),
-            _qtime(qos.liveliness_lease_duration),
-            bool(qos.avoid_ros_namespace_conventions),
-        )
-    except AttributeError as exc:
-        raise BagError(f'cannot use {type(qos).__name__} as a QoS profile: {exc}') from None
-
-
-def _qos_list(qos: Any) -> list[Qos]:
-    if qos is None:
-        return []
-    if isinstance(qos, str):
-        try:
-            return parse_qos(qos)
-        except (ReaderError, KeyError, TypeError) as exc:
-            raise BagError(f'invalid offered QoS profiles text: {exc}') from None
-    if isinstance(qos, (list, tuple)) and not isinstance(qos, Qos):
-        return [qos_to_bag(x) for x in qos]
-    return [qos_to_bag(qos)]
-
-
-def qos_to_dicts(qos: Sequence[Qos] | None) -> list[dict]:
-    """QoS profiles in the dict form of rosbag2 (version 9) metadata."""
-    return [dict(x) for x in dump_qos_v9(list(qos or []))]
-
-
-def adapted_qos(offers: Sequence[Any] | None, *, depth: int = 100) -> Any:
-    """An rclpy ``QoSProfile`` compatible with all ``offers`` (publishers' offered QoS).
-
-    Like rosbag2: reliable unless some offer is best effort, transient-local only when every
-    offer is transient-local, keep-last with at least ``depth`` (or the largest offered depth).
-    ``offers`` may be rosbags ``Qos`` (from a bag) or rclpy profiles (from the graph).
-    """
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    bag_offers = [qos_to_bag(x) for x in (offers or [])]
-    reliability = ReliabilityPolicy.RELIABLE
-    durability = DurabilityPolicy.VOLATILE
-    if bag_offers:
-        if any(x.reliability == QosReliability.BEST_EFFORT for x in bag_offers):
-            reliability = ReliabilityPolicy.BEST_EFFORT
-        if all(x.durability == QosDurability.TRANSIENT_LOCAL for x in bag_offers):
-            durability = DurabilityPolicy.TRANSIENT_LOCAL
-        depth = max([depth] + [x.depth for x in bag_offers if x.history == QosHistory.KEEP_LAST])
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(1, int(depth)),
-                      reliability=reliability, durability=durability)
-
-
-# --- message definitions -------------------------------------------------------------------------
-
-_TYPESTORE: Any = None
-
-
-def _typestore() -> Any:
-    global _TYPESTORE
-    if _TYPESTORE is None:
-        from rosbags.typesys import Stores, get_typestore
-        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-    return _TYPESTORE
-
-
-def _interface_file(pkg: str, kind: str, name: str) -> Path | None:
-    dirs: list[Path] = []
-    try:
-        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-        try:
-            dirs.append(Path(get_package_share_directory(pkg)))
-        except (PackageNotFoundError, ValueError):
-            pass
-    except ImportError:
-        pass
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
-        if prefix:
-            dirs.append(Path(prefix, 'share', pkg))
-    for share in dirs:
-        candidate = share / kind / f'{name}.msg'
-        if candidate.is_file():
-            return candidate
-    return None
-
-
-def _register_from_ament_index(store: Any, msgtype: str) -> None:
-    from rosbags.interfaces import Nodetype
-    from rosbags.typesys import get_types_from_msg
-
-    found: dict[str, Any] = {}
-    pending = [msgtype]
-
-    def walk(desc: Any) -> None:
-        node, arg = desc
-        if node == Nodetype.NAME:
-            pending.append(arg)
-        elif node in (Nodetype.ARRAY, Nodetype.SEQUENCE):
-            walk(arg[0])
-
-    while pending:
-        name = pending.pop()
-        if name in store.fielddefs or name in found:
-            continue
-        pkg, kind, short = name.split('/')
-        path = _interface_file(pkg, kind, short)
-        if path is None:
-            raise BagError(
-                f"no message definition for '{name}': not a standard message and no "
-                f'share/{pkg}/{kind}/{short}.msg in the ament index (AMENT_PREFIX_PATH)')
-        try:
-            types = get_types_from_msg(path.read_text(encoding='utf8'), name)
-        except Exception as exc:  # rosbags raises its own parse errors
-            raise BagError(f"cannot parse {path}: {exc}") from None
-        found.update(types)
-        for _, desc in types[name][1]:
-            walk(desc)
-    store.register(found)
-
-
-def message_definition(msgtype: str) -> tuple[str, str]:
-    """``(definition text, RIHS01 hash)`` of a message type, as rosbag2 stores them.
-
-    Standard Jazzy messages come from the rosbags typestore; other types from their ``.msg``
-    files in the ament index.
-    """
-    try:
-        msgtype = normalize_msgtype(msgtype)
-    except MessageTypeError as exc:
-        raise BagError(str(exc)) from None
-    store = _typestore()
-    if msgtype not in store.fielddefs:
-        _register_from_ament_index(store, msgtype)
-    try:
-        msgdef, _ = store.generate_msgdef(msgtype, ros_version=2)
-        return msgdef, store.hash_rihs01(msgtype)
-    except Exception as exc:
-        raise BagError(f"cannot build the message definition of '{msgtype}': {exc}") from None
-
-
-# --- reading ------------------------------------------------------------------------------------
-
 class _TopicAcc:
+    """Per-topic totals gathered while a bag's files are opened."""
+
     def __init__(self, name: str, msgtype: str) -> None:
         self.name = name
         self.msgtype = msgtype
@@ -295,13 +70,6 @@ class _TopicAcc:
     def info(self) -> TopicInfo:
         return TopicInfo(self.name, self.msgtype, self.count, list(self.qos) or None,
                          self.msgdef, self.type_hash, self.fmt)
-
-
-def _canonical(msgtype: str) -> str:
-    try:
-        return normalize_msgtype(msgtype)
-    except MessageTypeError:
-        return msgtype
 
 
 class _RosbagsSource:
@@ -323,7 +91,8 @@ class _RosbagsSource:
         for conn in reader.connections:
             acc = self.topics.get(conn.topic)
             if acc is None:
-                acc = self.topics[conn.topic] = _TopicAcc(conn.topic, _canonical(conn.msgtype))
+                acc = self.topics[conn.topic] = _TopicAcc(conn.topic,
+                                                          canonical_msgtype(conn.msgtype))
             acc.count += conn.msgcount
             ext = conn.ext
             acc.qos.extend(getattr(ext, 'offered_qos_profiles', []) or [])
@@ -400,7 +169,7 @@ class _StreamSource:
         if rec.id in self.channels or rec.message_encoding != 'cdr':
             return  # not a ROS 2 message stream: nothing we can publish or decode
         schema = schemas.get(rec.schema_id)
-        msgtype = _canonical(schema.name) if schema is not None else ''
+        msgtype = canonical_msgtype(schema.name) if schema is not None else ''
         acc = self.topics.get(rec.topic)
         if acc is None:
             acc = self.topics[rec.topic] = _TopicAcc(rec.topic, msgtype)
@@ -408,10 +177,7 @@ class _StreamSource:
                 acc.msgdef = bytes(schema.data).decode('utf8', 'replace')
         text = (rec.metadata or {}).get('offered_qos_profiles')
         if text:
-            try:
-                acc.qos.extend(parse_qos(text))
-            except (ReaderError, KeyError, TypeError):
-                pass
+            acc.qos.extend(parse_qos_text(text))
         self.channels[rec.id] = (rec.topic, acc.msgtype)
 
     def messages(self, topics: set[str] | None, start: int | None,
@@ -669,162 +435,3 @@ class BagReader:
 
     def __repr__(self) -> str:
         return f'BagReader({str(self.path)!r}, {self.message_count} messages)'
-
-
-# --- writing ------------------------------------------------------------------------------------
-
-_BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.zstd', '.db3-shm', '.db3-wal', '.db3-journal')
-
-
-def _remove_old_bag(path: Path) -> None:
-    if path.is_file() or path.is_symlink():
-        if path.suffix in ('.mcap', '.db3'):
-            path.unlink()
-            return
-        raise BagError(f"'{path}' exists and is not a bag; refusing to overwrite it")
-    entries = list(path.iterdir())
-    foreign = [p.name for p in entries
-               if not (p.is_file() and (p.name in ('metadata.yaml', 'metadata.yaml.tmp')
-                                        or p.name.endswith(_BAG_FILE_SUFFIXES)))]
-    if foreign:
-        raise BagError(
-            f"'{path}' exists and holds non-bag files ({', '.join(sorted(foreign)[:3])}); "
-            'refusing to delete it')
-    shutil.rmtree(path)
-
-
-class BagWriter:
-    """Write a rosbag2 bag with MCAP storage (readable by ``ros2 bag``, Foxglove, rosbags).
-
-    Usage::
-
-        with BagWriter('out_bag') as bag:
-            bag.add_topic('/mocap/skeleton/urdf', 'std_msgs/msg/String', qos=transient_local)
-            bag.write('/mocap/skeleton/urdf', stamp_ns, cdr_bytes)
-            bag.write_msg('/mocap/world/odom', stamp_ns, odom_msg)   # serialises with rclpy
-
-    The bag is finished (summary and metadata.yaml written) when the ``with`` block ends, also
-    when it ends with an exception, so what was written is kept.
-    """
-
-    def __init__(self, path: str | os.PathLike[str], *, overwrite: bool = False,
-                 storage: str = 'mcap') -> None:
-        self.path = Path(path)
-        plugins = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
-        if storage not in plugins:
-            raise BagError(f"unknown storage '{storage}' (use one of: {', '.join(plugins)})")
-        if self.path.exists() or self.path.is_symlink():
-            if not overwrite:
-                raise BagError(f"output bag '{self.path}' already exists")
-            _remove_old_bag(self.path)
-        self._writer: Writer | None = Writer(self.path, version=Writer.VERSION_LATEST,
-                                             storage_plugin=plugins[storage])
-        try:
-            self._writer.open()
-        except (WriterError, OSError) as exc:
-            self._writer = None
-            raise BagError(f"cannot create bag '{self.path}': {exc}") from None
-        self._conns: dict[str, Any] = {}
-        self._types: dict[str, str] = {}
-        self.message_count = 0
-
-    @property
-    def topics(self) -> dict[str, str]:
-        """Topic name -> message type of the topics added so far."""
-        return dict(self._types)
-
-    def add_topic(self, topic: str, msgtype: str, qos: Any = None, *, msgdef: str | None = None,
-                  type_hash: str | None = None, serialization_format: str = 'cdr') -> None:
-        """Declare a topic. Adding the same topic again with the same type is a no-op.
-
-        Args:
-            topic: fully qualified name ('/x/y').
-            msgtype: 'pkg/msg/Name' (also 'pkg/Name').
-            qos: the publishers' offered QoS, stored in the metadata so that a player can
-                offer the same (e.g. transient-local): an rclpy ``QoSProfile``, a rosbags
-                ``Qos``, a rosbag2 metadata dict or YAML text, or a list of those.
-            msgdef, type_hash: the stored definition and RIHS01 hash, e.g. copied from
-                :class:`TopicInfo`; looked up from the type name when not given.
-        """
-        writer = self._require_open()
-        if not isinstance(topic, str) or not topic.startswith('/'):
-            raise BagError(f"topic name must be absolute (start with '/'), got {topic!r}")
-        try:
-            msgtype = normalize_msgtype(msgtype)
-        except MessageTypeError as exc:
-            raise BagError(str(exc)) from None
-        if topic in self._types:
-            if self._types[topic] != msgtype:
-                raise BagError(
-                    f"topic '{topic}' was added as {self._types[topic]}, not {msgtype}")
-            return
-        offered = _qos_list(qos)
-        if not msgdef or not type_hash:
-            try:
-                msgdef, type_hash = message_definition(msgtype)
-            except BagError:
-                if not msgdef or not type_hash:
-                    raise
-        try:
-            self._conns[topic] = writer.add_connection(
-                topic, msgtype, msgdef=msgdef, rihs01=type_hash,
-                serialization_format=serialization_format, offered_qos_profiles=offered)
-        except WriterError as exc:
-            raise BagError(f"cannot add topic '{topic}': {exc}") from None
-        self._types[topic] = msgtype
-
-    def write(self, topic: str, timestamp_ns: int, data: bytes | bytearray | memoryview) -> None:
-        """Append one serialised (CDR) message to an added topic."""
-        writer = self._require_open()
-        conn = self._conns.get(topic)
-        if conn is None:
-            raise BagError(f"topic '{topic}' was not added to bag '{self.path}' (add_topic first)")
-        if not isinstance(data, (bytes, bytearray, memoryview)):
-            raise BagError(
-                f"data for '{topic}' must be bytes, got {type(data).__name__} (use write_msg)")
-        timestamp_ns = int(timestamp_ns)
-        if not 0 <= timestamp_ns <= _MAX_TIME:
-            raise BagError(f'time stamp out of range: {timestamp_ns}')
-        writer.write(conn, timestamp_ns, bytes(data))
-        self.message_count += 1
-
-    def write_msg(self, topic: str, timestamp_ns: int, msg: Any, qos: Any = None) -> None:
-        """Serialise an rclpy message and append it; adds the topic on first use."""
-        if topic not in self._conns:
-            try:
-                self.add_topic(topic, msgtype_of(msg), qos)
-            except MessageTypeError as exc:
-                raise BagError(str(exc)) from None
-        self.write(topic, timestamp_ns, serialize(msg))
-
-    def _require_open(self) -> Writer:
-        if self._writer is None:
-            raise BagError(f"bag '{self.path}' is closed")
-        return self._writer
-
-    def close(self) -> None:
-        """Finish the bag (MCAP summary + metadata.yaml). Safe to call twice."""
-        writer, self._writer = self._writer, None
-        if writer is None:
-            return
-        try:
-            writer.close()
-        except Exception as exc:
-            try:
-                writer.abort()
-            except Exception:
-                pass
-            raise BagError(f"cannot finish bag '{self.path}': {exc}") from None
-
-    def __enter__(self) -> BagWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def __del__(self) -> None:
-        if getattr(self, '_writer', None) is not None:
-            try:
-                self.close()
-            except Exception:
-                pass

@@ -23,7 +23,7 @@ from mocap_core.rotations import quat_rotate
 from mocap_core.kinematics import forward_kinematics
 from mocap_core.skeleton import JOINT_INDEX, NUM_BONE_GROUPS, Skeleton
 
-from .features import lifter_features
+from ..features import lifter_features
 
 _LEG = [JOINT_INDEX['left_knee'], JOINT_INDEX['left_ankle']]
 

@@ -25,8 +25,8 @@ from mocap_core.data.motion import Motion
 from mocap_core.data.synth2d import Corruption
 from mocap_core.skeleton import JOINT_INDEX
 
+from ..model import MotioNet
 from . import metrics as M
-from .model import MotioNet
 from .samples import Augmentation, make_sample
 
 _FEET = [JOINT_INDEX[n] for n in ('left_ankle', 'left_toe', 'right_ankle', 'right_toe')]
@@ -88,7 +88,7 @@ def evaluate_tpmae(model, motions: Sequence[Motion], device: str = 'cpu',
     motion (the camera of :func:`evaluate`) is encoded and decoded window by window; the
     decoded rotations and root depth, with the true skeleton and root keypoint, give joint
     positions by FK. Returns frame-weighted MPJPE, PA-MPJPE and MRPE (mm)."""
-    from .vtm import motion_representation
+    from ..vtm import motion_representation
 
     aug = Augmentation(flip_prob=0.0, bone_scale=0.0, global_scale=0.0, corruption=None)
     rows: List[Dict] = []
@@ -168,10 +168,10 @@ def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.
     and measure jitter (mm/s^2), foot skating (mm per frame, camera frame, during predicted
     contact) and bone-length spread (mm)."""
     from mocap_core.camera import CameraIntrinsics
-    from mocap_keypoints.openpose import (OpenPoseError, infer_image_size,
+    from mocap_core.data.openpose import (OpenPoseError, infer_image_size,
                                           list_openpose_files, read_openpose_file)
 
-    from .features import lifter_features
+    from ..features import lifter_features
 
     rows = []
     for d in directories:
@@ -238,7 +238,8 @@ def write_report(results: Sequence[Dict], out_dir: Path, title: str,
         ref = real.get('groundtruth', {})
         lines += ['', f"## Real OpenPose sequences (no ground truth): {real['sequences']} "
                   f"sequences, {real['frames']} frames", '',
-                  '| sequence | frames | mean confidence | jitter (m/s²) | foot skating (mm/frame) '
+                  '| sequence | frames | mean confidence | jitter (m/s²) | '
+                  'foot skating (mm/frame) '
                   '| bone-length spread (mm) |', '|---|---|---|---|---|---|']
         total = {'sequence': 'all (frame-weighted)', 'frames': real['frames'],
                  'mean_confidence': float('nan'), **real['summary']}

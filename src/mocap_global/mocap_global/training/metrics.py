@@ -28,7 +28,7 @@ import numpy as np
 
 from mocap_core.rotations import matrix_to_axis_angle
 
-from .se3 import accumulate, align_yaw_translation
+from ..se3 import accumulate, align_yaw_translation
 
 #: Clips travelling less than this (m) are left out of RTE.
 RTE_MIN_DISTANCE_M = 1.0

@@ -1,4 +1,4 @@
-"""``mocap eval physics`` (and ``mocap train physics``; also ``python -m mocap_physics.cli``).
+"""``mocap eval physics`` and ``mocap train physics`` (``python -m mocap_physics.training.cli``).
 
     mocap eval physics [--bags B [B ...]] [--noise none|lifter|both] [--dataset-clips N]
                        [--max-frames F] [--seed S] [--out docs/benchmarks/physics_eval]
@@ -6,8 +6,9 @@
 
 Evaluation runs the physics cycle on ground-truth motion (the committed ``bags/gt_*`` bags in
 the camera frame, and clips of the dataset's validation split in the world frame), clean and
-with lifter-like noise, and writes a JSON + Markdown report (:mod:`mocap_physics.evaluate`).
-Training fits the DyNet gains (:mod:`mocap_physics.dynet`) on the train split.
+with lifter-like noise, and writes a JSON + Markdown report
+(:mod:`mocap_physics.training.evaluate`). Training fits the DyNet gains
+(:mod:`mocap_physics.dynet`, :mod:`mocap_physics.training.train_dynet`) on the train split.
 """
 
 from __future__ import annotations
@@ -16,13 +17,17 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import List, Optional
+from typing import TYPE_CHECKING, List, Optional
 
-REPO = Path(__file__).resolve().parents[3]
+if TYPE_CHECKING:
+    from .evaluate import EvalConfig
+
+REPO = Path(__file__).resolve().parents[4]
 DEFAULT_BAGS = ('gt_cmu_walk_12_02', 'gt_bandai_walk_exhausted', 'gt_bandai_wave_normal')
 
 
-def add_train_parser(sub) -> None:
+def add_train_parser(sub: argparse._SubParsersAction) -> None:
+    """Add ``physics`` to the subcommands of ``mocap train``."""
     p = sub.add_parser('physics', help='train the DyNet PD gains of the physics cycle')
     p.add_argument('--steps', type=int, default=None, help='optimiser steps (default: config)')
     p.add_argument('--run-dir', default='runs/physics_dynet',
@@ -34,7 +39,8 @@ def add_train_parser(sub) -> None:
     p.set_defaults(func=cmd_train)
 
 
-def add_eval_parser(sub) -> None:
+def add_eval_parser(sub: argparse._SubParsersAction) -> None:
+    """Add ``physics`` to the subcommands of ``mocap eval``."""
     p = sub.add_parser('physics', help='evaluate the physics cycle on ground-truth motion')
     p.add_argument('--bags', nargs='*', default=None,
                    help='ground-truth bags (default: the committed bags/gt_*)')
@@ -54,8 +60,8 @@ def add_eval_parser(sub) -> None:
     p.set_defaults(func=cmd_eval)
 
 
-def _configs(quick: bool, dynet: Optional[str]):
-    from .cycle import PhysicsParams
+def _configs(quick: bool, dynet: Optional[str]) -> List['EvalConfig']:
+    from ..cycle_params import PhysicsParams
     from .evaluate import EvalConfig
 
     cfgs = [EvalConfig('physics, true floor', PhysicsParams(), 'gt'),
@@ -122,13 +128,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from .dynet import main_train
+    from .train_dynet import main_train
     return main_train(args)
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     from mocap_core.cli.mocap import run_model_cli
-    return run_model_cli(sys.modules[__name__], 'python -m mocap_physics.cli', argv)
+    return run_model_cli(sys.modules[__name__], 'python -m mocap_physics.training.cli', argv)
 
 
 if __name__ == '__main__':

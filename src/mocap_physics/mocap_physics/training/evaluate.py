@@ -1,5 +1,10 @@
 """Evaluation of the physics cycle on ground-truth motion (no ROS graph; ``mocap eval physics``).
 
+Coordinates: ``Clip`` motions are in their source frame (camera optical frame for bags,
+``world`` for dataset clips; quaternions x, y, z, w, positions in m); the true world frame
+is z up, floor z = 0. Each clip runs through :class:`~mocap_physics.online.OnlinePhysics`,
+the streaming logic of the node, frame by frame.
+
 The cycle runs on ground-truth motion, clean or corrupted with lifter-like noise
 (:func:`lifter_noise`), and its output is compared with its input and with the ground truth.
 Sources of motion (:class:`Clip`):
@@ -39,21 +44,26 @@ import json
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import TYPE_CHECKING, Callable, Dict, List, Optional, Sequence, Union
 
 import numpy as np
 
+from mocap_core import topics
 from mocap_core.kinematics import forward_kinematics
 from mocap_core.pose import Pose
 from mocap_core.pose_metrics import procrustes_align
 from mocap_core.rotations import axis_angle_to_quat, quat_multiply, quat_to_matrix
 from mocap_core.skeleton import CONTACT_POINT_NAMES, Skeleton
 
-from .cycle import PhysicsCycle, PhysicsParams
-from .floor import FloorFrame, FloorTracker, FloorTrackerParams
+from ..cycle_params import PhysicsParams
+from ..floor import FloorFrame, FloorTracker, FloorTrackerParams
+from ..online import Notice, OnlinePhysics
 
-GT_TOPICS = ('/mocap/groundtruth/motion', '/mocap/groundtruth/contacts',
-             '/mocap/groundtruth/camera_pose')
+if TYPE_CHECKING:
+    from mocap_core.data.motion import Motion
+
+GT_TOPICS = (topics.GROUNDTRUTH_MOTION, topics.GROUNDTRUTH_CONTACTS,
+             topics.GROUNDTRUTH_CAMERA_POSE)
 
 
 @dataclass
@@ -98,7 +108,7 @@ class Clip:
         return Pose(self.skeleton, self.rotations[i], self.root_positions[i])
 
 
-def load_gt_bag(path) -> Clip:
+def load_gt_bag(path: Union[str, Path]) -> Clip:
     """A ground-truth bag (bags/README.md) as a :class:`Clip` in the camera frame."""
     from mocap_core.bag_io import BagReader, deserialize
     from mocap_core.ros_conversions import motion_to_pose, msg_to_contacts, stamp_to_ns
@@ -134,7 +144,7 @@ def load_gt_bag(path) -> Clip:
                 'camera')
 
 
-def dataset_clip(motion, max_frames: Optional[int] = None) -> Clip:
+def dataset_clip(motion: 'Motion', max_frames: Optional[int] = None) -> Clip:
     """A :class:`mocap_core.data.motion.Motion` (world frame) as a :class:`Clip`."""
     n = motion.num_frames if max_frames is None else min(motion.num_frames, max_frames)
     lab = np.asarray(motion.contacts[:n], dtype=bool)
@@ -227,11 +237,21 @@ class RunResult:
 
 def run_clip(clip: Clip, params: PhysicsParams, floor: str = 'gt',
              floor_params: Optional[FloorTrackerParams] = None) -> RunResult:
-    """Run the cycle over ``clip`` with the true floor (``gt``) or an estimated one."""
+    """Run the node's streaming logic (:class:`OnlinePhysics`) over ``clip`` frame by frame
+    with the true floor (``gt``: ``clip.to_world``) or one estimated from the feet
+    (``estimate``: a :class:`FloorTracker`, as the node's ``floor_source: estimate``).
+
+    Raises:
+        ValueError: an unknown ``floor``.
+        RuntimeError: a frame was dropped (the notice says why).
+    """
     if floor not in ('gt', 'estimate'):
         raise ValueError(f"floor must be 'gt' or 'estimate', got {floor!r}")
-    cyc = PhysicsCycle(clip.skeleton, replace(params))
-    tracker = FloorTracker(floor_params, clip.source_frame) if floor == 'estimate' else None
+    source = FloorTracker(floor_params, clip.source_frame) if floor == 'estimate' \
+        else clip.to_world
+    notices: List[Notice] = []
+    online = OnlinePhysics(replace(params), source, report=notices.append,
+                           skeleton=clip.skeleton)
     F, J = clip.rotations.shape[:2]
     out_rot = np.empty((F, J, 4))
     out_root = np.empty((F, 3))
@@ -242,27 +262,27 @@ def run_clip(clip: Clip, params: PhysicsParams, floor: str = 'gt',
     times = np.empty(F)
     frame = clip.to_world
     for i in range(F):
-        pose = clip.pose(i)
+        t = float(clip.stamps[i])
         t0 = time.perf_counter()
-        if tracker is not None:
-            new, changed = tracker.update(pose, clip.contacts[i])
-            if changed:
-                delta = new.compose(frame.inverse())
-                cyc.change_frame(delta.rotation, delta.translation)
-            frame = new
-        r = cyc.step(frame.transform_pose(pose), float(clip.stamps[i]), clip.contacts[i])
+        out = online.step(int(round(t * 1e9)), clip.pose(i), probabilities=clip.contacts[i],
+                          time_s=t)
         times[i] = time.perf_counter() - t0
+        if out is None:
+            why = next((n.text for n in reversed(notices) if n.dropped), 'dropped')
+            raise RuntimeError(f'{clip.name}: frame {i} dropped: {why}')
+        frame = out.floor
+        r = out.result
         world = clip.to_world.compose(frame.inverse()).transform_pose(r.pose)
         out_rot[i], out_root[i] = world.rotations, world.root_position
         heights[i] = r.contact_heights
         forces[i] = r.contact_forces
         resid[i] = r.residual_ratio
         any_force[i] = bool(r.contact_active.any())
-    st = cyc.stats
+    st = online.cycle.stats
     res = RunResult(out_rot, out_root, heights, forces, resid, any_force, times,
                     st.cone_violations, st.fallbacks, st.grf_failures,
                     st.penetration_failures, st.stick_failures, st.frame_changes)
-    if tracker is not None:
+    if online.tracker is not None:
         est = clip.to_world.compose(frame.inverse())   # estimated floor frame -> world
         n_est = est.rotation[:, 2]                      # its z axis in world
         res.floor_error_deg = float(np.degrees(np.arccos(np.clip(n_est[2], -1, 1))))
@@ -411,7 +431,7 @@ class EvalConfig:
 
 
 def evaluate(clips: Sequence[Clip], configs: Sequence[EvalConfig], noises: Sequence[str],
-             seed: int = 0, log=print) -> List[dict]:
+             seed: int = 0, log: Optional[Callable[[str], None]] = print) -> List[dict]:
     """Every configuration x noise over every clip; one summary dict per pair."""
     results = []
     groups = list(dict.fromkeys(c.group for c in clips))
@@ -436,7 +456,7 @@ def evaluate(clips: Sequence[Clip], configs: Sequence[EvalConfig], noises: Seque
     return results
 
 
-def _log_line(log, s: dict) -> None:
+def _log_line(log: Callable[[str], None], s: dict) -> None:
     o, i, noise, cfg = s['output'], s['input'], s['noise'], s['config']
     log(f"{noise:6s} {s['group'][:5]:5s} {cfg[:22]:22s} pen max {i['penetration_max_mm']:6.1f}"
         f" -> {o['penetration_max_mm']:5.1f} mm  skate {i['skating_mean_mm']:5.2f} -> "
@@ -483,7 +503,7 @@ _READING = '''## How to read this
 
 All metrics are measured in the true world frame (floor z = 0) against the ground truth,
 for the input (the kinematic target fed to the cycle) and for each configuration's output
-(`mocap_physics.evaluate` documents each). "physics" is the default node configuration
+(`mocap_physics.training.evaluate` documents each). "physics" is the default node configuration
 (foot stick on, penetration QP metric diag(M), root gains 400/40, joint gains 3600/120).
 "true floor": the cycle is given the true floor; "est. floor": the node's default, the floor
 is estimated online from the input's feet in the camera frame (`FloorTracker`), so the

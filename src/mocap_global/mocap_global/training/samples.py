@@ -11,11 +11,12 @@ Augmentations (:class:`Augmentation`):
   of the reversed sequence being the inverted motions in reverse order;
 * beyond the paper: left/right mirroring (the skeleton is symmetric), a global body scale
   (bone lengths and trajectory together), and lifter-like noise on the input local pose and
-  bone lengths (:func:`~.features.noisy_local_pose`) for robustness to estimated poses.
+  bone lengths (:func:`mocap_global.features.noisy_local_pose`) for robustness to estimated
+  poses.
 
-Targets: ``dR`` (T-1, 3, 3), ``dT`` (T-1, 3) global motions (:mod:`.se3`), ``up`` (T, 3) the
-world's up direction in the root frame, ``joints`` (T, J, 3) joint positions in the root frame
-(for the joint-motion loss).
+Targets: ``dR`` (T-1, 3, 3), ``dT`` (T-1, 3) global motions (:mod:`mocap_global.se3`),
+``up`` (T, 3) the world's up direction in the root frame, ``joints`` (T, J, 3) joint positions
+in the root frame (for the joint-motion loss).
 """
 
 from __future__ import annotations
@@ -29,8 +30,8 @@ from mocap_core.data.motion import Motion
 from mocap_core.rotations import quat_to_matrix
 from mocap_core.skeleton import NUM_JOINTS
 
-from . import features as F
-from .se3 import relative_motion, up_in_body
+from .. import features as F
+from ..se3 import relative_motion, up_in_body
 
 
 @dataclass

@@ -12,10 +12,9 @@ Loss (§3.4 eq. 5, supplementary S3 eq. 10, 12-14), per valid motion i -> i + 1 
 with ``p`` the joint positions of the pipeline skeleton's FK in the root frame (in place of the
 SMPL mesh offsets of the paper; the ground-truth local pose is used for both sides, so the
 term measures the global motion only). Lengths enter the losses in centimetres
-(``length_unit``), and the weights are set for these units: the paper's 1 : 1 : 1 : 0.01 is for
-SMPL sums over 6890 vertices; here w_ori = 1000 puts a 0.5 deg orientation error on the
-scale of a few millimetres of joint motion, and w_smooth = w_ori / 100 keeps the paper's
-smoothness-to-orientation ratio. Terms are means over valid frames (padding is masked).
+(``length_unit`` = 0.01 m) and rotations as matrices; the default weights (:class:`TrainConfig`)
+are chosen for these units (``docs/global.md``). Terms are means over valid frames (padding is
+masked).
 
 Optimisation: Adam (§4.1), cosine learning-rate decay, gradient clipping. Checkpoints
 (``last.pt``: model, optimiser, step, sampler state, elapsed time) make training resumable;
@@ -39,9 +38,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from mocap_core.checkpoint import load_checkpoint
 from mocap_core.data.motion import Motion
 
-from .model import GMR, GMRConfig, save_weights
+from ..model import GMR, GMRConfig
+from ..weights import save_weights
 from .samples import Augmentation, WindowSampler
 
 
@@ -183,7 +184,7 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     ckpt = run_dir / 'last.pt'
     calibrate = minutes is not None
     if resume and ckpt.exists():
-        state = torch.load(ckpt, map_location=device, weights_only=False)
+        state = load_checkpoint(ckpt, device, required=('model', 'optimizer', 'step'))
         model.load_state_dict(state['model'])
         opt.load_state_dict(state['optimizer'])
         step, elapsed = state['step'], state.get('elapsed', 0.0)

@@ -10,9 +10,9 @@ Stage ``tpve`` (§3.3): the two-part visual encoder trained jointly with the pre
 alignment (smooth L1 between visual and motion latents), bone ratios, prediction and
 smoothness of the motion decoded from the visual latents, and the TPMAE loss.
 
-Both stages add (beyond the paper, weights in :class:`VTMTrainConfig`): heel/toe contacts
-(BCE; the physics stage needs them) and the root-relative joint positions of the FK layer
-(metres, on the true skeleton), which ties the decoded rotations to the positions.
+Both stages add two terms not in the paper (weights in :class:`VTMTrainConfig`): heel/toe
+contacts (BCE) and the mean error of the root-relative joint positions of the FK layer
+(metres, on the true skeleton).
 
 Training windows are the MotioNet ones (:mod:`.samples`: flip, bone-length and camera
 augmentation, the confidence/displacement corruption fitted on real detections, a share of
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -34,12 +33,14 @@ import numpy as np
 import torch
 from torch import nn
 
+from mocap_core.checkpoint import load_checkpoint
 from mocap_core.data.motion import Motion
 from mocap_core.skeleton import END_EFFECTORS, NUM_JOINTS
 
+from ..vtm import ROOT_OUT_CHANNELS, VTM, VTMConfig, keypoint_parts, motion_representation
+from ..weights import load_vtm, plain_data, save_vtm
+from .common import cosine_lr, plot_log, to_torch
 from .samples import Augmentation, WindowSampler
-from .train import half_state, load_half_state, plot_log, to_torch
-from .vtm import ROOT_OUT_CHANNELS, VTM, VTMConfig, keypoint_parts, motion_representation
 
 F = nn.functional
 
@@ -192,7 +193,7 @@ def train_stage(train_motions: Sequence[Motion], val_motions: Sequence[Motion], 
     step = 0
     ckpt = run_dir / 'last.pt'
     if resume and ckpt.exists():
-        state = torch.load(ckpt, map_location=device, weights_only=False)
+        state = load_checkpoint(ckpt, map_location=device, required=('model', 'step', 'config'))
         cfg = VTMTrainConfig.from_dict(state['config'])
         model = VTM(cfg.model).to(device)
         model.load_state_dict(state['model'])
@@ -224,8 +225,7 @@ def train_stage(train_motions: Sequence[Motion], val_motions: Sequence[Motion], 
     t0 = time.time()
     bar = tqdm(total=cfg.steps, initial=step, disable=not progress, desc=f'train vtm {cfg.stage}')
     while step < cfg.steps:
-        lr = cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1 + math.cos(math.pi * step /
-                                                                           cfg.steps))
+        lr = cosine_lr(step, cfg.steps, cfg.lr, cfg.lr_final)
         for g in opt.param_groups:
             g['lr'] = lr
         model.train()
@@ -248,7 +248,8 @@ def train_stage(train_motions: Sequence[Motion], val_motions: Sequence[Motion], 
             plot_log(log_path, run_dir / 'loss.png')
         if step % cfg.checkpoint_every == 0 or step == cfg.steps:
             torch.save({'model': model.state_dict(), 'optimizer': opt.state_dict(),
-                        'step': step, 'config': asdict(cfg)}, ckpt.with_suffix('.tmp'))
+                        'step': step, 'config': plain_data(asdict(cfg))},
+                       ckpt.with_suffix('.tmp'))
             ckpt.with_suffix('.tmp').replace(ckpt)
     bar.close()
     log.close()
@@ -280,20 +281,3 @@ def validate(model: VTM, batches, cfg: VTMTrainConfig, weights, device: str,
         for k, v in stage_losses(model, gt, cfg, weights).items():
             acc[k] = acc.get(k, 0.0) + float(v) / len(batches)
     return acc
-
-
-def save_vtm(model: VTM, path: Path, info: Optional[Dict] = None) -> None:
-    """Inference weights (float16 tensors) + configuration + ``arch: 'vtm'``."""
-    torch.save({'arch': 'vtm', 'model': half_state(model), 'config': asdict(model.cfg),
-                'info': info or {}}, path)
-
-
-def load_vtm(path: Path, device: str = 'cpu') -> VTM:
-    """Load weights written by :func:`save_vtm` (eval mode)."""
-    state = torch.load(path, map_location=device, weights_only=False)
-    if state.get('arch') != 'vtm':
-        raise ValueError(f'{path} holds no VTM weights (arch {state.get("arch", "motionet")!r})')
-    model = VTM(VTMConfig(**state['config'])).to(device)
-    load_half_state(model, state['model'])
-    model.eval()
-    return model

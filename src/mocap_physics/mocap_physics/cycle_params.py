@@ -1,0 +1,101 @@
+"""Parameters of the dynamic cycle (no ROS imports, no simulation).
+
+:class:`PhysicsParams` holds every setting of :class:`~mocap_physics.cycle.PhysicsCycle`; the
+node exposes most of them as ROS parameters. Units: SI (kg, m, s, N). Gains are per-DoF
+*accelerations* per unit error, multiplied by the joint-space inertia M(q) in the cycle::
+
+    tau = M(q) (kp o d(q_hat, q) - kd o qdot) + alpha + h(q, qdot)
+
+so ``kp`` is in s^-2 and ``kd`` in s^-1 for every DoF (root translation, root rotation and
+ball joints alike). The choice of the defaults is explained in ``docs/physics.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Tuple
+
+import numpy as np
+
+#: Values of ``penetration_metric``: the metric of the velocity QP (eq. 15).
+PENETRATION_METRICS = ('diagonal', 'identity', 'mass')
+#: Values of ``gains_mode``.
+GAINS_MODES = ('fixed', 'learned')
+
+
+@dataclass
+class PhysicsParams:
+    """Parameters of the dynamic cycle (the node exposes each as a ROS parameter).
+
+    Gains are accelerations per unit error (module docstring): kp in s^-2, kd in s^-1.
+    """
+
+    body_mass: float = 70.0               # kg
+    substeps: int = 6                     # k of the paper
+    frame_period: float = 1.0 / 30.0      # s, used when frames carry no stamps
+    max_substep: float = 1.0 / 120.0      # s; longer frames get more sub-steps
+    kp_root: float = 400.0                # root translation and orientation, s^-2
+    kd_root: float = 40.0                 # s^-1
+    kp_joint: float = 3600.0              # ball joints, s^-2
+    kd_joint: float = 120.0               # s^-1
+    velocity_feedforward: bool = False    # kd o (qdot_hat - qdot) instead of -kd o qdot
+    friction: float = 0.8                 # mu (eq. 9)
+    contact_probability_threshold: float = 0.5
+    contact_height: float = 0.03          # m: a contact point must be this close to the floor
+    grf_smoothness: float = 0.1           # w_s of eq. 11 relative to eq. 8
+    grf_moment_weight: float = 1.0        # w_m: root moment rows of eq. 8 vs force rows
+    root_residual: float = 1.0            # 1: paper (residual root actuation kept), 0: none
+    penetration_metric: str = 'diagonal'  # 'diagonal' (diag M), 'identity' (paper), 'mass' (M)
+    recovery_speed: float = 0.5           # m/s: max upward speed that undoes a penetration
+    max_frame_gap: float = 0.25           # s: a longer gap (or stamps going back) re-initialises
+    max_speed: float = 200.0              # any |qdot| entry above it counts as a blow-up
+    skeleton_tolerance: float = 0.005     # m: bone offsets changing less keep the model
+    gains_mode: str = 'fixed'             # 'fixed' or 'learned' (DyNet, dynet_weights)
+    dynet_weights: str = ''               # DyNet weights file (mocap train physics)
+    foot_stick: bool = True               # hold contact points in contact at their anchor
+    stick_gain: float = 10.0              # 1/s: horizontal velocity = gain * (anchor - p)
+    stick_speed: float = 0.2              # m/s: cap of that velocity
+    stick_release: float = 0.05           # m: the anchor stays this close to the target
+
+    def validate(self) -> None:
+        """Raise ValueError naming every bad value."""
+        bad: List[str] = []
+        if not (np.isfinite(self.body_mass) and self.body_mass > 0):
+            bad.append(f'body_mass={self.body_mass} (must be > 0)')
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            bad.append(f'substeps={self.substeps} (integer >= 1)')
+        for name in ('frame_period', 'max_substep', 'max_frame_gap', 'friction',
+                     'contact_height', 'recovery_speed', 'max_speed', 'skeleton_tolerance',
+                     'stick_gain', 'stick_speed', 'stick_release'):
+            val = getattr(self, name)
+            if not (np.isfinite(val) and val > 0):
+                bad.append(f'{name}={val} (must be > 0)')
+        for name in ('kp_root', 'kd_root', 'kp_joint', 'kd_joint', 'grf_smoothness'):
+            val = getattr(self, name)
+            if not (np.isfinite(val) and val >= 0):
+                bad.append(f'{name}={val} (must be >= 0)')
+        if not 0.0 <= self.contact_probability_threshold <= 1.0:
+            bad.append(f'contact_probability_threshold={self.contact_probability_threshold}')
+        if not 0.0 <= self.root_residual <= 1.0:
+            bad.append(f'root_residual={self.root_residual} (in [0, 1])')
+        if self.gains_mode not in GAINS_MODES:
+            bad.append(f"gains_mode={self.gains_mode!r} ('fixed' or 'learned')")
+        elif self.gains_mode == 'learned' and not self.dynet_weights:
+            bad.append('gains_mode learned needs dynet_weights (a file from mocap train '
+                       'physics)')
+        if self.penetration_metric not in PENETRATION_METRICS:
+            bad.append(f'penetration_metric={self.penetration_metric!r} '
+                       '(mass | diagonal | identity)')
+        if bad:
+            raise ValueError('bad physics parameters: ' + '; '.join(bad))
+
+    def gains(self, nv: int) -> Tuple[np.ndarray, np.ndarray]:
+        """Per-DoF (kp, kd) vectors of length nv (root first: 3 translation, 3 rotation)."""
+        kp = np.full(nv, float(self.kp_joint))
+        kd = np.full(nv, float(self.kd_joint))
+        kp[:6] = self.kp_root
+        kd[:6] = self.kd_root
+        return kp, kd
+
+
+__all__ = ['PhysicsParams', 'PENETRATION_METRICS', 'GAINS_MODES']
