@@ -10,8 +10,9 @@ physics-corrected frames in a floor frame (z up, floor z = 0), one person:
    contacts stamped more than 1 s after the new stamp are forgotten, and the cycle
    re-initialises at the time jump.
 2. **Contacts by stamp** (:meth:`OnlinePhysics.process`): a waiting motion frame takes the
-   contacts with exactly its stamp. Without them, while a contacts publisher exists
-   (``contacts_expected()``) and no newer contacts arrived, it waits up to
+   contacts with exactly its stamp. Without them, while contacts are expected (a contacts
+   publisher exists, ``contacts_expected()``, or contacts already arrived) and no newer
+   contacts arrived, it waits up to
    ``contacts_wait_s`` (wall clock, ``clock()``); then it takes the newest older contacts if
    at most ``contacts_max_age_s`` older (stamp time), else none (contact from the kinematics
    only). Frames leave in stamp order.
@@ -202,7 +203,11 @@ class OnlinePhysics:
         """(ready, probabilities) for a motion frame that has waited ``waited`` s."""
         if stamp in self.contacts:
             return True, self.contacts[stamp]
-        expecting = self.contacts_expected is not None and self.contacts_expected()
+        # contacts are expected while a publisher exists, and also once some have arrived:
+        # a publisher that has just gone (a bag player at its end) may still have messages
+        # waiting in this node's queue behind the motion it is catching up on
+        expecting = self.contacts_expected is not None and (
+            bool(self.contacts) or self.contacts_expected())
         if expecting and waited < self.contacts_wait_s and \
                 not any(s > stamp for s in self.contacts):
             return False, None

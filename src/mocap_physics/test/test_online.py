@@ -142,6 +142,28 @@ def test_contacts_matched_by_stamp_wait_and_age():
     assert not any(n.dropped for n in notices)
 
 
+def test_contacts_still_expected_after_their_publisher_left():
+    """A lagging node: the contacts publisher (a bag player at its end) is gone, but its
+    messages still wait in the queue behind the motion. Once contacts have arrived, a frame
+    waits for its own instead of silently taking the previous frame's."""
+    rest = Pose.rest(Skeleton.default())
+    publisher = {'up': True}
+    online, clock, notices, calls = _streaming(contacts_expected=lambda: publisher['up'],
+                                               contacts_wait_s=0.05)
+    a = np.array([1.0, 1.0, 0.0, 0.0])
+    b = np.array([0.0, 0.0, 1.0, 1.0])
+    online.add_contacts(T0, a)
+    assert [f.stamp_ns for f in online.add_motion(T0, rest)] == [T0]
+    publisher['up'] = False
+    assert online.add_motion(T0 + DT, rest) == []           # waits for its own contacts
+    assert [f.stamp_ns for f in online.add_contacts(T0 + DT, b)] == [T0 + DT]
+    np.testing.assert_array_equal(calls[-1][1], b)
+    assert online.add_motion(T0 + 2 * DT, rest) == []       # none come: waits, then the
+    clock.now += 0.06                                       # newest older ones
+    assert [f.stamp_ns for f in online.process()] == [T0 + 2 * DT]
+    np.testing.assert_array_equal(calls[-1][1], b)
+
+
 def test_without_a_contacts_input_nothing_waits():
     rest = Pose.rest(Skeleton.default())
     online, clock, notices, calls = _streaming()
