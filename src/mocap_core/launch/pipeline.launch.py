@@ -17,13 +17,10 @@ from launch.conditions import IfCondition, UnlessCondition
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 
+from mocap_core import topics
+
 #: Every topic of the pipeline (docs/design.md §2), for ``record:=true``.
-TOPICS = ['/mocap/keypoints2d', '/mocap/camera_info', '/mocap/skeleton/urdf', '/diagnostics',
-          '/mocap/lifter/contacts', '/mocap/physics/grf/left', '/mocap/physics/grf/right',
-          '/mocap/physics/com', '/mocap/physics/floor', '/mocap/world/odom',
-          '/mocap/world/path'] + [f'/mocap/{stage}/{leaf}' for stage in ('lifter', 'physics',
-                                                                          'world')
-                                  for leaf in ('motion', 'joints3d', 'joint_states', 'markers')]
+TOPICS = topics.ALL
 
 
 def generate_launch_description() -> LaunchDescription:

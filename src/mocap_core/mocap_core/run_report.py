@@ -21,6 +21,7 @@ from typing import Any, Callable, Dict, List, Optional
 import numpy as np
 
 from . import pose_metrics as M
+from . import topics as T
 from .skeleton import CONTACT_POINT_NAMES, NUM_JOINTS
 
 STAGES = ('lifter', 'physics', 'world')
@@ -94,16 +95,16 @@ def load_run(bag: Path | str) -> PipelineRun:
         return {s.name: {kv.key: kv.value for kv in s.values} for s in msg.status}
 
     wanted: Dict[str, Callable[[Any], Any]] = {
-        '/mocap/keypoints2d': stamped(lambda m: rc.cloud_to_keypoints(m)[0]),
-        '/mocap/lifter/contacts': stamped(rc.msg_to_contacts),
-        '/mocap/physics/grf/left': stamped(lambda m: rc.msg_to_wrench(m)[0]),
-        '/mocap/physics/grf/right': stamped(lambda m: rc.msg_to_wrench(m)[0]),
-        '/mocap/physics/joint_states': stamped(lambda m: (list(m.name), np.array(m.effort))),
-        '/mocap/physics/floor': stamped(floor_entry),
-        '/mocap/skeleton/urdf': lambda m: m.data,
-        '/mocap/groundtruth/joints3d': stamped(lambda m: rc.cloud_to_positions(m, NUM_JOINTS)),
-        '/mocap/groundtruth/contacts': stamped(rc.msg_to_contacts),
-        '/diagnostics': diag_entry,
+        T.KEYPOINTS: stamped(lambda m: rc.cloud_to_keypoints(m)[0]),
+        T.LIFTER_CONTACTS: stamped(rc.msg_to_contacts),
+        T.PHYSICS_GRF_LEFT: stamped(lambda m: rc.msg_to_wrench(m)[0]),
+        T.PHYSICS_GRF_RIGHT: stamped(lambda m: rc.msg_to_wrench(m)[0]),
+        T.PHYSICS_JOINT_STATES: stamped(lambda m: (list(m.name), np.array(m.effort))),
+        T.PHYSICS_FLOOR: stamped(floor_entry),
+        T.SKELETON_URDF: lambda m: m.data,
+        T.GROUNDTRUTH_JOINTS3D: stamped(lambda m: rc.cloud_to_positions(m, NUM_JOINTS)),
+        T.GROUNDTRUTH_CONTACTS: stamped(rc.msg_to_contacts),
+        T.DIAGNOSTICS: diag_entry,
     }
     for stage in STAGES:
         wanted[f'/mocap/{stage}/motion'] = stamped(pose_entry)
@@ -113,7 +114,7 @@ def load_run(bag: Path | str) -> PipelineRun:
         entries = sorted(entries, key=lambda e: e[0])
         return np.array([e[0] for e in entries], dtype=np.int64), [e[1] for e in entries]
 
-    st, kp = arrays(raw['/mocap/keypoints2d'])
+    st, kp = arrays(raw[T.KEYPOINTS])
     run = PipelineRun(st, np.stack(kp) if kp else np.zeros((0, 23, 3)))
     for stage in STAGES:
         entries = sorted(raw[f'/mocap/{stage}/motion'], key=lambda e: e[0])
@@ -124,28 +125,28 @@ def load_run(bag: Path | str) -> PipelineRun:
             np.stack([e[1][0] for e in entries]), np.stack([e[1][1] for e in entries]),
             np.stack([e[1][2] for e in entries]), np.stack([e[1][3] for e in entries]),
             entries[-1][2])
-    if raw['/mocap/lifter/contacts']:
-        run.contacts = np.stack(arrays(raw['/mocap/lifter/contacts'])[1])
-    left, right = raw['/mocap/physics/grf/left'], raw['/mocap/physics/grf/right']
+    if raw[T.LIFTER_CONTACTS]:
+        run.contacts = np.stack(arrays(raw[T.LIFTER_CONTACTS])[1])
+    left, right = raw[T.PHYSICS_GRF_LEFT], raw[T.PHYSICS_GRF_RIGHT]
     if left and len(left) == len(right):
         run.grf = np.stack([np.stack(arrays(left)[1]), np.stack(arrays(right)[1])], axis=1)
-    if raw['/mocap/physics/joint_states']:
-        values = arrays(raw['/mocap/physics/joint_states'])[1]
+    if raw[T.PHYSICS_JOINT_STATES]:
+        values = arrays(raw[T.PHYSICS_JOINT_STATES])[1]
         run.effort_names = values[-1][0]
         if all(len(v[1]) == len(run.effort_names) for v in values):
             run.efforts = np.stack([v[1] for v in values])
-    if raw['/mocap/physics/floor']:
-        values = arrays(raw['/mocap/physics/floor'])[1]
+    if raw[T.PHYSICS_FLOOR]:
+        values = arrays(raw[T.PHYSICS_FLOOR])[1]
         run.floor_rotation = np.stack([v[0] for v in values])
         run.floor_translation = np.stack([v[1] for v in values])
-    if raw['/mocap/skeleton/urdf']:
-        run.body_mass = _urdf_mass(raw['/mocap/skeleton/urdf'][-1])
-    if raw['/mocap/groundtruth/joints3d']:
-        run.gt_stamps, gt = arrays(raw['/mocap/groundtruth/joints3d'])
+    if raw[T.SKELETON_URDF]:
+        run.body_mass = _urdf_mass(raw[T.SKELETON_URDF][-1])
+    if raw[T.GROUNDTRUTH_JOINTS3D]:
+        run.gt_stamps, gt = arrays(raw[T.GROUNDTRUTH_JOINTS3D])
         run.gt_joints = np.stack(gt)
-    if raw['/mocap/groundtruth/contacts']:
-        run.gt_contacts = np.stack(arrays(raw['/mocap/groundtruth/contacts'])[1])
-    for d in raw['/diagnostics']:
+    if raw[T.GROUNDTRUTH_CONTACTS]:
+        run.gt_contacts = np.stack(arrays(raw[T.GROUNDTRUTH_CONTACTS])[1])
+    for d in raw[T.DIAGNOSTICS]:
         run.diagnostics.update(d)
     return run
 

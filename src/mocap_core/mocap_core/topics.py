@@ -70,3 +70,9 @@ WORLD_MOTION = stage_topic('world', 'motion')
 WORLD_JOINTS3D = stage_topic('world', 'joints3d')
 WORLD_JOINT_STATES = stage_topic('world', 'joint_states')
 WORLD_MARKERS = stage_topic('world', 'markers')
+
+#: Every output topic of the pipeline (what ``record:=true`` of the launch file records).
+ALL = [KEYPOINTS, CAMERA_INFO, SKELETON_URDF, DIAGNOSTICS, LIFTER_CONTACTS, PHYSICS_GRF_LEFT,
+       PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH] + [
+    stage_topic(stage, leaf) for stage in STAGES
+    for leaf in ('motion', 'joints3d', 'joint_states', 'markers')]

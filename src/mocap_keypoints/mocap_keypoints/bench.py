@@ -33,6 +33,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from mocap_core import topics
+
 ROOT = Path(__file__).resolve().parents[3]
 CLIP = ROOT / 'data' / 'video_example' / 'taiji_640x360.mp4'
 WIDTH, HEIGHT = 640, 480
@@ -110,12 +112,12 @@ class _Observer:
         self.arrivals: List[tuple] = []
         self.diag: Dict[str, str] = {}
         self.node.create_subscription(
-            PointCloud2, '/mocap/keypoints2d',
+            PointCloud2, topics.KEYPOINTS,
             lambda m: self.arrivals.append((time.time_ns(), m.header.stamp.sec * 10**9
                                             + m.header.stamp.nanosec)),
             QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT))
-        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
-        self.pub = self.node.create_publisher(Image, '/camera/image_raw', 2)
+        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, 10)
+        self.pub = self.node.create_publisher(Image, topics.IMAGE, 2)
 
     def _on_diag(self, msg) -> None:
         for st in msg.status:

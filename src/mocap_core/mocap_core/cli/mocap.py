@@ -26,6 +26,8 @@ from typing import Callable, Dict, List, Optional
 
 import numpy as np
 
+from .. import topics
+
 def validator_for(topic: str, msgtype: str) -> Optional[Callable]:
     """The converter that parses a message of a pipeline topic (raises on a bad message), or
     None for topics this project does not define."""
@@ -294,13 +296,13 @@ def build_parser() -> argparse.ArgumentParser:
                              'confidence over time')
     pk.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
     pk.add_argument('-o', '--output', default='keypoints.png', help='output PNG')
-    pk.add_argument('--topic', default='/mocap/keypoints2d', help='keypoint topic')
+    pk.add_argument('--topic', default=topics.KEYPOINTS, help='keypoint topic')
     pk.set_defaults(func=cmd_plot_keypoints)
     pm = plot_sub.add_parser('motion', help='3D skeleton of a motion topic, front and side '
                              'views at a few frames')
     pm.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
     pm.add_argument('-o', '--output', default='motion.png', help='output PNG')
-    pm.add_argument('--topic', default='/mocap/lifter/motion', help='motion topic')
+    pm.add_argument('--topic', default=topics.LIFTER_MOTION, help='motion topic')
     pm.add_argument('--frame', choices=('camera', 'world'), default='camera',
                     help="the topic's frame: camera optical frame or z-up world")
     pm.set_defaults(func=cmd_plot_motion)
@@ -334,7 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
     pb = export_sub.add_parser('bvh', help='a motion topic of a bag as a BVH file (y up, cm)')
     pb.add_argument('bag', help='rosbag2 folder (MCAP) or .mcap file')
     pb.add_argument('-o', '--output', default='motion.bvh', help='output BVH file')
-    pb.add_argument('--topic', default='/mocap/lifter/motion', help='motion topic')
+    pb.add_argument('--topic', default=topics.LIFTER_MOTION, help='motion topic')
     pb.add_argument('--frame', choices=('camera', 'world'), default='camera',
                     help="the topic's frame: camera optical frame or z-up world")
     pb.add_argument('--fps', type=float, help='frame rate (default: from the stamps)')

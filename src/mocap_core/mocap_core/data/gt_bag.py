@@ -53,6 +53,7 @@ import numpy as np
 from ..camera import CameraIntrinsics
 from ..kinematics import forward_kinematics
 from ..rotations import matrix_to_quat, quat_rotate
+from .. import topics as T
 from .motion import Motion
 from .synth2d import (CameraSampling, ConfidenceModel, Corruption, VirtualCamera,
                       corrupt_keypoints, keypoints_3d, motion_to_camera, project,
@@ -70,13 +71,13 @@ WORLD_FRAME = 'world'
 DEFAULT_START_NS = 1_700_000_000 * 1_000_000_000
 
 GT_TOPICS: Dict[str, str] = {
-    'camera_info': '/mocap/camera_info',
-    'keypoints': '/mocap/keypoints2d',
-    'motion': '/mocap/groundtruth/motion',
-    'joints3d': '/mocap/groundtruth/joints3d',
-    'contacts': '/mocap/groundtruth/contacts',
-    'world_motion': '/mocap/groundtruth/world_motion',
-    'camera_pose': '/mocap/groundtruth/camera_pose',
+    'camera_info': T.CAMERA_INFO,
+    'keypoints': T.KEYPOINTS,
+    'motion': T.GROUNDTRUTH_MOTION,
+    'joints3d': T.GROUNDTRUTH_JOINTS3D,
+    'contacts': T.GROUNDTRUTH_CONTACTS,
+    'world_motion': T.GROUNDTRUTH_WORLD_MOTION,
+    'camera_pose': T.GROUNDTRUTH_CAMERA_POSE,
 }
 
 
