@@ -50,7 +50,7 @@ def run(model, poses, stamps, lookahead: int, window: Optional[int], fusion: boo
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap = argparse.ArgumentParser(prog='mocap bench gmr', description=__doc__.split('\n\n')[0])
     ap.add_argument('--weights', type=Path, help='weights (default: the shipped gmr.pt)')
     ap.add_argument('--bag', type=Path, default=BAG)
     ap.add_argument('--repeat', type=int, default=3, help='times the bag is replayed')

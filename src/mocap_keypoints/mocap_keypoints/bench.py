@@ -365,7 +365,8 @@ def summarise(results: Dict) -> str:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+    ap = argparse.ArgumentParser(prog='mocap bench keypoints',
+                                 description=__doc__.split('\n\n')[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--frames', type=int, default=200, help='frames per detector run')
     ap.add_argument('--seconds', type=float, default=10.0, help='length of each stream')

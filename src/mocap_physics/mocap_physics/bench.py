@@ -48,7 +48,7 @@ def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap = argparse.ArgumentParser(prog='mocap bench physics', description=__doc__.split('\n')[0])
     ap.add_argument('--frames', type=int, default=600)
     ap.add_argument('--fps', type=float, default=30.0)
     ap.add_argument('--substeps', type=int, default=6)
