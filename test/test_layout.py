@@ -158,7 +158,8 @@ def test_node_packages_do_not_import_each_other_at_runtime():
 TRAINING_MODULES = ('mocap_core.data.dataset', 'mocap_core.data.splits',
                     'mocap_core.data.retarget', 'mocap_core.data.synth2d', 'mocap_core.data.bvh',
                     'mocap_core.data.bvh_synth', 'mocap_core.data.gt_bag', 'mocap_core.plots',
-                    'mocap_core.demo_render', 'mocap_core.run_report', 'mocap_core.cli')
+                    'mocap_core.demo_render', 'mocap_core.run_report', 'mocap_core.cli',
+                    'mocap_core.testing')
 
 START_NODE = '''
 import json, sys

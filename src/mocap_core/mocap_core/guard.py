@@ -16,7 +16,8 @@ Usage in a node::
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable, Optional
+import time
+from typing import Any, Callable, Dict, Optional
 
 #: Seconds between two logged failures of one node (the count in diagnostics is exact).
 LOG_PERIOD_S = 2.0
@@ -65,3 +66,27 @@ def guarded(node: Any, callback: Callable[..., Any], what: Optional[str] = None
 
     wrapper.guarded = True  # type: ignore[attr-defined]
     return wrapper
+
+
+class KeyedRateLimit:
+    """At most one event per ``period_s`` seconds (monotonic clock) for each key: for logs
+    limited per kind of problem (rclpy's throttling is per call site, not per key).
+
+    Usage::
+
+        if self.limit.ready('camera_info', 5.0):
+            self.get_logger().warn(text)
+    """
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self._last: Dict[str, float] = {}
+
+    def ready(self, key: str, period_s: float) -> bool:
+        """True (and the key's period restarts) when ``key`` was not ready in the last
+        ``period_s`` seconds."""
+        now = self._clock()
+        if now - self._last.get(key, -float('inf')) >= period_s:
+            self._last[key] = now
+            return True
+        return False

@@ -10,14 +10,7 @@ import pytest
 import torch
 
 from mocap_core.checkpoint import WeightsError, load_checkpoint
-
-
-class _Payload:
-    def __init__(self, marker):
-        self.marker = marker
-
-    def __reduce__(self):
-        return (os.makedirs, (self.marker,))
+from mocap_core.testing import CreatesFile
 
 
 def test_plain_weights_load(tmp_path):
@@ -38,7 +31,7 @@ def test_bad_files_give_one_line(tmp_path, case):
         path.write_bytes(os.urandom(4096))
     elif case == 'crafted':
         with path.open('wb') as f:
-            pickle.dump({'model': _Payload(str(marker))}, f)
+            pickle.dump({'model': CreatesFile(marker)}, f)
     elif case == 'list':
         torch.save([1, 2], path)
     elif case == 'key':

@@ -82,3 +82,17 @@ def test_keyboard_interrupt_is_not_swallowed():
 def test_describe():
     assert describe(ValueError()) == 'ValueError'
     assert describe(KeyError('k')) == "KeyError: 'k'"
+
+
+def test_keyed_rate_limit():
+    from mocap_core.guard import KeyedRateLimit
+
+    now = [0.0]
+    limit = KeyedRateLimit(clock=lambda: now[0])
+    assert limit.ready('a', 5.0) and limit.ready('b', 5.0)
+    assert not limit.ready('a', 5.0)
+    now[0] = 4.9
+    assert not limit.ready('a', 5.0)
+    now[0] = 5.0
+    assert limit.ready('a', 5.0)
+    assert not limit.ready('a', 5.0)

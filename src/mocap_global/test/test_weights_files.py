@@ -13,19 +13,10 @@ import pytest
 import torch
 
 from mocap_core.checkpoint import WeightsError
+from mocap_core.testing import crafted_weights, damaged_weights
 
 from mocap_global.model import GMR, GMRConfig
 from mocap_global.weights import load_weights, read_info, save_weights
-
-
-class _CreatesFile:
-    """Unpickling this object (with code execution allowed) creates ``path``."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = str(path)
-
-    def __reduce__(self):
-        return (open, (self.path, 'w'))
 
 
 def _bad_files(tmp_path: Path) -> Tuple[List[Tuple[str, Path]], Path]:
@@ -33,15 +24,11 @@ def _bad_files(tmp_path: Path) -> Tuple[List[Tuple[str, Path]], Path]:
     file the crafted pickle would create."""
     good = tmp_path / 'good.pt'
     save_weights(GMR(GMRConfig(layers=1, hidden=8, projection=8)), good, {'note': 'test'})
-    data = good.read_bytes()
-    truncated = tmp_path / 'truncated.pt'
-    truncated.write_bytes(data[:len(data) // 2])
-    noise = tmp_path / 'random.pt'
-    noise.write_bytes(os.urandom(4096))
+    damaged = damaged_weights(good, tmp_path)
     marker = tmp_path / 'pwned'
-    crafted = tmp_path / 'crafted.pt'
-    torch.save({'model': _CreatesFile(marker), 'config': {}, 'info': {}}, crafted)
-    return [('truncated', truncated), ('random bytes', noise), ('crafted', crafted)], marker
+    crafted = crafted_weights(tmp_path / 'crafted.pt', marker, config={}, info={})
+    return [('truncated', damaged['truncated']), ('random bytes', damaged['random']),
+            ('crafted', crafted)], marker
 
 
 def test_load_weights_refuses_bad_files_without_running_them(tmp_path):

@@ -40,7 +40,7 @@ import re
 import sys
 import threading
 import time
-from typing import Deque, Dict, Iterator, List, Optional, Tuple
+from typing import Deque, Iterator, List, Optional, Tuple
 
 import numpy as np
 import rclpy
@@ -53,7 +53,7 @@ from mocap_core import topics
 from mocap_core.camera import CameraCalibration, read_camera_info_yaml
 from mocap_core.data.openpose import infer_image_size
 from mocap_core.diagnostics import NodeDiagnostics
-from mocap_core.guard import guarded, record_failure
+from mocap_core.guard import KeyedRateLimit, guarded, record_failure
 from mocap_core.metrics import LatencyStats, RateMeter
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
 from mocap_core.qos import SENSOR_QOS, STREAM_QOS
@@ -311,7 +311,7 @@ class KeypointsNode(Node):
         self.intrinsics_approx = False
         self._last_error_t = -1e9
         self._last_error = ''
-        self._limited: Dict[str, float] = {}
+        self._limited = KeyedRateLimit()
         self._next_annotated = 0.0
         self.t0_ns = self._now_ns()
         self.create_timer(1.0, guarded(self, self._refresh_diagnostics, 'diagnostics'))
@@ -346,9 +346,7 @@ class KeypointsNode(Node):
     # --- logging helpers --------------------------------------------------------------
     def _warn_limited(self, key: str, text: str, period_s: float = 5.0) -> None:
         """Warn, at most once per ``period_s`` for the same ``key``."""
-        now = time.monotonic()
-        if now - self._limited.get(key, -1e9) >= period_s:
-            self._limited[key] = now
+        if self._limited.ready(key, period_s):
             self.get_logger().warn(text)
 
     def _problem(self, key: str, text: str) -> None:

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mocap_core.testing import CreatesFile
+
 ROOT = Path(__file__).resolve().parents[3]
 BAG = ROOT / 'bags' / 'gt_cmu_walk_12_02'
 SHIPPED = ROOT / 'src' / 'mocap_lifter' / 'weights' / 'motionet_windowed.pt'
@@ -128,16 +130,6 @@ def _ros_env() -> dict:
     return env
 
 
-class _CreatesAFile:
-    """Unpickling this calls ``open(path, 'w')``: a crafted weights file."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = str(path)
-
-    def __reduce__(self):
-        return (open, (self.path, 'w'))
-
-
 def _bad_weights(kind: str, tmp_path: Path) -> Path:
     import torch
 
@@ -148,7 +140,7 @@ def _bad_weights(kind: str, tmp_path: Path) -> Path:
     elif kind == 'random bytes':
         path.write_bytes(np.random.default_rng(0).bytes(4096))
     else:
-        torch.save({'model': _CreatesAFile(tmp_path / 'created'), 'config': {}}, path)
+        torch.save({'model': CreatesFile(tmp_path / 'created'), 'config': {}}, path)
     return path
 
 

@@ -7,6 +7,7 @@ import torch
 from mocap_core.checkpoint import WeightsError
 from mocap_core.rotations import axis_angle_to_quat
 from mocap_core.skeleton import NUM_JOINTS, Skeleton
+from mocap_core.testing import CreatesFile
 
 SMALL = dict(channels=16, fusion_blocks=1, skeleton_channels=8, dropout=0.0)
 
@@ -34,14 +35,6 @@ def _config(steps: int):
                                   'w_adversarial': 0.05, 'model': SMALL})
 
 
-class _CreatesAFile:
-    def __init__(self, path) -> None:
-        self.path = str(path)
-
-    def __reduce__(self):
-        return (open, (self.path, 'w'))
-
-
 def test_training_resumes_from_its_checkpoint_and_refuses_a_crafted_one(tmp_path):
     from mocap_lifter.training.train import train
     from mocap_lifter.weights import load_weights
@@ -57,7 +50,7 @@ def test_training_resumes_from_its_checkpoint_and_refuses_a_crafted_one(tmp_path
     rows = (run / 'log.csv').read_text().splitlines()
     assert rows[0].startswith('step,') and sum(r.startswith('step,') for r in rows) == 1
 
-    torch.save({'model': _CreatesAFile(tmp_path / 'created'), 'optimizer': {}, 'step': 1},
+    torch.save({'model': CreatesFile(tmp_path / 'created'), 'optimizer': {}, 'step': 1},
                run / 'last.pt')
     with pytest.raises(WeightsError, match='refused'):
         train(motions, motions, run, _config(6), progress=False)

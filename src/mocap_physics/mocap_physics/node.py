@@ -66,8 +66,7 @@ from __future__ import annotations
 
 import os
 import sys
-import time
-from typing import Dict, List, Optional
+from typing import List, Optional
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
@@ -78,7 +77,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mocap_core import topics
 from mocap_core.diagnostics import NodeDiagnostics
-from mocap_core.guard import guarded
+from mocap_core.guard import KeyedRateLimit, guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, make_header, motion_to_pose,
@@ -208,7 +207,7 @@ class PhysicsNode(Node):
             max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'],
             foot_stick=p['foot_stick'], stick_release=p['stick_release'],
             gains_mode=p['gains_mode'], dynet_weights=weights if learned else '')
-        self._limited: Dict[str, float] = {}
+        self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         contacts_topic = p['contacts_topic']
         self.online = OnlinePhysics(
@@ -268,9 +267,8 @@ class PhysicsNode(Node):
 
     # -- logging and counting -----------------------------------------------------------------
     def _warn_limited(self, key: str, text: str, period_s: float = 5.0) -> None:
-        now = time.monotonic()
-        if now - self._limited.get(key, -1e9) >= period_s:
-            self._limited[key] = now
+        """Warn, at most once per ``period_s`` for the same ``key``."""
+        if self._limited.ready(key, period_s):
             self.get_logger().warn(text)
 
     def _problem(self, key: str, text: str) -> None:

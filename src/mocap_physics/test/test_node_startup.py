@@ -11,6 +11,7 @@ import torch
 
 from mocap_core.checkpoint import WeightsError
 from mocap_core.skeleton import Skeleton
+from mocap_core.testing import crafted_weights, damaged_weights
 from mocap_physics.cycle_params import PhysicsParams
 from mocap_physics.dynet import DyNet, make_dynet
 from mocap_physics.model import PhysicsModel
@@ -107,18 +108,8 @@ def test_starting_the_node_imports_no_training_code(weights):
     assert others == []
 
 
-class _Payload:
-    """Pickles as a call that creates ``marker`` when a file holding it is unpickled."""
-
-    def __init__(self, marker) -> None:
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (open, (self.marker, 'w'))
-
-
 def _crafted(path, marker) -> None:
-    torch.save({'config': _Payload(marker), 'state': {}}, str(path))
+    crafted_weights(path, marker, key='config', state={})
 
 
 def test_a_crafted_file_would_run_its_payload(tmp_path):
@@ -130,11 +121,8 @@ def test_a_crafted_file_would_run_its_payload(tmp_path):
 
 
 def _bad_files(tmp_path, weights):
-    data = weights.read_bytes()
-    truncated = tmp_path / 'truncated.pt'
-    truncated.write_bytes(data[:len(data) // 2])
-    rand = tmp_path / 'random.pt'
-    rand.write_bytes(os.urandom(4096))
+    damaged = damaged_weights(weights, tmp_path)
+    truncated, rand = damaged['truncated'], damaged['random']
     crafted = tmp_path / 'crafted.pt'
     _crafted(crafted, tmp_path / 'pwned')
     wrong = tmp_path / 'wrong_size.pt'
