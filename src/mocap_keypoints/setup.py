@@ -25,5 +25,7 @@ setup(
         # the core finds the pipeline's parts through these groups (mocap_core.plugins)
         'mocap.nodes': ['keypoints = mocap_keypoints.node:KeypointsNode'],
         'mocap.benches': ['keypoints = mocap_keypoints.bench:main'],
+        # the node's detectors, for data generation (mocap data render)
+        'mocap.detectors': ['blazepose = mocap_keypoints.detector:BlazePoseDetector'],
     },
 )

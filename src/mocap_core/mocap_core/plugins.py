@@ -8,7 +8,10 @@ Each node package registers its parts under Python entry points in its ``setup.p
 * ``mocap.commands``: ``<name> = <package>.training.cli``, a module with
   ``add_train_parser(sub)`` and ``add_eval_parser(sub)`` (``mocap train|eval``);
 * ``mocap.benches``: ``<stage> = <package>.bench:main``, a benchmark taking its own argv
-  (``mocap bench <stage>``).
+  (``mocap bench <stage>``);
+* ``mocap.detectors``: ``<name> = <package>.detector:<Class>``, a 2D keypoint detector as the
+  keypoint node runs it (``detect(bgr) -> (P, 23, 3)``, ``reset()``, ``close()``), for data
+  generation (``mocap data render``).
 
 The stage names and their order are part of the design contract (:data:`PIPELINE`); which
 package provides a stage is not.
@@ -24,6 +27,7 @@ from typing import Any, Dict, List, Optional
 NODE_GROUP = 'mocap.nodes'
 COMMAND_GROUP = 'mocap.commands'
 BENCH_GROUP = 'mocap.benches'
+DETECTOR_GROUP = 'mocap.detectors'
 
 #: The pipeline's stages, upstream first (design contract).
 PIPELINE = ('keypoints', 'lifter', 'physics', 'gmr')
@@ -121,3 +125,16 @@ def run_bench(stage: str, argv: Optional[List[str]] = None) -> int:
         raise PluginError(f'no benchmark registered for {stage!r} (installed: '
                           f"{', '.join(found) or 'none'})")
     return int(found[stage].load()(argv) or 0)
+
+
+def detector_class(name: str = 'blazepose') -> type:
+    """The keypoint detector class registered as ``name`` under ``mocap.detectors``."""
+    group = _group(DETECTOR_GROUP)
+    if name not in group:
+        raise PluginError(f'no installed package provides the {name!r} detector (entry point '
+                          f"group {DETECTOR_GROUP}; installed: {', '.join(group) or 'none'})")
+    try:
+        return group[name].load()
+    except Exception as exc:  # noqa: BLE001 - one line for the user
+        raise PluginError(f'cannot load the {name} detector ({group[name].value}): '
+                          f'{type(exc).__name__}: {exc}') from exc
