@@ -8,6 +8,8 @@
                       [--azimuth MIN [MAX]] [--image-size WxH] [--clean] [--no-world-motion]
     mocap data from-openpose <dir> -o BAG [--fps 30] [--fov 60] [--camera-info YAML]
     mocap data fit-confidence <openpose dirs ...> -o model.json
+    mocap data render [--split validation|train|all] [--bvh FILE ...] [-o DIR] [--jobs 2]
+                      [--limit N] [--max-seconds 8] [--seed 0] [--camera KIND] [--hours H]
 
 The data default to ``$MOCAP_SHARED_DATA`` (else ``<repo>/../shared/data``): its ``cmu_bvh``
 and ``bandai_namco_bvh`` folders. Errors are one line on stderr, exit status 1.
@@ -368,6 +370,58 @@ def cmd_fit_confidence(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------
 # parser
 # ---------------------------------------------------------------------------------------------
+# ---------------------------------------------------------------------------------------------
+# render
+# ---------------------------------------------------------------------------------------------
+def cmd_render(args: argparse.Namespace) -> int:
+    """Render people driven by motion capture, run the detector, write ground truth."""
+    import logging
+
+    from ..render import RendererUnavailable
+    from ..render.batch import DEFAULT_OUT, plan, run
+    from ..render.cameras import CAMERA_KINDS
+    from ..render.scene import check_renderer
+
+    if args.camera and args.camera not in CAMERA_KINDS:
+        raise CommandError(f'--camera must be one of {", ".join(CAMERA_KINDS)}')
+    if args.jobs < 1 or args.max_seconds <= 0:
+        raise CommandError('--jobs must be >= 1 and --max-seconds > 0')
+    for f in args.bvh:
+        if not Path(f).is_file():
+            raise CommandError(f'{f}: no such BVH file')
+    problem = check_renderer()
+    if problem:
+        raise CommandError(f'cannot render: {problem}')
+    splits = {'all': ['validation', 'train'], 'none': []}.get(args.split, [args.split])
+    if args.bvh and args.split == 'validation' and not args.split_given:
+        splits = []
+    logging.basicConfig(level=logging.INFO, format='%(message)s')
+    out = Path(args.out) if args.out else DEFAULT_OUT
+    jobs = plan(splits, args.seed, args.limit, args.bvh)
+    print(f'{_PROG} render: {len(jobs)} clips ({", ".join(splits) or "user BVH"}) -> {out}; '
+          f'{args.jobs} worker(s), at most {args.max_seconds:g} s per clip', file=sys.stderr)
+    try:
+        summary = run(jobs, out, seed=args.seed, workers=args.jobs,
+                      max_frames=int(round(args.max_seconds * 30.0)), camera=args.camera,
+                      write_bag=not args.no_bag, progress=not args.quiet, hours=args.hours)
+    except RendererUnavailable as exc:
+        raise CommandError(str(exc)) from None
+    r = summary['this_run']
+    print(f'rendered {r["clips_rendered"]} clips ({r["frames"]} frames) in {r["seconds"]:.0f} s;'
+          f' {r["clips_failed"]} failed (see {out / "failures.jsonl"}); {r["clips_left"]} left')
+    for split, s in summary['splits'].items():
+        print(f'  {split}: {s["clips"]} clips, {s["frames"]} frames, person detected in '
+              f'{100 * s["detected_fraction"]:.1f} % of frames; cameras {s["cameras"]}; '
+              f'views {s["views"]}')
+    return 1 if r['clips_failed'] else 0
+
+
+class _SplitAction(argparse.Action):
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        namespace.split_given = True
+
+
 def add_data_parser(sub) -> None:
     """Add ``data`` and its sub-commands to the ``mocap`` sub-parsers."""
     from ..data.dataset import DEFAULT_FPS
@@ -470,5 +524,32 @@ def add_data_parser(sub) -> None:
                    'mocap_core/data/confidence_model.json)')
     q.add_argument('--source', help='description stored in the model (default: generated)')
     q.set_defaults(func=cmd_fit_confidence)
+
+    q = dsub.add_parser(
+        'render', help='render people (Anny + pyrender) driven by motion capture, run the '
+        'keypoint detector on the video, write exact ground truth (resumable cache)',
+        description='Render clips of the split (validation first, then train) or user BVH '
+        'files with random bodies, clothes, scenes and cameras; run BlazePose on the frames '
+        'as the keypoint node does; write video, keypoints, ground truth and a bag per clip '
+        'under OUT/<split>/<clip>/. Clips already done are skipped, so the command resumes.')
+    q.add_argument('--split', choices=('validation', 'train', 'all', 'none'),
+                   default='validation', action=_SplitAction,
+                   help='clips of the committed split to render (default validation; with '
+                   '--bvh and no --split, only the BVH files)')
+    q.set_defaults(split_given=False)
+    q.add_argument('--bvh', nargs='+', default=[], metavar='FILE',
+                   help='also render these BVH files (any format the data pipeline reads)')
+    q.add_argument('-o', '--out', help='output folder (default ~/.cache/mocap/render)')
+    q.add_argument('--jobs', type=int, default=2, help='worker processes (default 2)')
+    q.add_argument('--limit', type=int, help='at most this many clips per split')
+    q.add_argument('--max-seconds', type=float, default=8.0,
+                   help='longest rendered stretch of a clip, seconds (default 8)')
+    q.add_argument('--seed', type=int, default=0, help='seed of bodies, scenes and cameras')
+    q.add_argument('--camera', default='', help='force one camera kind (static, pan, orbit, '
+                   'handheld, follow); default: drawn per clip')
+    q.add_argument('--hours', type=float, help='stop starting new clips after this long')
+    q.add_argument('--no-bag', action='store_true', help='skip the per-clip MCAP bag')
+    q.add_argument('--quiet', action='store_true', help='no progress bar')
+    q.set_defaults(func=_guard(cmd_render))
 
     p.set_defaults(func=lambda a: (p.print_help(), 0)[1])
