@@ -16,7 +16,7 @@ log() { printf '[setup] %s\n' "$*"; }
 hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
 
 # 1. The virtual environment, reinstalled only when the lock files change.
-req_hash="$(hash_of requirements/lock.txt requirements/mediapipe.txt)"
+req_hash="$(hash_of requirements/lock.txt requirements/mediapipe.txt requirements/render.txt)"
 if [ "${FORCE:-0}" = 1 ] || [ ! -x "$venv/bin/python" ] || [ "$(cat "$venv/.lock-hash" 2>/dev/null)" != "$req_hash" ]; then
   log "creating $venv with $("$python_bin" --version 2>&1)"
   [ -x "$venv/bin/python" ] || "$python_bin" -m venv "$venv"
@@ -24,12 +24,26 @@ if [ "${FORCE:-0}" = 1 ] || [ ! -x "$venv/bin/python" ] || [ "$(cat "$venv/.lock
   log "installing requirements/lock.txt (torch==2.13.0 CPU, ROS 2 Jazzy wheels, Pinocchio, ...)"
   "$venv/bin/python" -m pip install --quiet -r requirements/lock.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
   "$venv/bin/python" -m pip install --quiet --no-deps -r requirements/mediapipe.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
+  "$venv/bin/python" -m pip install --quiet --no-deps -r requirements/render.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
   echo "$req_hash" > "$venv/.lock-hash"
 else
   log "venv up to date"
 fi
 
-# 2. The colcon workspace; rebuilt when any package manifest changes or install/ is missing.
+# 2. The OSMesa library for CPU rendering (mocap data render, its test). Only data generation
+#    needs it; without it the render command says what is missing and its tests skip.
+if ! ldconfig -p 2>/dev/null | grep -q 'libOSMesa\.so'; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    log "installing libosmesa6 (CPU OpenGL for rendering people)"
+    { DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libosmesa6 >/dev/null 2>&1 \
+      || { apt-get update >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libosmesa6 >/dev/null 2>&1; }; } \
+      || log "could not install libosmesa6: mocap data render will not work (the rest does)"
+  else
+    log "note: libOSMesa not found; mocap data render needs it (Debian: sudo apt-get install libosmesa6)"
+  fi
+fi
+
+# 3. The colcon workspace; rebuilt when any package manifest changes or install/ is missing.
 pkg_hash="$(hash_of $(find src -maxdepth 2 \( -name package.xml -o -name setup.py -o -name setup.cfg \) | sort))"
 stamp="ros2_ws/install/.pkg-hash"
 if [ "${FORCE:-0}" = 1 ] || [ ! -f ros2_ws/install/setup.bash ] || [ "$(cat "$stamp" 2>/dev/null)" != "$pkg_hash" ]; then

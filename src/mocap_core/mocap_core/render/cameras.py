@@ -14,8 +14,9 @@ Kinds (:data:`CAMERA_KINDS`):
 * ``follow`` -- walks with the person, keeping its offset (e.g. behind someone walking away).
 
 The ranges (:class:`CameraRanges`) are wider than the projected-keypoint sampler's
-(``data/synth2d.CameraSampling``): distances 1.8-12 m, heights 0.2-3.5 m, horizontal field of
-view 35-100 degrees, portrait and landscape images. A fraction of static / pan clips aims
+(``data/synth2d.CameraSampling``): heights 0.2-3.5 m, horizontal field of view 35-100 degrees,
+portrait and landscape images, and the distance that makes the person 35-90 % of the image
+height (1.5-25 m; BlazePose misses most people below ~130 px). A fraction of static / pan clips aims
 off the person so that part of the body leaves the image (``partial``).
 """
 
@@ -37,7 +38,8 @@ class CameraRanges:
     """Ranges drawn uniformly per clip. Angles in degrees, distances in metres."""
 
     kind_weights: Tuple[float, ...] = (0.35, 0.2, 0.15, 0.15, 0.15)   # CAMERA_KINDS order
-    distance: Tuple[float, float] = (1.8, 12.0)
+    person_fraction: Tuple[float, float] = (0.35, 0.9)  # body height / image height
+    distance: Tuple[float, float] = (1.5, 25.0)         # bounds on the resulting distance
     height: Tuple[float, float] = (0.2, 3.5)
     horizontal_fov: Tuple[float, float] = (35.0, 100.0)
     image_sizes: Tuple[Tuple[int, int], ...] = ((640, 480), (640, 480), (480, 640),
@@ -139,7 +141,9 @@ def sample_camera_path(points: np.ndarray, facing: np.ndarray, rng: np.random.Ge
     cam_height = rng.uniform(*ranges.height)
     roll = np.radians(rng.uniform(*ranges.roll))
     partial = kind in ('static', 'pan') and rng.random() < ranges.partial_fraction
-    distance = rng.uniform(*ranges.distance)
+    extent = float(np.ptp(points[..., 2], axis=1).mean())        # body height in the clip
+    fraction = rng.uniform(*ranges.person_fraction)
+    distance = float(np.clip(intr.fy * extent / (fraction * height), *ranges.distance))
     aim_jitter = rng.uniform(-0.25, 0.25, 3) * np.array([1.0, 1.0, 0.6])
     sweep = np.radians(rng.uniform(*ranges.orbit_degrees)) * rng.choice([-1.0, 1.0])
     shake_deg, shake_m = rng.uniform(0.5, 2.0), rng.uniform(0.01, 0.03)

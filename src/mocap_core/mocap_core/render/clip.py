@@ -44,7 +44,7 @@ import numpy as np
 from ..skeleton import (BONE_GROUPS, JOINT_INDEX, KEYPOINT_INDEX, NUM_KEYPOINTS, PARENTS)
 
 #: Bump when the output of :func:`render_clip` changes meaning (old clips are re-rendered).
-RENDER_FORMAT = 1
+RENDER_FORMAT = 2
 
 #: Anny's COCO keypoint names -> layout names (the feet points come from the skeleton).
 _COCO_TO_LAYOUT = {
@@ -137,10 +137,11 @@ class ClipRenderer:
     # ------------------------------------------------------------------------------------
     def render(self, motion, clip_id: str, split: str, out_dir: Path, seed: int,
                max_frames: Optional[int] = None, camera_kind: str = '',
-               write_bag: bool = True, progress: Optional[Callable[[int], None]] = None
-               ) -> ClipResult:
+               write_bag: bool = True, camera_ranges=None,
+               progress: Optional[Callable[[int], None]] = None) -> ClipResult:
         """Render ``motion`` (a processed :class:`~mocap_core.data.motion.Motion`) into
-        ``out_dir`` (module docstring). Returns what was done."""
+        ``out_dir`` (module docstring). ``camera_ranges``: a
+        :class:`~.cameras.CameraRanges` (default ranges when None). Returns what was done."""
         import cv2
         import torch
 
@@ -184,8 +185,9 @@ class ClipRenderer:
         facing = _facing(G)
         mean_facing = facing.mean(axis=0)
         sample = verts[:, ::997].astype(np.float64)
+        from .cameras import CameraRanges
         cam = sample_camera_path(np.concatenate([joints, sample], axis=1), mean_facing, rng,
-                                 kind=camera_kind)
+                                 camera_ranges or CameraRanges(), kind=camera_kind)
         appearance = sample_appearance(rng)
         K = cam.K()
         joints_cam = cam.world_to_camera(joints)

@@ -1,0 +1,261 @@
+"""Rendered people (mocap_core.render): body driving, ground-truth convention, cameras, and a
+small render-and-detect run through the keypoint node's detector.
+
+The Anny and render tests need ``anny``, ``pyrender`` and the OSMesa library, which
+``scripts/setup.sh`` installs. Where they are missing the tests fail with what to install;
+``MOCAP_ALLOW_NO_RENDERER=1`` turns that into a skip (a developer machine without root).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocap_core.render.cameras import (CAMERA_KINDS, CameraRanges, sample_camera_path,
+                                       view_labels)
+from mocap_core.render.clip import clip_key, clip_seed
+from mocap_core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+
+REPO = Path(__file__).resolve().parents[3]
+WALK_BAG = REPO / 'bags' / 'gt_bandai_walk_exhausted'
+
+
+def _need_renderer():
+    from mocap_core.render.scene import check_renderer
+    problem = check_renderer()
+    if problem:
+        if os.environ.get('MOCAP_ALLOW_NO_RENDERER') == '1':
+            pytest.skip(problem)
+        pytest.fail(f'{problem} (or set MOCAP_ALLOW_NO_RENDERER=1 to skip)')
+
+
+def _need_anny():
+    try:
+        import anny  # noqa: F401
+    except ImportError as exc:
+        if os.environ.get('MOCAP_ALLOW_NO_RENDERER') == '1':
+            pytest.skip(str(exc))
+        pytest.fail(f'anny missing ({exc}); run scripts/setup.sh')
+
+
+@pytest.fixture(scope='module')
+def walk():
+    """The motion and contacts of a committed validation bag, in the world (the camera-frame
+    motion composed with the camera pose), as a Motion."""
+    from mocap_core.bag_io import BagReader, deserialize
+    from mocap_core.data.motion import Motion
+    from mocap_core.ros_conversions import motion_to_pose
+    from mocap_core.rotations import quat_multiply, quat_to_matrix
+    from mocap_core.topics import (GROUNDTRUTH_CAMERA_POSE, GROUNDTRUTH_CONTACTS,
+                                   GROUNDTRUTH_MOTION)
+    poses, contacts, cam = [], [], None
+    with BagReader(WALK_BAG) as reader:
+        for m in reader.messages(topics=[GROUNDTRUTH_MOTION, GROUNDTRUTH_CONTACTS,
+                                         GROUNDTRUTH_CAMERA_POSE]):
+            msg = deserialize(m.data, m.msgtype)
+            if m.topic == GROUNDTRUTH_MOTION:
+                poses.append(motion_to_pose(msg))
+            elif m.topic == GROUNDTRUTH_CONTACTS:
+                contacts.append(np.asarray(msg.position) > 0.5)
+            else:
+                o, p = msg.pose.orientation, msg.pose.position
+                cam = (np.array([o.x, o.y, o.z, o.w]), np.array([p.x, p.y, p.z]))
+    q, t = cam
+    rot = np.stack([p.rotations for p in poses])
+    rot[:, 0] = quat_multiply(np.broadcast_to(q, rot[:, 0].shape), rot[:, 0])
+    root = np.stack([p.root_position for p in poses]) @ np.asarray(quat_to_matrix(q)).T + t
+    return Motion('gt_bandai_walk_exhausted', 30.0, poses[0].skeleton, rot, root,
+                  np.stack(contacts))
+
+
+@pytest.fixture(scope='module')
+def model():
+    _need_anny()
+    from mocap_core.render.body import load_anny
+    return load_anny()
+
+
+# ------------------------------------------------------------------------------------------
+# no renderer needed
+# ------------------------------------------------------------------------------------------
+def test_clip_seed_and_key_are_stable_and_distinct():
+    assert clip_seed(0, 'a/b.bvh') == clip_seed(0, 'a/b.bvh')
+    assert clip_seed(0, 'a/b.bvh') != clip_seed(1, 'a/b.bvh')
+    assert clip_seed(0, 'a/b.bvh') != clip_seed(0, 'a/c.bvh')
+    k = clip_key('bandai_namco_bvh/dataset-2_walk.tar.xz:dataset-2_walk_active_001.bvh')
+    assert '/' not in k and ':' not in k
+    assert clip_key('x/a:b') != clip_key('x/a_b')
+
+
+def test_convention_moves_hips_shoulders_head_to_training_ratios():
+    from mocap_core.render.body import CONVENTION_RATIOS, to_convention
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(5, NUM_JOINTS, 3))
+    J[:, JOINT_INDEX['pelvis']] = 0.5 * (J[:, JOINT_INDEX['left_hip']]
+                                         + J[:, JOINT_INDEX['right_hip']])
+    J[:, JOINT_INDEX['neck']] = 0.5 * (J[:, JOINT_INDEX['left_shoulder']]
+                                       + J[:, JOINT_INDEX['right_shoulder']])
+    C = to_convention(J)
+    ix = JOINT_INDEX
+
+    def d(a, b, X):
+        return np.linalg.norm(X[:, ix[a]] - X[:, ix[b]], axis=-1)
+
+    np.testing.assert_allclose(d('left_hip', 'pelvis', C),
+                               CONVENTION_RATIOS['hip_over_thigh'] * d('left_knee', 'left_hip', J),
+                               rtol=1e-9)
+    np.testing.assert_allclose(
+        d('right_shoulder', 'neck', C),
+        CONVENTION_RATIOS['clavicle_over_upper_arm'] * d('right_elbow', 'right_shoulder', J),
+        rtol=1e-9)
+    np.testing.assert_allclose(d('head', 'neck', C),
+                               CONVENTION_RATIOS['head_over_neck'] * d('neck', 'spine', J),
+                               rtol=1e-9)
+    # directions from the pelvis / neck are kept; the limbs below are untouched
+    u = (C[:, ix['left_hip']] - C[:, ix['pelvis']]) / d('left_hip', 'pelvis', C)[:, None]
+    w = (J[:, ix['left_hip']] - J[:, ix['pelvis']]) / d('left_hip', 'pelvis', J)[:, None]
+    np.testing.assert_allclose(u, w, atol=1e-9)
+    for name in ('left_knee', 'left_wrist', 'spine', 'pelvis', 'neck'):
+        np.testing.assert_array_equal(C[:, ix[name]], J[:, ix[name]])
+
+
+@pytest.mark.parametrize('kind', CAMERA_KINDS)
+def test_camera_paths_keep_the_body_in_view_and_move_as_named(kind):
+    rng = np.random.default_rng(3)
+    F = 90
+    t = np.linspace(0, 3, F)
+    # a body walking 3 m along +x: 18 points spread over 1.7 m height
+    pts = np.zeros((F, 18, 3))
+    pts[..., 0] = t[:, None]
+    pts[..., 2] = np.linspace(0.0, 1.7, 18)[None]
+    ranges = CameraRanges(partial_fraction=0.0)
+    cam = sample_camera_path(pts, np.array([1.0, 0.0]), rng, ranges, kind=kind)
+    assert cam.kind == kind and cam.R.shape == (F, 3, 3) and cam.position.shape == (F, 3)
+    np.testing.assert_allclose(np.einsum('fij,fkj->fik', cam.R, cam.R),
+                               np.broadcast_to(np.eye(3), (F, 3, 3)), atol=1e-9)
+    pc = cam.world_to_camera(pts)
+    assert np.all(pc[..., 2] > 0.2)
+    uv = cam.intrinsics.project(pc)
+    assert np.all((uv[..., 0] >= 0) & (uv[..., 0] < cam.intrinsics.width))
+    assert np.all((uv[..., 1] >= 0) & (uv[..., 1] < cam.intrinsics.height))
+    moved = np.linalg.norm(cam.position[-1] - cam.position[0])
+    turned = np.degrees(np.arccos(np.clip((np.trace(cam.R[0] @ cam.R[-1].T) - 1) / 2, -1, 1)))
+    if kind == 'static':
+        assert moved == 0 and turned < 1e-3
+    elif kind == 'pan':
+        assert moved == 0 and turned > 1.0
+    elif kind == 'handheld':
+        assert 0 < moved < 0.1
+    elif kind == 'orbit':
+        c = pts.mean(axis=1)
+        a0 = np.arctan2(*(cam.position[0, :2] - c[0, :2])[::-1])
+        a1 = np.arctan2(*(cam.position[-1, :2] - c[-1, :2])[::-1])
+        sweep = np.degrees(abs(np.angle(np.exp(1j * (a1 - a0)))))
+        assert 45.0 < sweep < 125.0
+    elif kind == 'follow':
+        assert moved > 1.5
+
+
+def test_view_labels():
+    pelvis = np.zeros((3, 3))
+    facing = np.tile([1.0, 0.0], (3, 1))
+    cams = np.array([[3.0, 0.2, 1.5], [0.1, 3.0, 1.5], [-3.0, -0.3, 1.5]])
+    assert list(view_labels(cams, pelvis, facing)) == ['front', 'side', 'back']
+
+
+def test_render_command_rejects_bad_arguments_in_one_line(capsys):
+    from mocap_core.cli.mocap import main
+    assert main(['data', 'render', '--camera', 'drone']) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'static, pan, orbit, handheld, follow' in err[0]
+    assert main(['data', 'render', '--bvh', '/nonexistent.bvh']) == 1
+    assert 'no such BVH file' in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------
+# Anny body
+# ------------------------------------------------------------------------------------------
+def test_body_limbs_point_where_the_motion_points(model, walk):
+    from mocap_core.render.body import AnnyBody
+    body = AnnyBody.create(model, {'age': 0.8, 'height': 0.3, 'weight': 0.7})
+    fk = walk.fk()
+    G, P = fk.global_rotations[:20], fk.positions[:20]
+    posed = body.pose(G, P[:, 0])
+    J = posed.joints_rig
+    np.testing.assert_allclose(J[:, 0], P[:, 0], atol=1e-5)   # pelvis placed as asked
+    for name in ('left_knee', 'left_ankle', 'left_toe', 'right_knee', 'right_ankle',
+                 'right_toe', 'left_elbow', 'left_wrist', 'right_elbow', 'right_wrist'):
+        j, p = JOINT_INDEX[name], PARENTS[JOINT_INDEX[name]]
+        a = J[:, j] - J[:, p]
+        b = P[:, j] - P[:, p]
+        cos = np.sum(a * b, -1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
+        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 0.5, name
+    # the mesh follows the bones: every joint lies inside the body's vertex cloud
+    v = posed.vertices
+    for f in (0, 19):
+        lo, hi = v[f].min(axis=0), v[f].max(axis=0)
+        assert np.all((posed.joints[f] > lo - 1e-3) & (posed.joints[f] < hi + 1e-3))
+    # bodies differ: the same motion on another phenotype changes the bone lengths
+    other = AnnyBody.create(model, {'age': 0.8, 'height': 0.9, 'weight': 0.2})
+    assert other.leg_length() > body.leg_length() + 0.02
+
+
+# ------------------------------------------------------------------------------------------
+# render + detect (CI: scripts/setup.sh installs the renderer)
+# ------------------------------------------------------------------------------------------
+def test_render_and_detect_a_clip(model, walk, tmp_path):
+    _need_renderer()
+    from mocap_core.plugins import detector_class
+    from mocap_core.render.clip import ClipRenderer, is_done, load_clip
+    detector = detector_class('blazepose')
+    from mocap_core.render.cameras import CameraRanges
+    r = ClipRenderer(lambda: detector(tracking=True), model=model)
+    out = tmp_path / 'clip'
+    ranges = CameraRanges(person_fraction=(0.5, 0.6), horizontal_fov=(50.0, 60.0),
+                          partial_fraction=0.0)
+    try:
+        res = r.render(walk, walk.name, 'validation', out, seed=5, max_frames=24,
+                       camera_kind='static', camera_ranges=ranges)
+    finally:
+        r.close()
+    assert is_done(out) and res.frames == 24
+    arrays, meta = load_clip(out)
+    assert meta['frames'] == 24 and meta['camera']['kind'] == 'static'
+    # the detector found the person in most frames, close to the mesh's own keypoints
+    assert res.detected >= 0.8, res
+    assert meta['median_2d_error_rel_height'] < 0.05
+    # the ground truth projects onto the image where the body is
+    K, Jc = arrays['K'], arrays['joints_camera']
+    uv = Jc[..., :2] / Jc[..., 2:] * K[[0, 1], [0, 1]] + K[:2, 2]
+    kp = arrays['keypoints']
+    ok = kp[:, 15:17, 2] > 0.5  # ankles seen
+    ankles = uv[:, [JOINT_INDEX['left_ankle'], JOINT_INDEX['right_ankle']]]
+    body_px = np.ptp(uv[..., 1], axis=1)[:, None]
+    err = np.linalg.norm(kp[:, 15:17, :2] - ankles, axis=-1) / body_px
+    assert np.median(err[ok]) < 0.06
+    # world and camera joints agree through the camera pose
+    Rw, C = arrays['camera_R'], arrays['camera_position']
+    np.testing.assert_allclose(np.einsum('fij,fnj->fni', Rw, arrays['joints_world'] - C[:, None]),
+                               Jc, atol=1e-9)
+    assert arrays['joints_world'][..., 2].min() > -0.05  # feet on or above the floor
+    assert (out / 'video.mp4').stat().st_size > 1000
+    # the bag: every frame on every ground-truth topic
+    from mocap_core.bag_io import BagReader
+    with BagReader(out / 'gt_bag') as bag:
+        counts = {t: i.count for t, i in bag.topics.items()}
+    assert counts['/mocap/keypoints2d'] == 24 and counts['/mocap/groundtruth/joints3d'] == 24
+    json.dumps(meta)
+    # deterministic: the same seed gives the same camera and body
+    r2 = ClipRenderer(lambda: detector(tracking=True), model=model)
+    try:
+        r2.render(walk, walk.name, 'validation', tmp_path / 'again', seed=5, max_frames=24,
+                  camera_kind='static', write_bag=False, camera_ranges=ranges)
+    finally:
+        r2.close()
+    again, _ = load_clip(tmp_path / 'again')
+    np.testing.assert_array_equal(again['joints_world'], arrays['joints_world'])
+    np.testing.assert_array_equal(again['camera_R'], arrays['camera_R'])
