@@ -141,6 +141,17 @@ def test_the_core_imports_no_node_package():
     assert upward == []
 
 
+def test_no_runtime_module_imports_the_renderer():
+    """Rendering is data generation: only the render package itself, the CLI and tests may
+    import it (statically; the node start test below checks the running processes)."""
+    graph = import_graph()
+    bad = sorted(f'{m} -> {t}' for m, targets in graph.items()
+                 if not m.startswith(('mocap_core.render', 'mocap_core.cli'))
+                 and '.training' not in m
+                 for t in targets if t.startswith('mocap_core.render'))
+    assert bad == []
+
+
 def test_node_packages_do_not_import_each_other_at_runtime():
     """A node package may use another's training code in its own training/evaluation, never
     in its runtime modules."""
@@ -159,7 +170,9 @@ TRAINING_MODULES = ('mocap_core.data.dataset', 'mocap_core.data.splits',
                     'mocap_core.data.retarget', 'mocap_core.data.synth2d', 'mocap_core.data.bvh',
                     'mocap_core.data.bvh_synth', 'mocap_core.data.gt_bag', 'mocap_core.plots',
                     'mocap_core.demo_render', 'mocap_core.run_report', 'mocap_core.cli',
-                    'mocap_core.testing')
+                    'mocap_core.testing', 'mocap_core.render',
+                    # the renderer and body model of data generation (mocap data render)
+                    'anny', 'pyrender', 'OpenGL', 'warp', 'trimesh')
 
 START_NODE = '''
 import json, sys

@@ -16,8 +16,8 @@ Kinds (:data:`CAMERA_KINDS`):
 The ranges (:class:`CameraRanges`) are wider than the projected-keypoint sampler's
 (``data/synth2d.CameraSampling``): heights 0.2-3.5 m, horizontal field of view 35-100 degrees,
 portrait and landscape images, and the distance that makes the person 35-90 % of the image
-height (1.5-25 m; BlazePose misses most people below ~130 px). A fraction of static / pan clips aims
-off the person so that part of the body leaves the image (``partial``).
+height (1.5-25 m; BlazePose misses most people below ~130 px). A fraction of static / pan
+clips aims off the person so that part of the body leaves the image (``partial``).
 """
 
 from __future__ import annotations

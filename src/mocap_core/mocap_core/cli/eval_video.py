@@ -1,0 +1,236 @@
+"""``mocap eval video``: the whole pipeline from rendered videos, scored against exact ground
+truth (``mocap_core.render.evaluate``).
+
+    mocap eval video [--renders DIR] [--split validation] [--limit N] [-o OUT_DIR]
+                     [--param NODE.NAME=VALUE ...] [--intrinsics true|approx]
+                     [--start video|keypoints] [--tag NAME]
+
+Per rendered clip (``mocap data render``), ``mocap process`` runs on ``video.mp4`` (start
+``video``: the keypoint node with BlazePose, then lifter, physics, GMR; the camera's true
+intrinsics are given to the keypoint node as a calibration file unless ``--intrinsics
+approx``) or on the clip's bag from the keypoints it recorded (start ``keypoints``: the same
+detector output, faster). The output bags are kept under ``OUT_DIR/runs/<tag>/`` and reused
+by a rerun with the same tag. Writes ``OUT_DIR/report.md``, ``report.json`` and plots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+
+class EvalError(Exception):
+    pass
+
+
+class NoOutput(Exception):
+    """The pipeline published no 3D output for a clip (nobody detected in any frame)."""
+
+
+def _read_output(bag: Path) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
+    """``{topic: (stamps ns (N,), joints (N, 18, 3))}`` of the three joints topics, and the
+    keypoint stamps (every frame) under ``'keypoints'``."""
+    from ..bag_io import BagReader, deserialize
+    from ..ros_conversions import cloud_to_positions, stamp_to_ns
+    from ..skeleton import NUM_JOINTS
+    from .. import topics as T
+    want = [T.KEYPOINTS, T.LIFTER_JOINTS3D, T.PHYSICS_JOINTS3D, T.WORLD_JOINTS3D]
+    acc: Dict[str, Tuple[list, list]] = {t: ([], []) for t in want}
+    with BagReader(bag) as reader:
+        present = [t for t in want if t in reader.topics]
+        for m in reader.messages(topics=present):
+            msg = deserialize(m.data, m.msgtype)
+            stamp = stamp_to_ns(msg.header.stamp)
+            if m.topic == T.KEYPOINTS:
+                acc[m.topic][0].append(stamp)
+                continue
+            try:
+                joints = cloud_to_positions(msg, NUM_JOINTS)[:NUM_JOINTS]
+            except ValueError:  # a malformed output frame is not scored
+                continue
+            if joints.shape == (NUM_JOINTS, 3):
+                acc[m.topic][1].append(joints)
+                acc[m.topic][0].append(stamp)
+    return {t: (np.asarray(s, dtype=np.int64), np.asarray(v)) for t, (s, v) in acc.items()}
+
+
+def _index(stamps: np.ndarray, first: int, fps: float) -> np.ndarray:
+    return np.round((stamps - first) * fps / 1e9).astype(int)
+
+
+def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
+             params: Dict[str, Dict], progress: bool = False):
+    """Process one rendered clip (reusing a finished output) and score it."""
+    from .. import topics as T
+    from ..camera import CameraCalibration, CameraIntrinsics, write_camera_info_yaml
+    from ..render.clip import load_clip
+    from ..render.evaluate import score_clip
+    from .process import process
+
+    gt, meta = load_clip(clip_dir)
+    out = work / clip_dir.name
+    bag = out / 'bag'
+    if not (out / 'done').exists():
+        out.mkdir(parents=True, exist_ok=True)
+        p = {k: dict(v) for k, v in params.items()}
+        if start == 'video':
+            src = clip_dir / 'video.mp4'
+            if intrinsics == 'true':
+                K = gt['K']
+                w, h = (int(x) for x in gt['image_size'])
+                yaml = out / 'camera.yaml'
+                write_camera_info_yaml(CameraCalibration(CameraIntrinsics(
+                    w, h, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]),
+                    approximate=False)), yaml)
+                p.setdefault('keypoints', {})['calibration_file'] = str(yaml)
+            kw = {}
+        else:
+            src = clip_dir / 'gt_bag'
+            kw = {'start': 'lifter'}
+            if intrinsics != 'true':
+                raise EvalError('--start keypoints uses the bag\'s true camera_info; '
+                                'use --start video for --intrinsics approx')
+        summary = process(src, bag, params=p, overwrite=True, progress=progress,
+                          log=lambda *a: None, log_level='error', **kw)
+        (out / 'summary.json').write_text(json.dumps(summary, indent=1, default=str))
+        (out / 'done').write_text('1')
+    data = _read_output(bag)
+    fps = float(gt['fps'])
+    kp_stamps = data[T.KEYPOINTS][0]
+    if start == 'video':
+        first = int(kp_stamps.min()) if len(kp_stamps) else 0
+    else:
+        from ..data.gt_bag import DEFAULT_START_NS
+        first = DEFAULT_START_NS
+    ls, lj = data[T.LIFTER_JOINTS3D]
+    if not len(lj):
+        raise NoOutput(f"{meta['clip']}: no lifter output (person detected in "
+                       f"{100 * meta.get('detected_fraction', 0):.0f} % of frames)")
+    roots = {}
+    for stage, topic in (('physics', T.PHYSICS_JOINTS3D), ('world', T.WORLD_JOINTS3D)):
+        s, j = data[topic]
+        if len(j):
+            roots[stage] = (j[:, 0], _index(s, first, fps))
+    return score_clip(meta['clip'], meta, gt, lj if len(lj) else None, _index(ls, first, fps),
+                      roots)
+
+
+def _plots(scores, agg: dict, out: Path) -> List[Path]:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    paths = []
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    per = np.array([s.summary()['mpjpe'] for s in scores])
+    ax[0].hist(per, bins=30, color='tab:blue')
+    ax[0].axvline(np.median(per), color='k', ls='--', label=f'median {np.median(per):.0f} mm')
+    ax[0].set_xlabel('lifter MPJPE per clip (mm)')
+    ax[0].set_ylabel('clips')
+    ax[0].legend()
+    views = list(agg['by_view'])
+    ax[1].bar(views, [agg['by_view'][v]['mpjpe'] for v in views], color='tab:orange',
+              label='MPJPE')
+    ax[1].bar(views, [agg['by_view'][v]['pa_mpjpe'] for v in views], color='tab:green',
+              width=0.5, label='PA-MPJPE')
+    ax[1].set_ylabel('mm (pooled over frames)')
+    ax[1].legend()
+    fig.tight_layout()
+    p = out / 'video_eval.png'
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    paths.append(p)
+    return paths
+
+
+def cmd_eval_video(args: argparse.Namespace) -> int:
+    from ..render.batch import DEFAULT_OUT
+    from ..render.clip import iter_done
+    from ..render.evaluate import aggregate, report_markdown
+    from .process import ProcessError, parse_params
+
+    renders = Path(args.renders) if args.renders else DEFAULT_OUT
+    clips = list(iter_done(renders, args.split))
+    if not clips:
+        print(f'mocap eval video: error: no rendered {args.split} clips under {renders} '
+              f'(make them with: mocap data render --split {args.split})', file=sys.stderr)
+        return 2
+    if args.limit:
+        clips = clips[:args.limit]
+    out = Path(args.output)
+    tag = args.tag or ('_'.join(f'{k}' for k in sorted(args.param)) or 'default')
+    tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
+    work = out / 'runs' / f'{tag}_{args.start}_{args.intrinsics}'
+    try:
+        params = parse_params(args.param)
+    except ProcessError as exc:
+        print(f'mocap eval video: error: {exc}', file=sys.stderr)
+        return 2
+    from tqdm import tqdm
+    scores, failed, no_output = [], [], []
+    for d in tqdm(clips, desc='mocap eval video', unit='clip', disable=args.quiet):
+        try:
+            scores.append(run_clip(d, work, args.start, args.intrinsics, params))
+        except NoOutput as exc:
+            no_output.append(str(exc))
+        except (EvalError, ProcessError, ValueError, OSError) as exc:
+            failed.append(f'{d.name}: {exc}')
+            print(f'mocap eval video: skipping {d.name}: {exc}', file=sys.stderr)
+    if not scores:
+        print('mocap eval video: error: no clip could be scored', file=sys.stderr)
+        return 2
+    agg = aggregate(scores)
+    agg['failed'] = failed
+    agg['no_output'] = no_output
+    setup = [f'`mocap eval video --split {args.split} --start {args.start} --intrinsics '
+             f'{args.intrinsics}' + ''.join(f' --param {p}' for p in args.param) + '`'
+             + (f' (first {args.limit} clips)' if args.limit else ''),
+             f'Rendered clips: `{renders}` ({args.split} split: subjects, contents and styles '
+             'never trained on).',
+             f'{len(no_output)} clip(s) without any lifter output (the detector found nobody '
+             'in any frame) are not in the figures.' if no_output else '']
+    out.mkdir(parents=True, exist_ok=True)
+    md = report_markdown(agg, args.title, setup)
+    (out / 'report.md').write_text(md)
+    (out / 'report.json').write_text(json.dumps(
+        {'aggregate': agg, 'clips': [{'clip': s.clip, **s.summary()} for s in scores]},
+        indent=1, default=float))
+    _plots(scores, agg, out)
+    print(md)
+    print(f'report: {out / "report.md"}', file=sys.stderr)
+    return 1 if failed else 0
+
+
+def add_eval_parser(sub) -> None:
+    p = sub.add_parser('video', help='the whole pipeline from rendered test videos, scored '
+                       'against exact ground truth', description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--renders', help='rendered clips (default ~/.cache/mocap/render)')
+    p.add_argument('--split', default='validation', help='split to score (default validation)')
+    p.add_argument('--limit', type=int, help='score only the first N clips')
+    p.add_argument('-o', '--output', default='out/eval_video',
+                   help='report folder (default out/eval_video)')
+    p.add_argument('--param', action='append', default=[], metavar='NODE.NAME=VALUE',
+                   help='node parameter for mocap process (repeatable)')
+    p.add_argument('--intrinsics', choices=('true', 'approx'), default='true',
+                   help="true: the render camera's calibration; approx: the keypoint node's "
+                   'field-of-view approximation')
+    p.add_argument('--start', choices=('video', 'keypoints'), default='video',
+                   help='video: run the detector on the video; keypoints: reuse the '
+                   "render's detections (same detector, faster)")
+    p.add_argument('--tag', help='name of this run (output bags reused by the same tag)')
+    p.add_argument('--title', default='Rendered test videos: the pipeline against exact '
+                   'ground truth', help='report title')
+    p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.set_defaults(func=cmd_eval_video)
+
+
+def main(argv: Optional[List[str]] = None) -> int:  # pragma: no cover - via mocap
+    parser = argparse.ArgumentParser(prog='mocap eval')
+    add_eval_parser(parser.add_subparsers(dest='model'))
+    args = parser.parse_args(argv)
+    return args.func(args)

@@ -1,0 +1,265 @@
+"""Scoring the pipeline's outputs on rendered clips against their exact ground truth (no ROS).
+
+``mocap eval video`` runs ``mocap process`` on each rendered test video and hands the output
+arrays to :func:`score_clip`; :func:`aggregate` and :func:`report_markdown` make the report.
+
+Metrics (positions in metres in, millimetres out):
+
+* lifter (camera optical frame): MPJPE (pelvis-aligned), PA-MPJPE (per-frame similarity
+  alignment), MRPE (pelvis position), MBLE (mean bone-length error against the rendered
+  body's bones);
+* jitter: mean joint acceleration magnitude (m/s^2) of the output and of the ground truth,
+  and their ratio;
+* left/right leg swaps: a frame counts as swapped when the lifter's legs (hip, knee, ankle,
+  toe; pelvis-aligned) are closer to the ground truth with left and right exchanged than as
+  labelled; frames whose true legs are less than :data:`SWAP_MIN_SEPARATION_M` apart on
+  average are ambiguous and not counted;
+* physics (``floor`` frame) and world stage (``world`` frame): root trajectory error: the
+  whole clip's pelvis path rigidly aligned (rotation + translation, no scale) to the true
+  world path; mean error (mm) and that error over the distance the pelvis travelled (RTE, %;
+  only clips travelling at least :data:`RTE_MIN_TRAVEL_M`).
+
+Breakdowns: per frame by view (front / side / back: the person's facing against the
+direction to the camera), per clip by motion group, body height, camera kind.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from ..pose_metrics import procrustes_align
+from ..skeleton import JOINT_INDEX, PARENTS
+
+#: Frames whose true left and right legs are closer than this (m, mean over knee, ankle,
+#: toe) are not scored for swaps.
+SWAP_MIN_SEPARATION_M = 0.12
+#: Clips whose pelvis travels less than this (m) get no RTE percentage.
+RTE_MIN_TRAVEL_M = 1.0
+
+_LEGS = {side: [JOINT_INDEX[f'{side}_{n}'] for n in ('hip', 'knee', 'ankle', 'toe')]
+         for side in ('left', 'right')}
+_BONES = [j for j in range(1, len(PARENTS))]
+
+
+def motion_group(clip_id: str) -> str:
+    """A readable motion family of a clip id: the Bandai Namco content (``walk``,
+    ``dance``, ...), ``cmu`` for CMU clips, else the file stem."""
+    name = clip_id.split(':')[-1].split('/')[-1]
+    m = re.match(r'dataset-\d+_(.+?)_[a-z-]+_\d+\.bvh$', name)
+    if m:
+        return m.group(1)
+    if 'cmu' in clip_id.lower():
+        return 'cmu'
+    return re.sub(r'[_-]?\d+$', '', name.rsplit('.', 1)[0]) or name
+
+
+def height_class(height_m: float) -> str:
+    return 'short (< 1.60 m)' if height_m < 1.6 else (
+        'medium (1.60-1.75 m)' if height_m < 1.75 else 'tall (>= 1.75 m)')
+
+
+def _rigid_align(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """(F, 3) ``pred`` rigidly (rotation, translation) aligned onto ``gt``."""
+    mp, mg = pred.mean(axis=0), gt.mean(axis=0)
+    h = (pred - mp).T @ (gt - mg)
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(u @ vt))
+    r = u @ np.diag([1.0, 1.0, d]) @ vt
+    return (pred - mp) @ r + mg
+
+
+def acceleration(p: np.ndarray, fps: float) -> float:
+    """Mean joint acceleration magnitude (m/s^2) of (F, J, 3) positions."""
+    if len(p) < 3:
+        return float('nan')
+    return float(np.linalg.norm(np.diff(p, 2, axis=0), axis=-1).mean() * fps * fps)
+
+
+@dataclass
+class ClipScore:
+    """The scores of one clip (see the module docstring); per-frame arrays for pooling."""
+
+    clip: str
+    group: str
+    height: str
+    camera: str
+    frames: int
+    scored: int
+    detected: float
+    mpjpe: np.ndarray                 # (scored,) mm per frame
+    pa_mpjpe: np.ndarray
+    mrpe: np.ndarray
+    views: np.ndarray                 # (scored,) str
+    swaps: np.ndarray                 # (scored,) 1 swapped, 0 not, -1 ambiguous
+    mble: float
+    jitter: float
+    jitter_gt: float
+    root: Dict[str, Dict[str, float]] = field(default_factory=dict)
+
+    def summary(self) -> Dict[str, float]:
+        s = self.swaps[self.swaps >= 0]
+        out = {'mpjpe': float(np.mean(self.mpjpe)), 'pa_mpjpe': float(np.mean(self.pa_mpjpe)),
+               'mrpe': float(np.mean(self.mrpe)), 'mble': self.mble, 'jitter': self.jitter,
+               'jitter_gt': self.jitter_gt,
+               'jitter_ratio': self.jitter / max(self.jitter_gt, 1e-9),
+               'swap_rate': float(s.mean()) if len(s) else float('nan'),
+               'detected': self.detected, 'scored': self.scored, 'frames': self.frames}
+        for stage, r in self.root.items():
+            for k, v in r.items():
+                out[f'{stage}_{k}'] = v
+        return out
+
+
+def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
+               lifter: Optional[np.ndarray], lifter_index: np.ndarray,
+               stage_roots: Optional[Dict[str, tuple]] = None) -> ClipScore:
+    """Score one clip.
+
+    Args:
+        clip: clip id; meta: its ``meta.json``; gt: its ``data.npz`` arrays.
+        lifter: (N, 18, 3) the lifter's joints, camera optical frame (None: nothing out).
+        lifter_index: (N,) the rendered frame index of each lifter output.
+        stage_roots: ``{'physics': (pelvis (M, 3), index (M,)), 'world': ...}`` the stages'
+            pelvis paths in their own frames with their frame indices.
+    """
+    fps = float(gt['fps'])
+    F = len(gt['joints_camera'])
+    G = gt['joints_camera']
+    if lifter is None or len(lifter) == 0:
+        raise ValueError(f'{clip}: the lifter published nothing')
+    idx = np.asarray(lifter_index, dtype=int)
+    keep = (idx >= 0) & (idx < F)
+    P, idx = np.asarray(lifter)[keep], idx[keep]
+    g = G[idx]
+    pr, gr = P - P[:, :1], g - g[:, :1]
+    mpjpe = 1000 * np.linalg.norm(pr - gr, axis=-1).mean(axis=1)
+    pa = 1000 * np.linalg.norm(procrustes_align(P, g) - g, axis=-1).mean(axis=1)
+    mrpe = 1000 * np.linalg.norm(P[:, 0] - g[:, 0], axis=-1)
+    bl_p = np.linalg.norm(P[:, _BONES] - P[:, [PARENTS[j] for j in _BONES]], axis=-1)
+    bl_g = np.linalg.norm(g[:, _BONES] - g[:, [PARENTS[j] for j in _BONES]], axis=-1)
+    mble = float(1000 * np.abs(np.median(bl_p, axis=0) - np.median(bl_g, axis=0)).mean())
+    L, R = _LEGS['left'], _LEGS['right']
+    same = np.linalg.norm(pr[:, L] - gr[:, L], axis=-1).mean(1) + \
+        np.linalg.norm(pr[:, R] - gr[:, R], axis=-1).mean(1)
+    swap = np.linalg.norm(pr[:, L] - gr[:, R], axis=-1).mean(1) + \
+        np.linalg.norm(pr[:, R] - gr[:, L], axis=-1).mean(1)
+    sep = np.linalg.norm(gr[:, L[1:]] - gr[:, R[1:]], axis=-1).mean(1)
+    swaps = np.where(sep < SWAP_MIN_SEPARATION_M, -1, (swap < same).astype(int))
+    contiguous = np.all(np.diff(idx) == 1)
+    jit = acceleration(P, fps) if contiguous else float('nan')
+    jit_gt = acceleration(g, fps)
+    root: Dict[str, Dict[str, float]] = {}
+    travel_path = gt['joints_world'][:, 0]
+    travel = float(np.linalg.norm(np.diff(travel_path[:, :2], axis=0), axis=-1).sum())
+    for stage, (pel, sidx) in (stage_roots or {}).items():
+        sidx = np.asarray(sidx, dtype=int)
+        ok = (sidx >= 0) & (sidx < F)
+        if ok.sum() < 3:
+            continue
+        est, true = np.asarray(pel)[ok], travel_path[sidx[ok]]
+        err = float(1000 * np.linalg.norm(_rigid_align(est, true) - true, axis=-1).mean())
+        root[stage] = {'root_error': err,
+                       'rte': 100 * err / 1000 / travel if travel >= RTE_MIN_TRAVEL_M
+                       else float('nan')}
+    height = height_class(float(meta.get('body_height_m', 1.7)))
+    return ClipScore(clip, motion_group(clip), height, meta['camera']['kind'], F, len(idx),
+                     float(meta.get('detected_fraction', float('nan'))), mpjpe, pa, mrpe,
+                     np.asarray(gt['view'])[idx], swaps, mble, jit, jit_gt, root)
+
+
+# ------------------------------------------------------------------------------------------
+def _median(xs: Sequence[float]) -> float:
+    xs = [x for x in xs if np.isfinite(x)]
+    return float(np.median(xs)) if xs else float('nan')
+
+
+def aggregate(scores: List[ClipScore]) -> dict:
+    """Medians over clips, pooled per-frame means, and the breakdowns."""
+    if not scores:
+        raise ValueError('no clip scored')
+    per = [s.summary() for s in scores]
+    keys = sorted({k for p in per for k in p})
+    out = {'clips': len(scores), 'frames': int(sum(s.frames for s in scores)),
+           'scored_frames': int(sum(s.scored for s in scores)),
+           'median': {k: _median([p.get(k, float('nan')) for p in per]) for k in keys}}
+    allsw = np.concatenate([s.swaps for s in scores])
+    out['pooled'] = {
+        'mpjpe': float(np.concatenate([s.mpjpe for s in scores]).mean()),
+        'pa_mpjpe': float(np.concatenate([s.pa_mpjpe for s in scores]).mean()),
+        'mrpe': float(np.concatenate([s.mrpe for s in scores]).mean()),
+        'swap_rate': float((allsw[allsw >= 0]).mean()) if (allsw >= 0).any() else float('nan'),
+    }
+    views = np.concatenate([s.views for s in scores])
+    mp = np.concatenate([s.mpjpe for s in scores])
+    pa = np.concatenate([s.pa_mpjpe for s in scores])
+    by_view = {}
+    for v in ('front', 'side', 'back'):
+        m = views == v
+        if m.any():
+            sw = allsw[m]
+            by_view[v] = {'frames': int(m.sum()), 'mpjpe': float(mp[m].mean()),
+                          'pa_mpjpe': float(pa[m].mean()),
+                          'swap_rate': float((sw[sw >= 0]).mean()) if (sw >= 0).any()
+                          else float('nan')}
+    out['by_view'] = by_view
+    for name, attr in (('by_group', 'group'), ('by_height', 'height'),
+                       ('by_camera', 'camera')):
+        groups: Dict[str, List[dict]] = {}
+        for s, p in zip(scores, per):
+            groups.setdefault(getattr(s, attr), []).append(p)
+        out[name] = {g: {'clips': len(ps), **{k: _median([p.get(k, float('nan')) for p in ps])
+                                              for k in ('mpjpe', 'pa_mpjpe', 'swap_rate',
+                                                        'jitter_ratio', 'detected',
+                                                        'physics_root_error',
+                                                        'world_root_error')}}
+                     for g, ps in sorted(groups.items())}
+    return out
+
+
+def _f(x: float, fmt: str = '{:.1f}') -> str:
+    return fmt.format(x) if x is not None and np.isfinite(x) else '–'
+
+
+def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
+    """The benchmark report (medians over clips first, then the breakdowns)."""
+    m, p = agg['median'], agg['pooled']
+    lines = [f'# {title}', '', *setup, '',
+             f"{agg['clips']} clips, {agg['frames']} frames ({agg['scored_frames']} with a "
+             'lifter output).', '', '## Summary (median over clips)', '',
+             '| measure | value |', '|---|---|',
+             f"| lifter MPJPE | {_f(m.get('mpjpe'))} mm (pooled over frames "
+             f"{_f(p['mpjpe'])}) |",
+             f"| lifter PA-MPJPE | {_f(m.get('pa_mpjpe'))} mm (pooled {_f(p['pa_mpjpe'])}) |",
+             f"| lifter MRPE (pelvis position) | {_f(m.get('mrpe'))} mm |",
+             f"| lifter MBLE (bone lengths) | {_f(m.get('mble'))} mm |",
+             f"| left/right leg swaps | {_f(100 * m.get('swap_rate', float('nan')), '{:.2f}')} "
+             f"% of frames (pooled {_f(100 * p['swap_rate'], '{:.2f}')} %) |",
+             f"| jitter: lifter / ground truth | {_f(m.get('jitter'))} / "
+             f"{_f(m.get('jitter_gt'))} m/s² (ratio {_f(m.get('jitter_ratio'), '{:.2f}')}×) |",
+             f"| physics root trajectory error | {_f(m.get('physics_root_error'))} mm "
+             f"(RTE {_f(m.get('physics_rte'))} %) |",
+             f"| world root trajectory error | {_f(m.get('world_root_error'))} mm "
+             f"(RTE {_f(m.get('world_rte'))} %) |",
+             f"| person detected | {_f(100 * m.get('detected', float('nan')))} % of frames |",
+             '', '## By view (pooled over frames)', '',
+             '| view | frames | MPJPE | PA-MPJPE | leg swaps |', '|---|---|---|---|---|']
+    for v, r in agg['by_view'].items():
+        lines.append(f"| {v} | {r['frames']} | {_f(r['mpjpe'])} | {_f(r['pa_mpjpe'])} | "
+                     f"{_f(100 * r['swap_rate'], '{:.2f}')} % |")
+    for name, label in (('by_group', 'motion group'), ('by_height', 'body height'),
+                        ('by_camera', 'camera')):
+        lines += ['', f'## By {label} (median over clips)', '',
+                  f'| {label} | clips | MPJPE | PA-MPJPE | leg swaps | jitter ratio | '
+                  'detected | physics root | world root |',
+                  '|---|---|---|---|---|---|---|---|---|']
+        for g, r in agg[name].items():
+            lines.append(
+                f"| {g} | {r['clips']} | {_f(r['mpjpe'])} | {_f(r['pa_mpjpe'])} | "
+                f"{_f(100 * r['swap_rate'], '{:.2f}')} % | {_f(r['jitter_ratio'], '{:.2f}')} | "
+                f"{_f(100 * r['detected'], '{:.0f}')} % | {_f(r['physics_root_error'], '{:.0f}')}"
+                f" | {_f(r['world_root_error'], '{:.0f}')} |")
+    return '\n'.join(lines) + '\n'
