@@ -8,6 +8,7 @@
                       [--azimuth MIN [MAX]] [--image-size WxH] [--clean] [--no-world-motion]
     mocap data from-openpose <dir> -o BAG [--fps 30] [--fov 60] [--camera-info YAML]
     mocap data fit-confidence <openpose dirs ...> -o model.json
+    mocap data fit-placement [--renders DIR] [--split train] [-o detector_placement.json]
     mocap data render [--split validation|train|all] [--bvh FILE ...] [-o DIR] [--jobs 2]
                       [--limit N] [--max-seconds 8] [--seed 0] [--camera KIND] [--hours H]
 
@@ -416,6 +417,36 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 1 if r['clips_failed'] else 0
 
 
+def cmd_fit_placement(args: argparse.Namespace) -> int:
+    """Fit where the detector puts the keypoints, on rendered clips."""
+    from ..data.detector_placement import PLACEMENT_PATH, fit_detector_placement
+    from ..render.batch import DEFAULT_OUT
+    from ..render.clip import iter_done, load_clip
+    from ..skeleton import KEYPOINT_NAMES
+
+    renders = Path(args.renders) if args.renders else DEFAULT_OUT
+    clips = list(iter_done(renders, args.split))
+    if len(clips) < args.min_clips:
+        raise CommandError(f'{len(clips)} rendered {args.split} clips under {renders}; at least '
+                           f'{args.min_clips} needed (mocap data render --split {args.split})')
+    placement = fit_detector_placement(
+        (load_clip(d)[0] for d in clips),
+        info={'renders': args.split, 'command': 'mocap data fit-placement '
+              + ' '.join(sys.argv[3:]), 'date': time.strftime('%Y-%m-%d')})
+    out = Path(args.output) if args.output else PLACEMENT_PATH
+    placement.save(out)
+    before = placement.info['median_residual_before_rel_height']
+    after = placement.info['median_residual_after_rel_height']
+    print(f'{len(clips)} clips; median 2D residual (fraction of the person\'s height) of the '
+          'detector against the synthesizer: joints -> placed')
+    for k, name in enumerate(KEYPOINT_NAMES):
+        if np.isfinite(before[k]):
+            print(f'  {name:16s} {before[k]:.4f} -> {after[k]:.4f}   offset (leg lengths) '
+                  f'{np.round(placement.offsets[k], 3).tolist()}')
+    print(f'wrote {out}')
+    return 0
+
+
 class _SplitAction(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         setattr(namespace, self.dest, values)
@@ -524,6 +555,16 @@ def add_data_parser(sub) -> None:
                    'mocap_core/data/confidence_model.json)')
     q.add_argument('--source', help='description stored in the model (default: generated)')
     q.set_defaults(func=cmd_fit_confidence)
+
+    q = dsub.add_parser('fit-placement', help='fit where the keypoint detector puts each point '
+                        'relative to the synthesizer, on rendered clips (cross-synthesizer '
+                        'keypoints)')
+    q.add_argument('--renders', help='rendered clips (default ~/.cache/mocap/render)')
+    q.add_argument('--split', default='train', help='rendered split to fit on (default train)')
+    q.add_argument('--min-clips', type=int, default=20, help='refuse fewer clips (default 20)')
+    q.add_argument('-o', '--output', help='output JSON (default: the shipped '
+                   'mocap_core/data/detector_placement.json)')
+    q.set_defaults(func=_guard(cmd_fit_placement))
 
     q = dsub.add_parser(
         'render', help='render people (Anny + pyrender) driven by motion capture, run the '

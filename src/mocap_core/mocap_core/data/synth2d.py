@@ -61,8 +61,11 @@ FOOT_POINTS: Dict[str, Tuple[str, Tuple[float, float, float]]] = {
 
 
 def keypoints_3d(skeleton: Skeleton, rotations: np.ndarray,
-                 root_positions: np.ndarray) -> np.ndarray:
-    """World positions (F, 23, 3) of the layout keypoints for a motion (module docstring)."""
+                 root_positions: np.ndarray, placement=None) -> np.ndarray:
+    """World positions (F, 23, 3) of the layout keypoints for a motion (module docstring).
+
+    ``placement``: a :class:`~.detector_placement.DetectorPlacement` moves every point to where
+    the real detector puts it (cross-synthesizer keypoints); None keeps the joints."""
     fk = forward_kinematics(skeleton.parents, skeleton.offsets, rotations, root_positions)
     pos, rot = fk.positions, fk.global_rotations
     out = np.zeros(pos.shape[:-2] + (NUM_KEYPOINTS, 3))
@@ -78,6 +81,9 @@ def keypoints_3d(skeleton: Skeleton, rotations: np.ndarray,
     for side in ('left', 'right'):
         j, local = skeleton.contact_points()[f'{side}_heel']
         out[..., KEYPOINT_INDEX[f'{side}_heel'], :] = pos[..., j, :] + rot[..., j, :, :] @ local
+    if placement is not None:
+        from .detector_placement import leg_length
+        out = placement.apply(out, rot, leg_length(skeleton))
     return out
 
 

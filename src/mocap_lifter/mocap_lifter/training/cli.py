@@ -134,6 +134,13 @@ def add_eval_parser(sub) -> None:
                    'joints to the keypoints')
     p.add_argument('--mode', choices=('windowed', 'causal'), default='windowed')
     p.add_argument('--noise', choices=('none', 'motionet', 'both'), default='both')
+    p.add_argument('--split', choices=('validation', 'strict'), default='validation',
+                   help='validation: the committed split; strict: held-out subjects and whole '
+                   'motion families (mocap_core.data.strict_split)')
+    p.add_argument('--placement', choices=('joints', 'detector', 'both'), default='joints',
+                   help='keypoints on the joints (the training synthesizer) or where the real '
+                   'detector puts them (cross-synthesizer check, '
+                   'mocap_core/data/detector_placement.json)')
     p.add_argument('--out', help='report directory (default: next to the weights)')
     p.add_argument('--device', default='cpu')
     p.add_argument('--real', nargs='*', default=None, metavar='DIR',
@@ -227,13 +234,33 @@ def cmd_eval(args: argparse.Namespace) -> int:
         print(f"mocap eval lifter: error: {weights} holds {'VTM' if is_vtm else 'MotioNet'} "
               f'weights but --model {args.model}', file=sys.stderr)
         return 2
-    val = load_dataset('validation')
+    families = None
+    if args.split == 'strict':
+        from mocap_core.data.strict_split import load_strict
+        val, families = load_strict('strict_validation')
+        train_for_baseline, _ = load_strict('strict_train')
+    else:
+        val = load_dataset('validation')
+        train_for_baseline = load_dataset('train')
+    placements = {'joints': [None], 'detector': ['detector'],
+                  'both': [None, 'detector']}[args.placement]
+    if 'detector' in placements:
+        from mocap_core.data.detector_placement import PLACEMENT_PATH, DetectorPlacement
+        try:
+            placed = DetectorPlacement.load(PLACEMENT_PATH)
+        except (OSError, ValueError) as exc:
+            print(f'mocap eval lifter: error: no detector placement ({exc}); make it with '
+                  '`mocap data fit-placement`', file=sys.stderr)
+            return 2
+        placements = [placed if p else None for p in placements]
     noises = ('none', 'motionet') if args.noise == 'both' else (args.noise,)
     t0 = time.time()
-    results = [evaluate(model, val, n, args.device) for n in noises]
+    results = [evaluate(model, val, n, args.device, placement=pl, families=families)
+               for pl in placements for n in noises]
     seconds = time.time() - t0
-    baseline = {n: baseline_mean_pose(load_dataset('train'), val, n) for n in noises}
-    out = Path(args.out) if args.out else weights.parent / f'{weights.stem}_eval'
+    baseline = {n: baseline_mean_pose(train_for_baseline, val, n) for n in noises}
+    suffix = '' if args.split == 'validation' else f'_{args.split}'
+    out = Path(args.out) if args.out else weights.parent / f'{weights.stem}_eval{suffix}'
     real_dirs = args.real if args.real is not None else default_real_sequences()
     real = None
     if real_dirs:
@@ -255,12 +282,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
         print(f"TPMAE alone (true motion encoded and decoded): MPJPE {t['mpjpe_mm']:.1f} mm  "
               f"PA-MPJPE {t['pa_mpjpe_mm']:.1f} mm  MRPE {t['mrpe_mm']:.1f} mm")
     name = 'VTM' if is_vtm else 'MotioNet'
-    path = write_report(results, out, f'{name} lifter ({weights.name}) on the validation '
-                        'split', extra, real=real)
+    split_name = 'the validation split' if args.split == 'validation' else \
+        'the strict split (held-out subjects and whole motion families)'
+    path = write_report(results, out, f'{name} lifter ({weights.name}) on {split_name}', extra,
+                        real=real)
     for r in results:
         s = r['summary']
-        print(f"{r['noise']:9s} MPJPE {s['mpjpe_mm']:.1f} mm  PA-MPJPE {s['pa_mpjpe_mm']:.1f} mm"
-              f"  MRPE {s['mrpe_mm']:.1f} mm  MBLE {s['mble_mm']:.1f} mm  contacts "
+        print(f"{r['noise']:9s} {r['placement']:8s} MPJPE {s['mpjpe_mm']:.1f} mm  "
+              f"PA-MPJPE {s['pa_mpjpe_mm']:.1f} mm  MRPE {s['mrpe_mm']:.1f} mm  "
+              f"MBLE {s['mble_mm']:.1f} mm  contacts "
               f"{s['contact_accuracy']:.3f}")
     print(f'baseline (mean pose): {baseline}')
     print(f'report: {path}')

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import zlib
 from pathlib import Path
-from typing import Dict, List, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import torch
@@ -50,12 +50,19 @@ def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.n
 
 
 def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
-             device: str = 'cpu', max_frames: int = 900) -> Dict:
-    """Metrics over validation clips (frame-weighted means); per-clip rows included."""
+             device: str = 'cpu', max_frames: int = 900, placement=None,
+             families: Optional[Sequence[str]] = None) -> Dict:
+    """Metrics over validation clips (frame-weighted means); per-clip rows included.
+
+    ``placement``: a ``DetectorPlacement`` puts the keypoints where the real detector puts them
+    (the cross-synthesizer check); None projects the joints. ``families``: a label per clip
+    (e.g. the strict split's held-out family) for a per-family summary."""
     if noise not in ('none', 'motionet'):
         raise ValueError("noise must be 'none' or 'motionet'")
     aug = Augmentation(flip_prob=0.0, bone_scale=0.0, global_scale=0.0,
-                       corruption=Corruption() if noise == 'motionet' else None)
+                       corruption=Corruption() if noise == 'motionet' else None,
+                       placement=placement, placement_prob=1.0 if placement is not None
+                       else 0.0)
     rows: List[Dict] = []
     for m in motions:
         n = min(m.num_frames, max_frames)
@@ -77,8 +84,22 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
     frames = np.array([r['frames'] for r in rows], dtype=np.float64)
     summary = {k: _weighted_mean([r[k] for r in rows], frames)
                for k in rows[0] if k not in ('clip', 'frames')}
-    return {'noise': noise, 'clips': len(rows), 'frames': int(frames.sum()),
-            'summary': summary, 'per_clip': rows}
+    out = {'noise': noise, 'clips': len(rows), 'frames': int(frames.sum()),
+           'placement': 'detector' if placement is not None else 'joints',
+           'summary': summary, 'per_clip': rows}
+    if families is not None:
+        by: Dict[str, Dict[str, float]] = {}
+        for fam in sorted(set(families)):
+            idx = [i for i, f in enumerate(families) if f == fam]
+            w = frames[idx]
+            by[fam] = {'clips': len(idx), 'frames': int(w.sum()),
+                       **{k: _weighted_mean([rows[i][k] for i in idx], w)
+                          for k in ('mpjpe_mm', 'pa_mpjpe_mm', 'mrpe_mm')}}
+            rows_f = [rows[i] for i in idx]
+            for r in rows_f:
+                r['family'] = fam
+        out['by_family'] = by
+    return out
 
 
 @torch.no_grad()
@@ -227,13 +248,26 @@ def write_report(results: Sequence[Dict], out_dir: Path, title: str,
     keys = ['mpjpe_mm', 'n_mpjpe_mm', 'pa_mpjpe_mm', 'mrpe_mm', 'mble_mm', 'bone_spread_mm',
             'contact_accuracy', 'accel_error_mm', 'skating_mm', 'skating_gt_mm',
             'local_rotation_error_deg', 'root_orientation_error_deg']
-    lines = [f'# {title}', '', '| input | clips | frames | ' + ' | '.join(keys) + ' |',
-             '|---|---|---|' + '---|' * len(keys)]
+    lines = [f'# {title}', '', '| noise | keypoints | clips | frames | ' + ' | '.join(keys)
+             + ' |', '|---|---|---|---|' + '---|' * len(keys)]
     for r in results:
         s = r['summary']
-        lines.append(f"| {r['noise']} | {r['clips']} | {r['frames']} | "
+        lines.append(f"| {r['noise']} | {r.get('placement', 'joints')} | {r['clips']} | "
+                     f"{r['frames']} | "
                      + ' | '.join(f'{s[k]:.3f}' if 'accuracy' in k else f'{s[k]:.1f}'
                                   for k in keys if k in s) + ' |')
+    fams = [r for r in results if r.get('by_family')]
+    if fams:
+        lines += ['', '## By held-out family (MPJPE / PA-MPJPE / MRPE, mm)', '',
+                  '| family | clips | ' + ' | '.join(f"{r['noise']}, {r['placement']}"
+                                                    for r in fams) + ' |',
+                  '|---|---|' + '---|' * len(fams)]
+        for fam, v in fams[0]['by_family'].items():
+            lines.append(f"| {fam} | {v['clips']} | " + ' | '.join(
+                '{:.1f} / {:.1f} / {:.0f}'.format(r['by_family'][fam]['mpjpe_mm'],
+                                                  r['by_family'][fam]['pa_mpjpe_mm'],
+                                                  r['by_family'][fam]['mrpe_mm'])
+                for r in fams) + ' |')
     if real:
         ref = real.get('groundtruth', {})
         lines += ['', f"## Real OpenPose sequences (no ground truth): {real['sequences']} "

@@ -39,6 +39,10 @@ class Augmentation:
     corruption: Optional[Corruption] = field(default_factory=Corruption)  # None = clean
     clean_prob: float = 0.0        # share of windows left uncorrupted (confidence 1)
     tpose_prob: float = 0.0        # share of windows replaced by the character's T-pose
+    #: keypoints placed where the real detector puts them (``mocap_core.data.
+    #: detector_placement``) in this share of windows; the rest on the joints.
+    placement: Optional[object] = None
+    placement_prob: float = 0.0
 
 
 def scaled_skeleton(skeleton: Skeleton, rng: np.random.Generator, aug: Augmentation,
@@ -71,7 +75,8 @@ def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generato
     tpose = aug.tpose_prob > 0 and rng.random() < aug.tpose_prob
     if tpose:
         rot, root, contacts = tpose_window(skeleton, rot, root)
-    pts = keypoints_3d(skeleton, rot, root)
+    placed = aug.placement is not None and rng.random() < aug.placement_prob
+    pts = keypoints_3d(skeleton, rot, root, placement=aug.placement if placed else None)
     forward = _facing(rot[:, 0])
     camera = sample_camera(pts, rng, aug.camera, facing=forward)
     kp = project(camera, pts)
