@@ -39,6 +39,14 @@ def add_train_parser(sub) -> None:
                    'configuration) instead of a random initialisation')
     p.add_argument('--clean-fraction', type=float, help='share of training windows with clean '
                    'keypoints (confidence 1, no displacement); default 0.25')
+    p.add_argument('--split', choices=('committed', 'strict'),
+                   help='training clips: the committed split (default) or the strict one '
+                   '(whole motion families held out; mocap_core.data.strict_split)')
+    p.add_argument('--placement-fraction', type=float,
+                   help='share of projected windows with detector-placed keypoints')
+    p.add_argument('--rendered-fraction', type=float,
+                   help='share of windows from rendered clips (mocap data render)')
+    p.add_argument('--renders', help='rendered clips folder (default ~/.cache/mocap/render)')
     p.add_argument('--install', action='store_true', help='copy the final weights to the '
                    'package (weights/motionet_<mode>.pt)')
     p.set_defaults(func=cmd_train)
@@ -170,11 +178,19 @@ def cmd_train(args: argparse.Namespace) -> int:
         cfg.init = str(Path(args.init).resolve())
     if args.clean_fraction is not None:
         cfg.clean_fraction = args.clean_fraction
+    for name in ('split', 'placement_fraction', 'rendered_fraction', 'renders'):
+        if getattr(args, name) is not None:
+            setattr(cfg, name, getattr(args, name))
     run_dir = Path(args.run_dir or f'runs/lifter_{args.mode}')
-    print('loading the dataset (train and validation splits) ...', flush=True)
+    print(f'loading the dataset ({cfg.split} train and validation splits) ...', flush=True)
     t0 = time.time()
-    train_motions = load_dataset('train')
-    val_motions = load_dataset('validation')
+    if cfg.split == 'strict':
+        from mocap_core.data.strict_split import load_strict
+        train_motions, _ = load_strict('strict_train')
+        val_motions, _ = load_strict('strict_validation')
+    else:
+        train_motions = load_dataset('train')
+        val_motions = load_dataset('validation')
     print(f'{len(train_motions)} training clips, {len(val_motions)} validation clips '
           f'({time.time() - t0:.0f} s)', flush=True)
     try:

@@ -145,3 +145,99 @@ class WindowSampler:
             start = int(self.rng.integers(0, m.num_frames - self.window + 1))
             items.append(make_sample(m, start, self.window, self.rng, self.aug))
         return {k: np.stack([it[k] for it in items]) for k in items[0]}
+
+
+class RenderedWindowSampler:
+    """Windows of rendered clips (``mocap data render``): the real detector's keypoints on
+    rendered people, with exact targets in the (possibly moving) camera's optical frame.
+
+    Each clip folder's ``data.npz`` gives the detector keypoints, the intrinsics, the exact
+    joints (``joints_camera``: the training convention, so the position targets are exact),
+    the driving rotations (the root turned into the camera frame per frame), the bone-group
+    lengths and the contacts. Frames without a detection stay in (zero confidence), as the
+    lifter sees them live. No flip augmentation: the renders already show every side.
+
+    Args:
+        clip_dirs: rendered clip folders.
+        window: frames per window; shorter clips are skipped.
+        seed: the sampler's generator.
+        keep: optional predicate on the clip id (e.g. the strict split's training clips).
+    """
+
+    def __init__(self, clip_dirs: Sequence, window: int, seed: int = 0,
+                 keep=None) -> None:
+        import json
+        from pathlib import Path
+
+        from mocap_core.camera import CameraIntrinsics
+        from mocap_core.rotations import matrix_to_quat, quat_multiply
+        self.window = window
+        self.rng = np.random.default_rng(seed)
+        self.clips: List[Dict[str, np.ndarray]] = []
+        for d in clip_dirs:
+            d = Path(d)
+            meta = json.loads((d / 'meta.json').read_text())
+            if keep is not None and not keep(meta['clip']):
+                continue
+            with np.load(d / 'data.npz') as z:
+                if len(z['keypoints']) < window:
+                    continue
+                K, (w, h) = z['K'], (int(x) for x in z['image_size'])
+                intr = CameraIntrinsics(w, h, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]),
+                                        float(K[1, 2]), approximate=False)
+                rot = z['rotations'].copy()
+                rot[:, 0] = quat_multiply(matrix_to_quat(z['camera_R']), rot[:, 0])
+                feats, root_2d, scale, _ = lifter_features(z['keypoints'], intr)
+                self.clips.append({
+                    'features': feats, 'root_2d': root_2d.astype(np.float32),
+                    'scale': scale.astype(np.float32),
+                    'positions': z['joints_camera'].astype(np.float32),
+                    'rotations': rot.astype(np.float32),
+                    'root': z['joints_camera'][:, 0].astype(np.float32),
+                    'lengths': z['bone_lengths'].astype(np.float32),
+                    'contacts': z['contacts'].astype(np.float32),
+                    'keypoints': z['keypoints'].astype(np.float32)})
+        if not self.clips:
+            raise ValueError(f'no rendered clip has {window} frames')
+        counts = np.array([len(c['features']) - window + 1 for c in self.clips], float)
+        self.weights = counts / counts.sum()
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    def sample(self) -> Dict[str, np.ndarray]:
+        c = self.clips[self.rng.choice(len(self.clips), p=self.weights)]
+        s = int(self.rng.integers(0, len(c['features']) - self.window + 1))
+        out = {k: (v if k == 'lengths' else v[s:s + self.window]) for k, v in c.items()}
+        out['tpose'] = np.float32(0.0)
+        return out
+
+
+class MixedSampler:
+    """Batches mixing projected windows (:class:`WindowSampler`) and rendered windows
+    (:class:`RenderedWindowSampler`): each sample is rendered with probability
+    ``rendered_fraction``."""
+
+    def __init__(self, projected: WindowSampler, rendered: RenderedWindowSampler,
+                 rendered_fraction: float) -> None:
+        self.projected, self.rendered = projected, rendered
+        self.fraction = float(rendered_fraction)
+        self.rng = projected.rng
+
+    @property
+    def window(self) -> int:
+        return self.projected.window
+
+    def reseed(self, seed: int) -> None:
+        self.projected.rng = np.random.default_rng(seed)
+        self.rendered.rng = np.random.default_rng(seed + 1)
+        self.rng = self.projected.rng
+
+    def batch(self, size: int) -> Dict[str, np.ndarray]:
+        n_r = int(self.rng.binomial(size, self.fraction))
+        items = [self.rendered.sample() for _ in range(n_r)]
+        if size - n_r:
+            proj = self.projected.batch(size - n_r)
+            items += [{k: v[i] for k, v in proj.items()} for i in range(size - n_r)]
+        return {k: np.stack([np.asarray(it[k], dtype=np.float32) for it in items])
+                for k in items[0]}

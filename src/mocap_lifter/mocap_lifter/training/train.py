@@ -41,7 +41,7 @@ from ..features import NUM_FEATURES
 from ..model import LifterConfig, MotioNet, RotationDiscriminator
 from ..weights import load_weights, plain_data, save_weights
 from .common import cosine_lr, plot_log, to_torch
-from .samples import Augmentation, WindowSampler
+from .samples import Augmentation, MixedSampler, RenderedWindowSampler, WindowSampler
 
 _FOOT_JOINTS = [JOINT_INDEX[n] for n in ('left_ankle', 'left_toe', 'right_ankle', 'right_toe')]
 
@@ -68,6 +68,16 @@ class TrainConfig:
     tpose_fraction: float = 0.0    # share of T-pose windows (reference T-pose loss)
     w_tpose: float = 0.0           # weight of the T-pose loss (identity rotations)
     init: Optional[str] = None     # weights to start from (fine-tuning) instead of random
+    #: share of keypoint windows placed where the real detector puts its points
+    #: (mocap_core/data/detector_placement.json) instead of on the joints
+    placement_fraction: float = 0.0
+    #: share of windows taken from rendered clips (real detector on rendered people), and
+    #: the folder of the renders (default ~/.cache/mocap/render; its train split is used)
+    rendered_fraction: float = 0.0
+    renders: Optional[str] = None
+    #: 'committed' trains on the committed training split; 'strict' on the strict one
+    #: (whole motion families held out, mocap_core.data.strict_split)
+    split: str = 'committed'
     validate_every: int = 500
     checkpoint_every: int = 250
     threads: int = 2
@@ -137,11 +147,20 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / 'config.json').write_text(json.dumps(asdict(cfg), indent=1))
+    placement = None
+    if cfg.placement_fraction > 0:
+        from mocap_core.data.detector_placement import PLACEMENT_PATH, DetectorPlacement
+        placement = DetectorPlacement.load(PLACEMENT_PATH)
     sampler = WindowSampler(train_motions, cfg.window, seed=cfg.seed,
                             aug=Augmentation(clean_prob=cfg.clean_fraction,
-                                             tpose_prob=cfg.tpose_fraction))
+                                             tpose_prob=cfg.tpose_fraction,
+                                             placement=placement,
+                                             placement_prob=cfg.placement_fraction))
     val_sampler = WindowSampler(val_motions, cfg.window, seed=12345, aug=Augmentation())
     val_batches = [val_sampler.batch(cfg.batch) for _ in range(4)]
+    rendered_val = None
+    if cfg.rendered_fraction > 0:
+        sampler, rendered_val = _with_renders(sampler, cfg)
 
     model = MotioNet(cfg.model).to(device)
     disc = RotationDiscriminator().to(device) if cfg.w_adversarial > 0 else None
@@ -158,7 +177,10 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
             disc.load_state_dict(state['disc'])
             opt_d.load_state_dict(state['optimizer_d'])
         step = state['step']
-        sampler.rng = np.random.default_rng(cfg.seed + step)
+        if isinstance(sampler, MixedSampler):
+            sampler.reseed(cfg.seed + step)
+        else:
+            sampler.rng = np.random.default_rng(cfg.seed + step)
     elif cfg.init:
         init = load_weights(Path(cfg.init), device, causal=cfg.model.causal)
         if asdict(init.cfg) != asdict(model.cfg):
@@ -203,6 +225,10 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
         if step % cfg.validate_every == 0 or step == cfg.steps:
             v = validate(model, val_batches, cfg, device)
             writer.writerow(_row(step, 'val', v['loss'], v, lr, time.time() - t0))
+            if rendered_val is not None:
+                v = validate(model, rendered_val, cfg, device)
+                writer.writerow(_row(step, 'val_rendered', v['loss'], v, lr,
+                                     time.time() - t0))
             log.flush()
             plot_log(log_path, run_dir / 'loss.png')
         if step % cfg.checkpoint_every == 0 or step == cfg.steps:
@@ -217,6 +243,34 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     weights = run_dir / 'lifter.pt'
     save_weights(model, weights, {'steps': step, 'train_seconds': time.time() - t0})
     return weights
+
+
+def _with_renders(sampler: WindowSampler, cfg: TrainConfig):
+    """The training sampler mixed with rendered training windows, and a few fixed batches of
+    rendered validation windows (None when no validation clip is rendered)."""
+    from pathlib import Path as _P
+
+    from mocap_core.render.batch import DEFAULT_OUT
+    from mocap_core.render.clip import iter_done
+    root = _P(cfg.renders) if cfg.renders else DEFAULT_OUT
+    keep = None
+    if cfg.split == 'strict':
+        from mocap_core.data.strict_split import family_of
+        keep = lambda clip: family_of(clip) is None  # noqa: E731
+    train_dirs = list(iter_done(root, 'train'))
+    if not train_dirs:
+        raise ValueError(f'rendered_fraction > 0 but no rendered training clip under {root} '
+                         '(mocap data render --split train)')
+    rendered = RenderedWindowSampler(train_dirs, cfg.window, seed=cfg.seed + 7, keep=keep)
+    print(f'rendered training clips: {len(rendered)} (of {len(train_dirs)} under {root})',
+          flush=True)
+    val_dirs = list(iter_done(root, 'validation'))
+    batches = None
+    if val_dirs:
+        rv = RenderedWindowSampler(val_dirs, cfg.window, seed=54321)
+        batches = [{k: np.stack([it[k] for it in items]) for k in items[0]}
+                   for items in ([rv.sample() for _ in range(cfg.batch)] for _ in range(4))]
+    return MixedSampler(sampler, rendered, cfg.rendered_fraction), batches
 
 
 def _row(step, split, loss, terms, lr, seconds) -> List:
