@@ -44,3 +44,33 @@ def damaged_weights(good: PathLike, directory: PathLike) -> Dict[str, Path]:
     noise = directory / 'random.pt'
     noise.write_bytes(os.urandom(4096))
     return {'truncated': truncated, 'random': noise}
+
+
+def groundtruth_motion(bag: PathLike):
+    """The ground-truth motion of a committed ``gt_*`` bag in the world (its camera-frame
+    motion composed with the camera pose), as a :class:`~mocap_core.data.motion.Motion` with
+    the bag's contact labels (30 fps)."""
+    import numpy as np
+
+    from .bag_io import BagReader, deserialize
+    from .data.motion import Motion
+    from .ros_conversions import motion_to_pose
+    from .rotations import quat_multiply, quat_to_matrix
+    from .topics import GROUNDTRUTH_CAMERA_POSE, GROUNDTRUTH_CONTACTS, GROUNDTRUTH_MOTION
+    poses, contacts, cam = [], [], None
+    with BagReader(bag) as reader:
+        for m in reader.messages(topics=[GROUNDTRUTH_MOTION, GROUNDTRUTH_CONTACTS,
+                                         GROUNDTRUTH_CAMERA_POSE]):
+            msg = deserialize(m.data, m.msgtype)
+            if m.topic == GROUNDTRUTH_MOTION:
+                poses.append(motion_to_pose(msg))
+            elif m.topic == GROUNDTRUTH_CONTACTS:
+                contacts.append(np.asarray(msg.position) > 0.5)
+            else:
+                o, p = msg.pose.orientation, msg.pose.position
+                cam = (np.array([o.x, o.y, o.z, o.w]), np.array([p.x, p.y, p.z]))
+    q, t = cam
+    rot = np.stack([p.rotations for p in poses])
+    rot[:, 0] = quat_multiply(np.broadcast_to(q, rot[:, 0].shape), rot[:, 0])
+    root = np.stack([p.root_position for p in poses]) @ np.asarray(quat_to_matrix(q)).T + t
+    return Motion(Path(bag).name, 30.0, poses[0].skeleton, rot, root, np.stack(contacts))

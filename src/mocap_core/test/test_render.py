@@ -44,32 +44,9 @@ def _need_anny():
 
 @pytest.fixture(scope='module')
 def walk():
-    """The motion and contacts of a committed validation bag, in the world (the camera-frame
-    motion composed with the camera pose), as a Motion."""
-    from mocap_core.bag_io import BagReader, deserialize
-    from mocap_core.data.motion import Motion
-    from mocap_core.ros_conversions import motion_to_pose
-    from mocap_core.rotations import quat_multiply, quat_to_matrix
-    from mocap_core.topics import (GROUNDTRUTH_CAMERA_POSE, GROUNDTRUTH_CONTACTS,
-                                   GROUNDTRUTH_MOTION)
-    poses, contacts, cam = [], [], None
-    with BagReader(WALK_BAG) as reader:
-        for m in reader.messages(topics=[GROUNDTRUTH_MOTION, GROUNDTRUTH_CONTACTS,
-                                         GROUNDTRUTH_CAMERA_POSE]):
-            msg = deserialize(m.data, m.msgtype)
-            if m.topic == GROUNDTRUTH_MOTION:
-                poses.append(motion_to_pose(msg))
-            elif m.topic == GROUNDTRUTH_CONTACTS:
-                contacts.append(np.asarray(msg.position) > 0.5)
-            else:
-                o, p = msg.pose.orientation, msg.pose.position
-                cam = (np.array([o.x, o.y, o.z, o.w]), np.array([p.x, p.y, p.z]))
-    q, t = cam
-    rot = np.stack([p.rotations for p in poses])
-    rot[:, 0] = quat_multiply(np.broadcast_to(q, rot[:, 0].shape), rot[:, 0])
-    root = np.stack([p.root_position for p in poses]) @ np.asarray(quat_to_matrix(q)).T + t
-    return Motion('gt_bandai_walk_exhausted', 30.0, poses[0].skeleton, rot, root,
-                  np.stack(contacts))
+    """The world motion and contacts of a committed validation bag."""
+    from mocap_core.testing import groundtruth_motion
+    return groundtruth_motion(WALK_BAG)
 
 
 @pytest.fixture(scope='module')
@@ -207,21 +184,32 @@ def test_body_limbs_point_where_the_motion_points(model, walk):
 # ------------------------------------------------------------------------------------------
 # render + detect (CI: scripts/setup.sh installs the renderer)
 # ------------------------------------------------------------------------------------------
-def test_render_and_detect_a_clip(model, walk, tmp_path):
+@pytest.fixture(scope='module')
+def rendered(model, walk, tmp_path_factory):
+    """One 24-frame clip rendered with a static camera into ``<root>/validation/<key>/``."""
     _need_renderer()
     from mocap_core.plugins import detector_class
-    from mocap_core.render.clip import ClipRenderer, is_done, load_clip
-    detector = detector_class('blazepose')
     from mocap_core.render.cameras import CameraRanges
-    r = ClipRenderer(lambda: detector(tracking=True), model=model)
-    out = tmp_path / 'clip'
+    from mocap_core.render.clip import ClipRenderer, clip_key
+    detector = detector_class('blazepose')
+    root = tmp_path_factory.mktemp('renders')
+    out = root / 'validation' / clip_key(walk.name)
     ranges = CameraRanges(person_fraction=(0.5, 0.6), horizontal_fov=(50.0, 60.0),
                           partial_fraction=0.0)
+    r = ClipRenderer(lambda: detector(tracking=True), model=model)
     try:
         res = r.render(walk, walk.name, 'validation', out, seed=5, max_frames=24,
                        camera_kind='static', camera_ranges=ranges)
     finally:
         r.close()
+    return root, out, res, ranges
+
+
+def test_render_and_detect_a_clip(model, walk, rendered, tmp_path):
+    from mocap_core.plugins import detector_class
+    from mocap_core.render.clip import ClipRenderer, is_done, load_clip
+    detector = detector_class('blazepose')
+    _, out, res, ranges = rendered
     assert is_done(out) and res.frames == 24
     arrays, meta = load_clip(out)
     assert meta['frames'] == 24 and meta['camera']['kind'] == 'static'
@@ -259,3 +247,31 @@ def test_render_and_detect_a_clip(model, walk, tmp_path):
     again, _ = load_clip(tmp_path / 'again')
     np.testing.assert_array_equal(again['joints_world'], arrays['joints_world'])
     np.testing.assert_array_equal(again['camera_R'], arrays['camera_R'])
+
+
+def test_eval_video_scores_the_pipeline_on_a_rendered_clip(rendered, tmp_path, capsys):
+    """mocap eval video from the recorded detections and from the video itself: every stage
+    is scored, and the keypoint node finds the same keypoints the render recorded."""
+    from mocap_core.cli.mocap import main
+    from mocap_core.render.clip import load_clip
+    root, clip_dir, _, _ = rendered
+    reports = {}
+    for start in ('keypoints', 'video'):
+        out = tmp_path / start
+        rc = main(['eval', 'video', '--renders', str(root), '-o', str(out), '--start', start,
+                   '--quiet'])
+        assert rc == 0, capsys.readouterr().err
+        reports[start] = json.loads((out / 'report.json').read_text())
+        assert (out / 'report.md').read_text().count('lifter MPJPE') == 1
+        assert (out / 'video_eval.png').stat().st_size > 1000
+    for start, rep in reports.items():
+        (clip,) = rep['clips']
+        assert clip['scored'] == 24 and clip['frames'] == 24, start
+        assert 20.0 < clip['mpjpe'] < 400.0 and clip['pa_mpjpe'] < clip['mpjpe']
+        assert np.isfinite(clip['physics_root_error']) and np.isfinite(clip['world_root_error'])
+    # same detector, same frames: the same numbers from the video as from the recording
+    assert abs(reports['video']['clips'][0]['mpjpe']
+               - reports['keypoints']['clips'][0]['mpjpe']) < 1.0
+    # a clip folder without any lifter output is counted, not scored
+    gt, _ = load_clip(clip_dir)
+    assert gt['keypoints'].shape == (24, 23, 3)

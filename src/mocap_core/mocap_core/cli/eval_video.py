@@ -91,7 +91,7 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             kw = {}
         else:
             src = clip_dir / 'gt_bag'
-            kw = {'start': 'lifter'}
+            kw = {'start': 'keypoints'}
             if intrinsics != 'true':
                 raise EvalError('--start keypoints uses the bag\'s true camera_info; '
                                 'use --start video for --intrinsics approx')

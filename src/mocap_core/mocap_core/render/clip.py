@@ -5,8 +5,9 @@ Per clip (:func:`render_clip`), into ``<out>/<split>/<key>/``:
 * ``video.mp4`` -- the rendered frames (mp4v, the clip's frame rate);
 * ``data.npz`` -- arrays, all float64 unless stated, F frames:
 
-  ``keypoints`` (F, 23, 3) the detector's keypoints (u px, v px, confidence), as the keypoint
-  node publishes them (most confident person; confidences 0 when nobody is found);
+  ``keypoints`` (F, 23, 3) the detector's keypoints (u px, v px, confidence) on the decoded
+  video, as the keypoint node publishes them for that file (most confident person;
+  confidences 0 when nobody is found);
   ``keypoints_mesh`` (F, 23, 3) Anny's COCO-style mesh keypoints projected (u, v, 1 when in
   front of the camera; the feet points of the layout that Anny's regressor lacks are the
   ground-truth skeleton's); ``joints_world`` / ``joints_camera`` (F, 18, 3) the rendered body's
@@ -44,7 +45,7 @@ import numpy as np
 from ..skeleton import (BONE_GROUPS, JOINT_INDEX, KEYPOINT_INDEX, NUM_KEYPOINTS, PARENTS)
 
 #: Bump when the output of :func:`render_clip` changes meaning (old clips are re-rendered).
-RENDER_FORMAT = 2
+RENDER_FORMAT = 3
 
 #: Anny's COCO keypoint names -> layout names (the feet points come from the skeleton).
 _COCO_TO_LAYOUT = {
@@ -212,25 +213,33 @@ class ClipRenderer:
                                  regions, appearance, centre=pelvis.mean(axis=0)[:2])
         writer = cv2.VideoWriter(str(tmp / 'video.mp4'), cv2.VideoWriter_fourcc(*'mp4v'),
                                  float(motion.fps), (cam.intrinsics.width, cam.intrinsics.height))
-        self._detector.reset()
         keypoints = np.zeros((F, NUM_KEYPOINTS, 3))
         t_render = t_detect = 0.0
         try:
             for f in range(F):
                 a = time.perf_counter()
-                img = renderer.render(verts[f], cam.R[f], cam.position[f])
-                b = time.perf_counter()
-                det = np.asarray(self._detector.detect(img), dtype=np.float64)
-                t_detect += time.perf_counter() - b
-                t_render += b - a
-                if det.size:
-                    keypoints[f] = det[0]
-                writer.write(img)
-                if progress is not None:
-                    progress(1)
+                writer.write(renderer.render(verts[f], cam.R[f], cam.position[f]))
+                t_render += time.perf_counter() - a
         finally:
             writer.release()
             renderer.close()
+        # The detector sees the decoded video, as the keypoint node does with this file.
+        self._detector.reset()
+        cap = cv2.VideoCapture(str(tmp / 'video.mp4'))
+        try:
+            for f in range(F):
+                ok, img = cap.read()
+                if not ok:
+                    raise RuntimeError(f'{tmp / "video.mp4"}: frame {f} cannot be decoded')
+                b = time.perf_counter()
+                det = np.asarray(self._detector.detect(img), dtype=np.float64)
+                t_detect += time.perf_counter() - b
+                if det.size:
+                    keypoints[f] = det[0]
+                if progress is not None:
+                    progress(1)
+        finally:
+            cap.release()
         detected = keypoints[..., 2].max(axis=1) > 0
         err = np.linalg.norm(keypoints[..., :2] - kp_mesh[..., :2], axis=-1)
         body_px = np.ptp(kp_mesh[..., 1], axis=1)

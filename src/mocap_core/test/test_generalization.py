@@ -1,0 +1,146 @@
+"""The strict split, the detector placement fit and the rendered-clip scores (no renderer)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocap_core.data.detector_placement import (DetectorPlacement, fit_detector_placement,
+                                                leg_length)
+from mocap_core.data.strict_split import family_of, strict_assignment
+from mocap_core.data.synth2d import keypoints_3d, look_at
+from mocap_core.render.evaluate import aggregate, motion_group, score_clip
+from mocap_core.skeleton import JOINT_INDEX, JOINT_MIRROR, KEYPOINT_NAMES, NUM_KEYPOINTS
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope='module')
+def walk():
+    from mocap_core.testing import groundtruth_motion
+    return groundtruth_motion(REPO / 'bags' / 'gt_bandai_walk_exhausted')
+
+
+# ------------------------------------------------------------------------------------------
+def test_strict_split_holds_out_whole_families_and_keeps_committed_validation():
+    bn = 'bandai_namco_bvh/dataset-1_all.tar.xz:'
+    cases = {
+        bn + 'dataset-1_kick_normal_001.bvh': 'martial arts',
+        bn + 'dataset-1_dance-short_normal_001.bvh': 'dance',
+        bn + 'dataset-1_walk_old_002.bvh': 'style: old',
+        'bandai_namco_bvh/dataset-2_run.tar.xz:dataset-2_run_exhausted_004.bvh':
+            'style: exhausted',
+        'cmu_bvh/daz_friendly_acrnn_salsa_indian.tar.xz:salsa/03.bvh': 'dance',
+        bn + 'dataset-1_walk_happy_001.bvh': None,
+        'cmu_bvh/mb2_120fps/02_01.bvh': None,
+    }
+    for clip, fam in cases.items():
+        assert family_of(clip) == fam, clip
+    ids = list(cases)
+    got = strict_assignment(ids, ['train'] * (len(ids) - 1) + ['validation'])
+    assert got[0] == ('strict_validation', 'martial arts')
+    assert got[5] == ('strict_train', '')
+    assert got[-1] == ('strict_validation', 'validation')  # committed validation stays
+
+
+# ------------------------------------------------------------------------------------------
+def _fake_renders(walk, placement, n_clips=6, noise_px=1.0, seed=0):
+    """Arrays like ``render.clip`` writes, whose 'detections' are the placed keypoints
+    projected by random static cameras around the walk, plus pixel noise."""
+    rng = np.random.default_rng(seed)
+    sk = walk.skeleton
+    pts = keypoints_3d(sk, walk.rotations, walk.root_positions, placement=placement)
+    centre = walk.root_positions.mean(axis=0)
+    out = []
+    for c in range(n_clips):
+        az = 2 * np.pi * c / n_clips + rng.uniform(-0.3, 0.3)
+        pos = centre + np.array([4 * np.cos(az), 4 * np.sin(az), 0.5])
+        R = look_at(pos, centre)
+        K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
+        pc = (pts - pos) @ R.T
+        uv = pc[..., :2] / pc[..., 2:] * 600.0 + [320, 240]
+        det = np.concatenate([uv + rng.normal(0, noise_px, uv.shape),
+                              np.ones(uv.shape[:-1] + (1,))], axis=-1)
+        det[:, [KEYPOINT_NAMES.index('left_small_toe'),
+                KEYPOINT_NAMES.index('right_small_toe')]] = 0.0  # like BlazePose
+        F = len(pts)
+        out.append({'bone_lengths': sk.group_lengths(), 'rotations': walk.rotations,
+                    'root_positions': walk.root_positions, 'camera_R': np.tile(R, (F, 1, 1)),
+                    'camera_position': np.tile(pos, (F, 1)), 'K': K, 'keypoints': det})
+    return out
+
+
+def test_placement_fit_recovers_known_offsets(walk):
+    rng = np.random.default_rng(1)
+    truth = rng.uniform(-0.05, 0.05, (NUM_KEYPOINTS, 3))
+    for k, name in enumerate(KEYPOINT_NAMES):   # a symmetric detector
+        if name.startswith('right_'):
+            truth[k] = truth[KEYPOINT_NAMES.index('left_' + name[6:])] * [1, -1, 1]
+    truth[[KEYPOINT_NAMES.index('left_small_toe'), KEYPOINT_NAMES.index('right_small_toe')]] = 0
+    placed = DetectorPlacement(truth, np.zeros(NUM_KEYPOINTS), {})
+    fit = fit_detector_placement(_fake_renders(walk, placed))
+    err_mm = 1000 * leg_length(walk.skeleton) * np.linalg.norm(fit.offsets - truth, axis=1)
+    assert err_mm.max() < 6.0, dict(zip(KEYPOINT_NAMES, err_mm.round(1)))
+    before = np.array(fit.info['median_residual_before_rel_height'], dtype=float)
+    after = np.array(fit.info['median_residual_after_rel_height'], dtype=float)
+    ok = np.isfinite(before)
+    assert np.all(after[ok] < before[ok])
+    assert fit.info['detections_per_keypoint'][KEYPOINT_NAMES.index('left_small_toe')] == 0
+    # no offset in the data: the fit stays near zero
+    zero = fit_detector_placement(_fake_renders(walk, None, seed=2))
+    assert 1000 * leg_length(walk.skeleton) * np.abs(zero.offsets).max() < 6.0
+
+
+def test_placement_moves_points_with_their_segment(walk, tmp_path):
+    offsets = np.zeros((NUM_KEYPOINTS, 3))
+    k = KEYPOINT_NAMES.index('left_knee')
+    offsets[k] = [0.1, 0.0, 0.0]                       # forward of the thigh's end
+    placed = DetectorPlacement(offsets, np.zeros(NUM_KEYPOINTS), {'x': 1})
+    a = keypoints_3d(walk.skeleton, walk.rotations, walk.root_positions)
+    b = keypoints_3d(walk.skeleton, walk.rotations, walk.root_positions, placement=placed)
+    moved = np.linalg.norm(b - a, axis=-1)
+    assert np.allclose(moved[:, k], 0.1 * leg_length(walk.skeleton))
+    assert np.allclose(np.delete(moved, k, axis=1), 0.0)
+    placed.save(tmp_path / 'p.json')
+    again = DetectorPlacement.load(tmp_path / 'p.json')
+    np.testing.assert_allclose(again.offsets, offsets)
+
+
+# ------------------------------------------------------------------------------------------
+def _gt(walk, F=40):
+    fk = walk.fk()
+    J = fk.positions[:F] - [0, 0, 0] + np.array([0.0, 0.0, 3.0])  # a 'camera' frame
+    meta = {'clip': 'bandai_namco_bvh/x.tar.xz:dataset-2_walk_exhausted_001.bvh',
+            'camera': {'kind': 'static'}, 'body_height_m': 1.8, 'detected_fraction': 1.0}
+    gt = {'fps': np.array(30.0), 'joints_camera': J, 'joints_world': fk.positions[:F],
+          'view': np.array(['front'] * F)}
+    return gt, meta, J
+
+
+def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
+    gt, meta, J = _gt(walk)
+    idx = np.arange(len(J))
+    perfect = score_clip(meta['clip'], meta, gt, J, idx,
+                         {'world': (gt['joints_world'][:, 0], idx)})
+    s = perfect.summary()
+    assert s['mpjpe'] < 1e-6 and s['pa_mpjpe'] < 1e-6 and s['mble'] < 1e-6
+    assert s['world_root_error'] < 1e-6 and abs(s['jitter_ratio'] - 1) < 1e-9
+    legs = [JOINT_INDEX[f'{sd}_{n}'] for sd in ('left', 'right')
+            for n in ('hip', 'knee', 'ankle', 'toe')]
+    swapped = J.copy()
+    swapped[:, legs] = J[:, [JOINT_MIRROR[j] for j in legs]]
+    sw = score_clip(meta['clip'], meta, gt, swapped, idx).summary()
+    scored = score_clip(meta['clip'], meta, gt, swapped, idx).swaps
+    assert sw['swap_rate'] == 1.0 and (scored >= 0).sum() > len(J) // 2
+    assert s['swap_rate'] == 0.0
+    # a translated, rotated world path has no trajectory error after rigid alignment
+    c, si = np.cos(0.7), np.sin(0.7)
+    Rz = np.array([[c, -si, 0], [si, c, 0], [0, 0, 1]])
+    moved = gt['joints_world'][:, 0] @ Rz.T + [5.0, -2.0, 0.3]
+    r = score_clip(meta['clip'], meta, gt, J, idx, {'physics': (moved, idx)}).summary()
+    assert r['physics_root_error'] < 1e-6
+    agg = aggregate([perfect, score_clip(meta['clip'], meta, gt, swapped, idx)])
+    assert agg['clips'] == 2 and agg['by_view']['front']['frames'] == 2 * len(J)
+    assert motion_group(meta['clip']) == 'walk'
