@@ -128,11 +128,16 @@ BONE_REGIONS: Dict[str, str] = {
 
 #: Phenotype ranges sampled for rendered people (Anny's parameters in [0, 1]; age 0.5 is a
 #: child, 0.75 a young adult, 1.0 old; below 0.6 the motion-capture adults' motion would be
-#: played by small children, so the range starts there).
+#: played by small children, so the range starts there). Anny's ``height`` parameter spans
+#: 1.2-2.4 m; it is not drawn but solved for a standing height drawn from
+#: :data:`ADULT_HEIGHT_M` (see :func:`sample_phenotype`).
 PHENOTYPE_RANGES: Dict[str, Tuple[float, float]] = {
     'gender': (0.0, 1.0), 'age': (0.6, 1.0), 'muscle': (0.1, 0.9), 'weight': (0.1, 0.95),
-    'height': (0.05, 0.95), 'proportions': (0.2, 0.8),
+    'proportions': (0.2, 0.8),
 }
+#: Adult standing height (m): mean for gender 0 (Anny's male) and 1 (female), standard
+#: deviation, and the clip range (roughly the 1st-99th percentiles of adult populations).
+ADULT_HEIGHT_M = {'male_mean': 1.76, 'female_mean': 1.63, 'sd': 0.075, 'range': (1.48, 1.98)}
 
 
 def default_cache_dir() -> Path:
@@ -156,9 +161,32 @@ def load_anny():
     return anny.Anny(rig='cmu_mb', skinning_method='lbs', pose_parameterization='world-orient')
 
 
-def sample_phenotype(rng: np.random.Generator) -> Dict[str, float]:
-    """A random body within :data:`PHENOTYPE_RANGES`."""
-    return {k: float(rng.uniform(*r)) for k, r in PHENOTYPE_RANGES.items()}
+def sample_phenotype(rng: np.random.Generator, model=None) -> Dict[str, float]:
+    """A random adult body: :data:`PHENOTYPE_RANGES` drawn uniformly, and, given the Anny
+    ``model``, the ``height`` parameter that gives a standing height drawn from
+    :data:`ADULT_HEIGHT_M` for the drawn gender (bisection on the rest mesh, +-5 mm)."""
+    p = {k: float(rng.uniform(*r)) for k, r in PHENOTYPE_RANGES.items()}
+    h = ADULT_HEIGHT_M
+    mean = h['male_mean'] + (h['female_mean'] - h['male_mean']) * p['gender']
+    target = float(np.clip(rng.normal(mean, h['sd']), *h['range']))
+    p['target_height_m'] = target
+    if model is None:
+        p['height'] = 0.5
+        return p
+    lo, hi = 0.0, 1.0
+    for _ in range(12):
+        mid = 0.5 * (lo + hi)
+        got = AnnyBody.create(model, {**_anny_params(p), 'height': mid}).height()
+        if abs(got - target) < 0.005:
+            break
+        lo, hi = (mid, hi) if got < target else (lo, mid)
+    p['height'] = mid
+    return p
+
+
+def _anny_params(p: Mapping[str, float]) -> Dict[str, float]:
+    """The Anny phenotype parameters of a sampled body (drops bookkeeping keys)."""
+    return {k: float(v) for k, v in p.items() if k in PHENOTYPE_RANGES or k == 'height'}
 
 
 def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -224,7 +252,7 @@ class AnnyBody:
         """The body of ``phenotype`` (Anny parameters; missing ones 0.5) on ``model``
         (:func:`load_anny`)."""
         import torch
-        pheno = {k: float(v) for k, v in (phenotype or {}).items()}
+        pheno = _anny_params(phenotype or {})
         with torch.no_grad():
             inputs = model.get_tensor_inputs(None, pheno or None, None, None)
             coeffs = model._get_phenotype_blendshape_coefficients(*inputs[1:])

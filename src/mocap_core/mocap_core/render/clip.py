@@ -45,7 +45,7 @@ import numpy as np
 from ..skeleton import (BONE_GROUPS, JOINT_INDEX, KEYPOINT_INDEX, NUM_KEYPOINTS, PARENTS)
 
 #: Bump when the output of :func:`render_clip` changes meaning (old clips are re-rendered).
-RENDER_FORMAT = 3
+RENDER_FORMAT = 4
 
 #: Anny's COCO keypoint names -> layout names (the feet points come from the skeleton).
 _COCO_TO_LAYOUT = {
@@ -161,7 +161,7 @@ class ClipRenderer:
         fk = motion.fk()
         G = fk.global_rotations[start:start + F]
         P = fk.positions[start:start + F]
-        pheno = sample_phenotype(rng)
+        pheno = sample_phenotype(rng, self._model)
         body = AnnyBody.create(self._model, pheno)
         sk_len = motion.skeleton.bone_lengths()
         mocap_leg = sk_len[JOINT_INDEX['left_knee']] + sk_len[JOINT_INDEX['left_ankle']]
