@@ -153,6 +153,21 @@ def test_render_command_rejects_bad_arguments_in_one_line(capsys):
     assert 'no such BVH file' in capsys.readouterr().err
 
 
+def test_render_without_a_working_renderer_says_what_is_missing(tmp_path):
+    """A machine whose OpenGL platform does not work gets one line naming the fix, no
+    traceback, and nothing is written."""
+    import subprocess
+    import sys
+    env = dict(os.environ, PYOPENGL_PLATFORM='no-such-platform')
+    out = subprocess.run([sys.executable, '-m', 'mocap_core.cli.mocap', 'data', 'render',
+                          '--limit', '1', '-o', str(tmp_path / 'r')], env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 1
+    err = [line for line in out.stderr.splitlines() if line.strip()]
+    assert len(err) == 1 and 'cannot render' in err[0] and 'libosmesa6' in err[0], out.stderr
+    assert 'Traceback' not in out.stderr and not (tmp_path / 'r').exists()
+
+
 # ------------------------------------------------------------------------------------------
 # Anny body
 # ------------------------------------------------------------------------------------------

@@ -81,9 +81,9 @@ def keypoints_3d(skeleton: Skeleton, rotations: np.ndarray,
     for side in ('left', 'right'):
         j, local = skeleton.contact_points()[f'{side}_heel']
         out[..., KEYPOINT_INDEX[f'{side}_heel'], :] = pos[..., j, :] + rot[..., j, :, :] @ local
-    if placement is not None:
-        from .detector_placement import leg_length
-        out = placement.apply(out, rot, leg_length(skeleton))
+    if placement is not None:  # offsets in leg lengths (hip to ankle)
+        leg = float(bone[JOINT_INDEX['left_knee']] + bone[JOINT_INDEX['left_ankle']])
+        out = placement.apply(out, rot, leg)
     return out
 
 

@@ -47,6 +47,8 @@ def add_train_parser(sub) -> None:
     p.add_argument('--rendered-fraction', type=float,
                    help='share of windows from rendered clips (mocap data render)')
     p.add_argument('--renders', help='rendered clips folder (default ~/.cache/mocap/render)')
+    p.add_argument('--cameras', choices=('default', 'wide'),
+                   help='projected-keypoint camera ranges (wide: those of the renders)')
     p.add_argument('--install', action='store_true', help='copy the final weights to the '
                    'package (weights/motionet_<mode>.pt)')
     p.set_defaults(func=cmd_train)
@@ -178,7 +180,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         cfg.init = str(Path(args.init).resolve())
     if args.clean_fraction is not None:
         cfg.clean_fraction = args.clean_fraction
-    for name in ('split', 'placement_fraction', 'rendered_fraction', 'renders'):
+    for name in ('split', 'placement_fraction', 'rendered_fraction', 'renders', 'cameras'):
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
     run_dir = Path(args.run_dir or f'runs/lifter_{args.mode}')

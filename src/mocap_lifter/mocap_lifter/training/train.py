@@ -35,6 +35,7 @@ from torch import nn
 
 from mocap_core.checkpoint import WeightsError, load_checkpoint
 from mocap_core.data.motion import Motion
+from mocap_core.data.synth2d import CameraSampling
 from mocap_core.skeleton import END_EFFECTORS, JOINT_INDEX, NUM_JOINTS
 
 from ..features import NUM_FEATURES
@@ -78,6 +79,10 @@ class TrainConfig:
     #: 'committed' trains on the committed training split; 'strict' on the strict one
     #: (whole motion families held out, mocap_core.data.strict_split)
     split: str = 'committed'
+    #: projected-keypoint cameras: 'default' (data.synth2d.CameraSampling) or 'wide' (the
+    #: rendered benchmark's ranges: height 0.2-3.5 m, distance 2-12 m, field of view 35-100
+    #: degrees, portrait and landscape images)
+    cameras: str = 'default'
     validate_every: int = 500
     checkpoint_every: int = 250
     threads: int = 2
@@ -155,7 +160,8 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
                             aug=Augmentation(clean_prob=cfg.clean_fraction,
                                              tpose_prob=cfg.tpose_fraction,
                                              placement=placement,
-                                             placement_prob=cfg.placement_fraction))
+                                             placement_prob=cfg.placement_fraction,
+                                             camera=camera_sampling(cfg.cameras)))
     val_sampler = WindowSampler(val_motions, cfg.window, seed=12345, aug=Augmentation())
     val_batches = [val_sampler.batch(cfg.batch) for _ in range(4)]
     rendered_val = None
@@ -243,6 +249,18 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     weights = run_dir / 'lifter.pt'
     save_weights(model, weights, {'steps': step, 'train_seconds': time.time() - t0})
     return weights
+
+
+def camera_sampling(name: str) -> CameraSampling:
+    """The projected-keypoint camera ranges of ``TrainConfig.cameras``."""
+    if name == 'default':
+        return CameraSampling()
+    if name == 'wide':
+        return CameraSampling(distance=(2.0, 12.0), height=(0.2, 3.5),
+                              horizontal_fov=(35.0, 100.0), roll=(-5.0, 5.0),
+                              image_sizes=((640, 480), (480, 640), (1280, 720), (720, 1280),
+                                           (1920, 1080), (960, 540)))
+    raise ValueError(f"unknown camera ranges {name!r} (use 'default' or 'wide')")
 
 
 def _with_renders(sampler: WindowSampler, cfg: TrainConfig):
