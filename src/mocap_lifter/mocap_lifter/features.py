@@ -29,7 +29,7 @@ import numpy as np
 
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.keypoint_geometry import canonicalize
-from mocap_core.skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
+from mocap_core.skeleton import KEYPOINT_INDEX, KEYPOINT_MIRROR, NUM_KEYPOINTS
 
 NUM_FEATURES = NUM_KEYPOINTS * 3 + 3
 _LHIP, _RHIP = KEYPOINT_INDEX['left_hip'], KEYPOINT_INDEX['right_hip']
@@ -94,3 +94,42 @@ def lifter_features(keypoints: np.ndarray, intr: CameraIntrinsics,
     feats = np.concatenate([(rel / scale[:, None, None]).reshape(len(kp), -1), kc[..., 2],
                             vel / scale[:, None], np.log(scale)[:, None]], axis=1)
     return feats.astype(np.float32), root, scale, valid
+
+
+def mirror_features(features: np.ndarray, root_2d: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """The features (..., T, 72) and canonical root keypoint (..., T, 2) of the left-right
+    mirrored image (canonical x -> -x about the principal point, left and right keypoints
+    exchanged), in the layout of :func:`lifter_features`. For test-time flip augmentation."""
+    f = np.array(features, copy=True)
+    n = NUM_KEYPOINTS
+    mirror = list(KEYPOINT_MIRROR)
+    rel = f[..., :2 * n].reshape(f.shape[:-1] + (n, 2))[..., mirror, :]
+    rel[..., 0] *= -1
+    f[..., :2 * n] = rel.reshape(f.shape[:-1] + (2 * n,))
+    f[..., 2 * n:3 * n] = f[..., 2 * n:3 * n][..., mirror]
+    f[..., 3 * n] *= -1                                   # root velocity, x
+    r = np.array(root_2d, copy=True)
+    r[..., 0] *= -1
+    return f, r
+
+
+def unmirror_rotations(rotations: np.ndarray) -> np.ndarray:
+    """Local rotations (..., J, 4) x, y, z, w lifted from a mirrored image (root row in the
+    camera optical frame) -> the rotations of the unmirrored pose: joints exchanged left and
+    right, the camera frame reflected in x and the body frame in y (its left axis)."""
+    from mocap_core.rotations import matrix_to_quat, quat_to_matrix
+    from mocap_core.skeleton import JOINT_MIRROR
+    R = np.asarray(quat_to_matrix(np.asarray(rotations, dtype=np.float64)))
+    R = R[..., list(JOINT_MIRROR), :, :]
+    cam = np.diag([-1.0, 1.0, 1.0])
+    body = np.diag([1.0, -1.0, 1.0])
+    out = body @ R @ body
+    out[..., 0, :, :] = cam @ R[..., 0, :, :] @ body
+    return np.asarray(matrix_to_quat(out))
+
+
+def average_quaternions(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Half-way rotation of two arrays of unit quaternions (same hemisphere first)."""
+    sign = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    q = a + sign * b
+    return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)

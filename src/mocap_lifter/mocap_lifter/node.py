@@ -70,6 +70,9 @@ PARAMETERS = (
     ParamSpec('chunk', 1, 'Frames lifted per network pass: 1 for live use; more (offline, '
               'e.g. mocap process) is faster per frame and adds chunk - 1 frames of delay',
               min_value=1, max_value=256, read_only=True),
+    ParamSpec('test_time_flip', False, 'MotioNet: also lift the mirrored keypoints and '
+              'average the mirrored-back pose in (test-time flip augmentation; twice the '
+              'network time; see docs/rendering.md for its measured effect)', read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,
               read_only=True),
@@ -113,7 +116,7 @@ class LifterNode(Node):
             raise ValueError(f'{path} holds {architecture(model)} weights but model:={arch}')
         lifter = OnlineLifter(model, mode, None if p['latency'] < 0 else p['latency'],
                               p['skeleton_frames'], p['max_gap_s'], p['device'],
-                              chunk=p['chunk'])
+                              chunk=p['chunk'], flip=p['test_time_flip'])
         self.stream = LifterStream(lifter, StreamIntrinsics(p['horizontal_fov_deg']),
                                    p['person'], p['max_gap_s'])
         self.published_lengths: Optional[np.ndarray] = None

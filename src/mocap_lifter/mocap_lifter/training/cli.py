@@ -151,6 +151,8 @@ def add_eval_parser(sub) -> None:
                    help='keypoints on the joints (the training synthesizer) or where the real '
                    'detector puts them (cross-synthesizer check, '
                    'mocap_core/data/detector_placement.json)')
+    p.add_argument('--flip', action='store_true',
+                   help='test-time flip augmentation (mirrored input lifted too, averaged)')
     p.add_argument('--out', help='report directory (default: next to the weights)')
     p.add_argument('--device', default='cpu')
     p.add_argument('--real', nargs='*', default=None, metavar='DIR',
@@ -273,8 +275,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         placements = [placed if p else None for p in placements]
     noises = ('none', 'motionet') if args.noise == 'both' else (args.noise,)
     t0 = time.time()
-    results = [evaluate(model, val, n, args.device, placement=pl, families=families)
-               for pl in placements for n in noises]
+    results = [evaluate(model, val, n, args.device, placement=pl, families=families,
+                        flip=args.flip) for pl in placements for n in noises]
     seconds = time.time() - t0
     baseline = {n: baseline_mean_pose(train_for_baseline, val, n) for n in noises}
     suffix = '' if args.split == 'validation' else f'_{args.split}'

@@ -38,20 +38,34 @@ def _clip_seed(name: str) -> int:
 
 @torch.no_grad()
 def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.ndarray,
-         device: str = 'cpu') -> Dict[str, np.ndarray]:
+         device: str = 'cpu', flip: bool = False) -> Dict[str, np.ndarray]:
     """Run the model on one (T, C) feature sequence -> numpy outputs without the batch axis
-    (contacts as probabilities)."""
-    out = model(torch.as_tensor(features[None], device=device),
-                torch.as_tensor(root_2d[None], device=device),
-                torch.as_tensor(scale[None], device=device))
-    res = {k: v[0].cpu().numpy() for k, v in out.items()}
-    res['contacts'] = 1.0 / (1.0 + np.exp(-res['contacts']))
+    (contacts as probabilities). ``flip``: test-time flip augmentation: the mirrored input is
+    lifted too and its positions, root and contacts, mirrored back, averaged in (rotations
+    are the unflipped pass's)."""
+    def run(f, r):
+        out = model(torch.as_tensor(f[None], device=device),
+                    torch.as_tensor(r[None], device=device),
+                    torch.as_tensor(scale[None], device=device))
+        res = {k: v[0].cpu().numpy() for k, v in out.items()}
+        res['contacts'] = 1.0 / (1.0 + np.exp(-res['contacts']))
+        return res
+    res = run(features, root_2d)
+    if flip:
+        from mocap_core.skeleton import JOINT_MIRROR
+        from ..features import mirror_features
+        m = run(*mirror_features(features, root_2d))
+        pos = m['positions'][:, list(JOINT_MIRROR)] * np.array([-1.0, 1.0, 1.0])
+        root = m['root'] * np.array([-1.0, 1.0, 1.0])
+        res['positions'] = 0.5 * (res['positions'] + pos)
+        res['root'] = 0.5 * (res['root'] + root)
+        res['contacts'] = 0.5 * (res['contacts'] + m['contacts'][:, [2, 3, 0, 1]])
     return res
 
 
 def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
              device: str = 'cpu', max_frames: int = 900, placement=None,
-             families: Optional[Sequence[str]] = None) -> Dict:
+             families: Optional[Sequence[str]] = None, flip: bool = False) -> Dict:
     """Metrics over validation clips (frame-weighted means); per-clip rows included.
 
     ``placement``: a ``DetectorPlacement`` puts the keypoints where the real detector puts them
@@ -68,7 +82,7 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
         n = min(m.num_frames, max_frames)
         rng = np.random.default_rng(_clip_seed(m.name))
         s = make_sample(m, 0, n, rng, aug)
-        out = lift(model, s['features'], s['root_2d'], s['scale'], device)
+        out = lift(model, s['features'], s['root_2d'], s['scale'], device, flip=flip)
         p, g = out['positions'], s['positions']
         rows.append({
             'clip': m.name, 'frames': n,
