@@ -274,7 +274,7 @@ def test_eval_video_scores_the_pipeline_on_a_rendered_clip(rendered, tmp_path, c
     for start in ('keypoints', 'video'):
         out = tmp_path / start
         rc = main(['eval', 'video', '--renders', str(root), '-o', str(out), '--start', start,
-                   '--quiet'])
+                   '--work', str(tmp_path / f'work_{start}'), '--quiet'])
         assert rc == 0, capsys.readouterr().err
         reports[start] = json.loads((out / 'report.json').read_text())
         assert (out / 'report.md').read_text().count('lifter MPJPE') == 1

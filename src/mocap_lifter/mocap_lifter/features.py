@@ -133,3 +133,30 @@ def average_quaternions(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     sign = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -1.0, 1.0)
     q = a + sign * b
     return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+
+
+def smooth_keypoints(keypoints: np.ndarray, sigma: float) -> np.ndarray:
+    """Zero-phase Gaussian smoothing of (T, 23, 3) keypoints along time (``sigma`` in frames;
+    0 returns them unchanged). Each point's u, v are confidence-weighted averages over the
+    frames where it was seen; confidences are kept; unseen points stay (0, 0, 0). The window
+    is truncated at the ends of the sequence (one-sided there)."""
+    kp = np.asarray(keypoints, dtype=np.float64)
+    if sigma <= 0 or len(kp) < 2:
+        return kp.copy()
+    r = int(np.ceil(3 * sigma))
+    t = np.arange(-r, r + 1)
+    w = np.exp(-0.5 * (t / sigma) ** 2)
+    c = kp[..., 2]
+    T = len(kp)
+    num = np.zeros(kp.shape[:-1] + (2,))
+    den = np.zeros(kp.shape[:-1])
+    for k, wk in zip(t, w):
+        lo, hi = max(0, -k), min(T, T - k)            # frames i with i + k inside
+        cw = wk * c[lo + k:hi + k]
+        num[lo:hi] += cw[..., None] * kp[lo + k:hi + k, :, :2]
+        den[lo:hi] += cw
+    out = kp.copy()
+    seen = (c > 0) & (den > 0)
+    out[..., :2] = np.where(seen[..., None], num / np.maximum(den, 1e-12)[..., None],
+                            kp[..., :2])
+    return out

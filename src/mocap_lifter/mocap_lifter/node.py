@@ -73,6 +73,10 @@ PARAMETERS = (
     ParamSpec('test_time_flip', False, 'MotioNet: also lift the mirrored keypoints and '
               'average the mirrored-back pose in (test-time flip augmentation; twice the '
               'network time; see docs/rendering.md for its measured effect)', read_only=True),
+    ParamSpec('smooth_sigma', 0.0, 'Gaussian smoothing of the keypoints along time before '
+              'lifting, sigma in frames (0: off); centred within the look-ahead in windowed '
+              'mode, one-sided (a lag) in causal mode', min_value=0.0, max_value=10.0,
+              read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,
               read_only=True),
@@ -116,7 +120,8 @@ class LifterNode(Node):
             raise ValueError(f'{path} holds {architecture(model)} weights but model:={arch}')
         lifter = OnlineLifter(model, mode, None if p['latency'] < 0 else p['latency'],
                               p['skeleton_frames'], p['max_gap_s'], p['device'],
-                              chunk=p['chunk'], flip=p['test_time_flip'])
+                              chunk=p['chunk'], flip=p['test_time_flip'],
+                              smooth=p['smooth_sigma'])
         self.stream = LifterStream(lifter, StreamIntrinsics(p['horizontal_fov_deg']),
                                    p['person'], p['max_gap_s'])
         self.published_lengths: Optional[np.ndarray] = None

@@ -96,3 +96,22 @@ def test_unmirrored_rotations_give_the_mirrored_skeleton():
     Q = forward_kinematics(sk.parents, sk.offsets, unmirror_rotations(q),
                            root * [-1, 1, 1]).positions
     np.testing.assert_allclose(Q, P[:, list(JOINT_MIRROR)] * [-1, 1, 1], atol=1e-9)
+
+
+def test_keypoint_smoothing_keeps_a_straight_path_and_damps_noise():
+    from mocap_lifter.features import smooth_keypoints
+    T = 60
+    t = np.arange(T, dtype=float)
+    kp = np.zeros((T, 23, 3))
+    kp[..., 0] = 100 + 2.0 * t[:, None]             # constant velocity: unchanged inside
+    kp[..., 1] = 200.0
+    kp[..., 2] = 1.0
+    kp[10, 4] = 0.0                                 # an unseen point stays unseen
+    sm = smooth_keypoints(kp, 2.0)
+    np.testing.assert_allclose(sm[8:-8, 5:, :2], kp[8:-8, 5:, :2], atol=1e-9)
+    assert np.all(sm[10, 4] == 0.0) and np.all(sm[..., 2] == kp[..., 2])
+    noisy = kp.copy()
+    noisy[..., :2] += np.random.default_rng(0).normal(0, 3.0, (T, 23, 2))
+    acc = lambda x: np.abs(np.diff(x[..., :2], 2, axis=0)).mean()  # noqa: E731
+    assert acc(smooth_keypoints(noisy, 2.0)) < 0.2 * acc(noisy)
+    np.testing.assert_array_equal(smooth_keypoints(noisy, 0.0), noisy)

@@ -9,8 +9,9 @@ Per rendered clip (``mocap data render``), ``mocap process`` runs on ``video.mp4
 ``video``: the keypoint node with BlazePose, then lifter, physics, GMR; the camera's true
 intrinsics are given to the keypoint node as a calibration file unless ``--intrinsics
 approx``) or on the clip's bag from the keypoints it recorded (start ``keypoints``: the same
-detector output, faster). The output bags are kept under ``OUT_DIR/runs/<tag>/`` and reused
-by a rerun with the same tag. Writes ``OUT_DIR/report.md``, ``report.json`` and plots.
+detector output, faster). The output bags are kept under
+``~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>/`` (``--work``) and reused by a rerun
+with the same tag. Writes ``OUT_DIR/report.md``, ``report.json`` and plots.
 """
 
 from __future__ import annotations
@@ -164,7 +165,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     out = Path(args.output)
     tag = args.tag or ('_'.join(f'{k}' for k in sorted(args.param)) or 'default')
     tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
-    work = out / 'runs' / f'{tag}_{args.start}_{args.intrinsics}'
+    work_root = Path(args.work) if args.work else Path.home() / '.cache' / 'mocap' / 'eval_video'
+    work = work_root / f'{tag}_{args.start}_{args.intrinsics}'
     try:
         params = parse_params(args.param)
     except ProcessError as exc:
@@ -223,6 +225,8 @@ def add_eval_parser(sub) -> None:
                    help='video: run the detector on the video; keypoints: reuse the '
                    "render's detections (same detector, faster)")
     p.add_argument('--tag', help='name of this run (output bags reused by the same tag)')
+    p.add_argument('--work', help='where the output bags are kept (default '
+                   '~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>)')
     p.add_argument('--title', default='Rendered test videos: the pipeline against exact '
                    'ground truth', help='report title')
     p.add_argument('--quiet', action='store_true', help='no progress bar')

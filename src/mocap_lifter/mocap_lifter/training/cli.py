@@ -153,6 +153,9 @@ def add_eval_parser(sub) -> None:
                    'mocap_core/data/detector_placement.json)')
     p.add_argument('--flip', action='store_true',
                    help='test-time flip augmentation (mirrored input lifted too, averaged)')
+    p.add_argument('--smooth', type=float, default=0.0, metavar='SIGMA',
+                   help='Gaussian smoothing of the keypoints along time before lifting '
+                   '(frames; the node parameter smooth_sigma)')
     p.add_argument('--out', help='report directory (default: next to the weights)')
     p.add_argument('--device', default='cpu')
     p.add_argument('--real', nargs='*', default=None, metavar='DIR',
@@ -276,7 +279,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     noises = ('none', 'motionet') if args.noise == 'both' else (args.noise,)
     t0 = time.time()
     results = [evaluate(model, val, n, args.device, placement=pl, families=families,
-                        flip=args.flip) for pl in placements for n in noises]
+                        flip=args.flip, smooth=args.smooth)
+               for pl in placements for n in noises]
     seconds = time.time() - t0
     baseline = {n: baseline_mean_pose(train_for_baseline, val, n) for n in noises}
     suffix = '' if args.split == 'validation' else f'_{args.split}'
@@ -284,7 +288,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     real_dirs = args.real if args.real is not None else default_real_sequences()
     real = None
     if real_dirs:
-        real = evaluate_real(model, [Path(d) for d in real_dirs], device=args.device)
+        real = evaluate_real(model, [Path(d) for d in real_dirs], device=args.device,
+                             flip=args.flip, smooth=args.smooth)
         real['groundtruth'] = groundtruth_plausibility(val)
         s = real['summary']
         print(f"real OpenPose ({real['sequences']} sequences, {real['frames']} frames): jitter "

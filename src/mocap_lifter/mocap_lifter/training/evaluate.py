@@ -65,7 +65,8 @@ def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.n
 
 def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
              device: str = 'cpu', max_frames: int = 900, placement=None,
-             families: Optional[Sequence[str]] = None, flip: bool = False) -> Dict:
+             families: Optional[Sequence[str]] = None, flip: bool = False,
+             smooth: float = 0.0) -> Dict:
     """Metrics over validation clips (frame-weighted means); per-clip rows included.
 
     ``placement``: a ``DetectorPlacement`` puts the keypoints where the real detector puts them
@@ -76,7 +77,7 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
     aug = Augmentation(flip_prob=0.0, bone_scale=0.0, global_scale=0.0,
                        corruption=Corruption() if noise == 'motionet' else None,
                        placement=placement, placement_prob=1.0 if placement is not None
-                       else 0.0)
+                       else 0.0, smooth=smooth)
     rows: List[Dict] = []
     for m in motions:
         n = min(m.num_frames, max_frames)
@@ -197,7 +198,8 @@ def _largest_person(people: np.ndarray) -> np.ndarray:
 
 
 def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.0,
-                  fov: float = 60.0, device: str = 'cpu') -> Dict:
+                  fov: float = 60.0, device: str = 'cpu', flip: bool = False,
+                  smooth: float = 0.0) -> Dict:
     """Lift OpenPose JSON folders (one sequence each; the most confident person per frame;
     intrinsics from ``fov`` over the inferred image size, as ``mocap data from-openpose``)
     and measure jitter (mm/s^2), foot skating (mm per frame, camera frame, during predicted
@@ -218,9 +220,13 @@ def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.
             except OpenPoseError:
                 kps.append(np.zeros((23, 3)))
         kp = np.stack(kps)
+        if smooth > 0:
+            from ..features import smooth_keypoints
+            kp = smooth_keypoints(kp, smooth)
         w, h = infer_image_size(files)
         feats, root_2d, scale, _ = lifter_features(kp, CameraIntrinsics.from_fov(w, h, fov))
-        out = lift(model, feats, root_2d.astype(np.float32), scale.astype(np.float32), device)
+        out = lift(model, feats, root_2d.astype(np.float32), scale.astype(np.float32), device,
+                   flip=flip)
         p = out['positions']
         rows.append({'sequence': Path(d).name, 'frames': len(kp),
                      'jitter_mm_s2': M.jitter_mm(p) * fps ** 2,

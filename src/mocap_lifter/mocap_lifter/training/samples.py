@@ -23,7 +23,7 @@ from mocap_core.rotations import quat_rotate
 from mocap_core.kinematics import forward_kinematics
 from mocap_core.skeleton import JOINT_INDEX, NUM_BONE_GROUPS, Skeleton
 
-from ..features import lifter_features
+from ..features import lifter_features, smooth_keypoints
 
 _LEG = [JOINT_INDEX['left_knee'], JOINT_INDEX['left_ankle']]
 
@@ -43,6 +43,9 @@ class Augmentation:
     #: detector_placement``) in this share of windows; the rest on the joints.
     placement: Optional[object] = None
     placement_prob: float = 0.0
+    #: temporal smoothing of the keypoints before the features (frames; see
+    #: ``features.smooth_keypoints``), as the node applies it with ``smooth_sigma``
+    smooth: float = 0.0
 
 
 def scaled_skeleton(skeleton: Skeleton, rng: np.random.Generator, aug: Augmentation,
@@ -82,7 +85,8 @@ def make_sample(motion: Motion, start: int, length: int, rng: np.random.Generato
     kp = project(camera, pts)
     if aug.corruption is not None and rng.random() >= aug.clean_prob:
         kp = corrupt_keypoints(kp, rng, _confidence_model(), aug.corruption)
-    features, root_2d, scale, _ = lifter_features(kp, camera.intrinsics)
+    kp_in = smooth_keypoints(kp, aug.smooth) if aug.smooth > 0 else kp
+    features, root_2d, scale, _ = lifter_features(kp_in, camera.intrinsics)
     crot, croot = motion_to_camera(rot, root, camera)
     positions = forward_kinematics(skeleton.parents, skeleton.offsets, crot, croot).positions
     return {'features': features, 'root_2d': root_2d.astype(np.float32),
