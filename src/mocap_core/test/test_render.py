@@ -18,7 +18,7 @@ import pytest
 from mocap_core.render.cameras import (CAMERA_KINDS, CameraRanges, sample_camera_path,
                                        view_labels)
 from mocap_core.render.clip import clip_key, clip_seed
-from mocap_core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+from mocap_core.skeleton import JOINT_INDEX, NUM_JOINTS
 
 REPO = Path(__file__).resolve().parents[3]
 WALK_BAG = REPO / 'bags' / 'gt_bandai_walk_exhausted'
@@ -171,27 +171,38 @@ def test_render_without_a_working_renderer_says_what_is_missing(tmp_path):
 # ------------------------------------------------------------------------------------------
 # Anny body
 # ------------------------------------------------------------------------------------------
-def test_body_limbs_point_where_the_motion_points(model, walk):
-    from mocap_core.render.body import AnnyBody
+def test_body_ground_truth_is_its_skeleton_and_the_mesh_follows_it(model, walk):
+    from mocap_core.kinematics import forward_kinematics
+    from mocap_core.render.body import AnnyBody, CONVENTION_RATIOS
     body = AnnyBody.create(model, {'age': 0.8, 'height': 0.3, 'weight': 0.7})
     fk = walk.fk()
     G, P = fk.global_rotations[:20], fk.positions[:20]
     posed = body.pose(G, P[:, 0])
-    J = posed.joints_rig
-    np.testing.assert_allclose(J[:, 0], P[:, 0], atol=1e-5)   # pelvis placed as asked
-    for name in ('left_knee', 'left_ankle', 'left_toe', 'right_knee', 'right_ankle',
-                 'right_toe', 'left_elbow', 'left_wrist', 'right_elbow', 'right_wrist'):
-        j, p = JOINT_INDEX[name], PARENTS[JOINT_INDEX[name]]
-        a = J[:, j] - J[:, p]
-        b = P[:, j] - P[:, p]
-        cos = np.sum(a * b, -1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
-        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 0.5, name
-    # the mesh follows the bones: every joint lies inside the body's vertex cloud
+    J = posed.joints
+    # the ground truth is exactly the FK of the motion on the body's pipeline skeleton
+    sk = body.skeleton
+    np.testing.assert_allclose(
+        J, forward_kinematics(sk.parents, sk.offsets, walk.rotations[:20], P[:, 0]).positions,
+        atol=1e-9)
+    # ... whose proportions follow the training convention
+    g = dict(zip(('hip', 'thigh', 'shin', 'foot', 'spine', 'neck', 'head', 'clavicle',
+                  'upper_arm', 'forearm'), sk.group_lengths()))
+    assert abs(g['hip'] / g['thigh'] - CONVENTION_RATIOS['hip_over_thigh']) < 0.03
+    # (the ratio is applied to the rig's own upper arm; measured from the moved shoulder the
+    # upper arm is longer, so the skeleton's ratio comes out lower)
+    assert 0.3 < g['clavicle'] / g['upper_arm'] < CONVENTION_RATIOS['clavicle_over_upper_arm']
+    # the mesh's legs end where the skeleton's do (re-aimed limbs), the arms within a few cm
+    rig = posed.joints_rig
+    for name, tol in (('left_knee', 0.02), ('right_ankle', 0.02), ('left_toe', 0.02),
+                      ('right_elbow', 0.06), ('left_wrist', 0.06)):
+        j = JOINT_INDEX[name]
+        assert np.linalg.norm(rig[:, j] - J[:, j], axis=-1).max() < tol, name
+    # every joint lies inside the body's vertex cloud
     v = posed.vertices
     for f in (0, 19):
         lo, hi = v[f].min(axis=0), v[f].max(axis=0)
-        assert np.all((posed.joints[f] > lo - 1e-3) & (posed.joints[f] < hi + 1e-3))
-    # bodies differ: the same motion on another phenotype changes the bone lengths
+        assert np.all((J[f] > lo - 1e-3) & (J[f] < hi + 1e-3))
+    # bodies differ: another phenotype changes the bone lengths
     other = AnnyBody.create(model, {'age': 0.8, 'height': 0.9, 'weight': 0.2})
     assert other.leg_length() > body.leg_length() + 0.02
 
@@ -240,6 +251,13 @@ def test_render_and_detect_a_clip(model, walk, rendered, tmp_path):
     body_px = np.ptp(uv[..., 1], axis=1)[:, None]
     err = np.linalg.norm(kp[:, 15:17, :2] - ankles, axis=-1) / body_px
     assert np.median(err[ok]) < 0.06
+    # the rendered ground truth is the FK of the recorded rotations on the recorded lengths
+    from mocap_core.kinematics import forward_kinematics
+    from mocap_core.skeleton import Skeleton
+    sk = Skeleton.from_group_lengths(arrays['bone_lengths'])
+    np.testing.assert_allclose(forward_kinematics(sk.parents, sk.offsets, arrays['rotations'],
+                                                  arrays['root_positions']).positions,
+                               arrays['joints_world'], atol=1e-6)
     # world and camera joints agree through the camera pose
     Rw, C = arrays['camera_R'], arrays['camera_position']
     np.testing.assert_allclose(np.einsum('fij,fnj->fni', Rw, arrays['joints_world'] - C[:, None]),

@@ -33,7 +33,8 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from ..rotations import quat_to_matrix
-from ..skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, REST_DIRECTIONS
+from ..skeleton import (BONE_GROUPS, JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS,
+                        REST_DIRECTIONS, Skeleton)
 
 #: Anny rest coordinates -> pipeline body coordinates: (x, y, z) -> (-y, x, z).
 ANNY_TO_PIPELINE = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -244,6 +245,9 @@ class AnnyBody:
     drivers: np.ndarray
     faces: np.ndarray
     vertex_bones: np.ndarray
+    rest_tips: np.ndarray
+    aim_targets: np.ndarray
+    skeleton: Skeleton
     _model: object = field(repr=False)
     _coeffs: object = field(repr=False)
 
@@ -282,8 +286,19 @@ class AnnyBody:
         weights = model.vertex_bone_weights if hasattr(model, 'vertex_bone_weights') else None
         vertex_bones = _dominant_bones(model, weights)
         faces = model.get_triangular_faces().numpy().astype(np.int64)
+        tips = tails.copy()
+        aim = np.full(len(names), -1)
+        for name, (_, target) in BONE_DRIVERS.items():
+            b = index[name]
+            children = [c for c in range(len(names)) if parents[c] == b]
+            if children:
+                tips[b] = heads[children[0]]
+            if target is not None and not target.startswith('='):
+                aim[b] = JOINT_INDEX[target]
+        rig_rest = to_convention(_rig_points(names, heads[None]))[0]
+        skeleton = Skeleton.from_group_lengths(_group_lengths(rig_rest))
         return cls(pheno, names, parents, heads, rots, corr, drivers, faces, vertex_bones,
-                   model, coeffs)
+                   tips, aim, skeleton, model, coeffs)
 
     # ------------------------------------------------------------------------------------
     def rest_joints(self) -> np.ndarray:
@@ -307,12 +322,7 @@ class AnnyBody:
         return float(v[:, 2].max() - v[:, 2].min())
 
     def _rig_joints(self, heads: np.ndarray) -> np.ndarray:
-        index = {n: i for i, n in enumerate(self.bone_names)}
-        out = np.empty(heads.shape[:-2] + (NUM_JOINTS, 3))
-        for j, name in enumerate(JOINT_NAMES):
-            out[..., j, :] = np.mean([heads[..., index[b], :] for b in JOINT_POINTS[name]],
-                                     axis=0)
-        return out
+        return _rig_points(self.bone_names, heads)
 
     def _joints_from_heads(self, heads: np.ndarray) -> np.ndarray:
         return to_convention(self._rig_joints(heads))
@@ -333,29 +343,74 @@ class AnnyBody:
         G = np.asarray(global_rotations, dtype=np.float64)
         pelvis = np.asarray(pelvis, dtype=np.float64)
         F = len(G)
-        # World orientation of every bone: G_driver @ C_bone @ R_rest_bone (pipeline axes).
+        # The ground truth: the pipeline skeleton of this body, exactly.
+        joints = self.skeleton_positions(G, pelvis)
+        # World orientation of every bone: G_driver @ C_bone (pipeline axes), then the limb
+        # bones re-aimed from their posed heads at the skeleton's next joint.
         Q = np.einsum('fbij,bjk->fbik', G[:, self.drivers], self.corrections)
-        W = np.einsum('fbij,bjk->fbik', Q, self.rest_rotations)
+        rest_pelvis = self._rig_joints(self.rest_heads[None])[0, JOINT_INDEX['pelvis']]
+        heads = np.empty((F, len(self.bone_names), 3))
         # Root head so that the mean of the hips lands on ``pelvis``: the hips hang from the
         # root through bones that all take the pelvis rotation (LHipJoint, RHipJoint).
-        rest_pelvis = self.rest_joints()[JOINT_INDEX['pelvis']]
-        root = pelvis - np.einsum('fij,j->fi', Q[:, 0], rest_pelvis - self.rest_heads[0])
+        heads[:, 0] = pelvis - np.einsum('fij,j->fi', Q[:, 0], rest_pelvis - self.rest_heads[0])
+        for b in range(1, len(self.bone_names)):
+            p = self.parents[b]
+            heads[:, b] = heads[:, p] + np.einsum('fij,j->fi', Q[:, p],
+                                                  self.rest_heads[b] - self.rest_heads[p])
+            t = self.aim_targets[b]
+            if t >= 0:
+                u = np.einsum('fij,j->fi', Q[:, b], self.rest_tips[b] - self.rest_heads[b])
+                Q[:, b] = np.einsum('fij,fjk->fik', _min_rotations(u, joints[:, t] - heads[:, b]),
+                                    Q[:, b])
+        W = np.einsum('fbij,bjk->fbik', Q, self.rest_rotations)
         A = ANNY_TO_PIPELINE
         D = np.einsum('ij,fbjk->fbik', A.T, W)  # back to Anny axes
         verts = np.empty((F, len(self.vertex_bones), 3), dtype=np.float32)
-        heads = np.empty((F, len(self.bone_names), 3))
         with torch.no_grad():
             for s in range(0, F, chunk):
                 e = min(F, s + chunk)
-                delta = torch.zeros((e - s, len(self.bone_names), 4, 4), dtype=torch.float32)
-                delta[..., :3, :3] = torch.from_numpy(D[s:e]).float()
+                delta = torch.zeros((e - s, len(self.bone_names), 4, 4), dtype=torch.float64)
+                delta[..., :3, :3] = torch.from_numpy(D[s:e])
                 delta[..., 3, 3] = 1.0
-                delta[:, 0, :3, 3] = torch.from_numpy(root[s:e] @ A).float()
-                out = _forward(self._model, delta, self._coeffs)
+                delta[:, 0, :3, 3] = torch.from_numpy(heads[s:e, 0] @ A)
+                out = _forward(self._model, delta.float(), self._coeffs)
                 verts[s:e] = out['vertices'].numpy() @ A.T.astype(np.float32)
                 heads[s:e] = out['bone_poses'][..., :3, 3].double().numpy() @ A.T
-        rig = self._rig_joints(heads)
-        return PosedBody(verts, to_convention(rig), rig, heads)
+        return PosedBody(verts, joints, self._rig_joints(heads), heads)
+
+    def skeleton_positions(self, global_rotations: np.ndarray,
+                           pelvis: np.ndarray) -> np.ndarray:
+        """(F, 18, 3) FK of the body's pipeline skeleton (:attr:`skeleton`) with the given
+        global rotations, pelvis at ``pelvis``."""
+        G = np.asarray(global_rotations, dtype=np.float64)
+        off = self.skeleton.offsets
+        P = np.empty(G.shape[:-3] + (NUM_JOINTS, 3))
+        P[..., 0, :] = pelvis
+        for j in range(1, NUM_JOINTS):
+            p = PARENTS[j]
+            P[..., j, :] = P[..., p, :] + np.einsum('...ij,j->...i', G[..., p, :, :], off[j])
+        return P
+
+
+def _rig_points(bone_names: Sequence[str], heads: np.ndarray) -> np.ndarray:
+    """(..., 18, 3) the pipeline joints at the rig's points (:data:`JOINT_POINTS`)."""
+    index = {n: i for i, n in enumerate(bone_names)}
+    out = np.empty(heads.shape[:-2] + (NUM_JOINTS, 3))
+    for j, name in enumerate(JOINT_NAMES):
+        out[..., j, :] = np.mean([heads[..., index[b], :] for b in JOINT_POINTS[name]], axis=0)
+    return out
+
+
+def _group_lengths(joints: np.ndarray) -> np.ndarray:
+    """(10,) bone-group lengths of one (18, 3) pose (symmetric pairs averaged)."""
+    return np.array([np.mean([np.linalg.norm(joints[JOINT_INDEX[n]]
+                                             - joints[PARENTS[JOINT_INDEX[n]]])
+                              for n in names]) for _, names in BONE_GROUPS])
+
+
+def _min_rotations(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) smallest rotations taking directions (F, 3) ``a`` onto ``b``."""
+    return np.stack([_min_rotation(x, y) for x, y in zip(a, b)])
 
 
 def to_convention(rig_joints: np.ndarray) -> np.ndarray:

@@ -42,10 +42,10 @@ from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..skeleton import (BONE_GROUPS, JOINT_INDEX, KEYPOINT_INDEX, NUM_KEYPOINTS, PARENTS)
+from ..skeleton import (JOINT_INDEX, KEYPOINT_INDEX, NUM_KEYPOINTS)
 
 #: Bump when the output of :func:`render_clip` changes meaning (old clips are re-rendered).
-RENDER_FORMAT = 4
+RENDER_FORMAT = 5
 
 #: Anny's COCO keypoint names -> layout names (the feet points come from the skeleton).
 _COCO_TO_LAYOUT = {
@@ -85,16 +85,6 @@ def _facing(global_rotations: np.ndarray) -> np.ndarray:
     """(F, 2) horizontal forward direction of the pelvis."""
     f = global_rotations[:, 0, :2, 0]
     return f / np.maximum(np.linalg.norm(f, axis=1, keepdims=True), 1e-9)
-
-
-def _bone_group_lengths(joints: np.ndarray) -> np.ndarray:
-    """(10,) median bone-group lengths of (F, 18, 3) joints."""
-    out = []
-    for _, names in BONE_GROUPS:
-        ls = [np.linalg.norm(joints[:, JOINT_INDEX[n]] - joints[:, PARENTS[JOINT_INDEX[n]]],
-                             axis=-1) for n in names]
-        out.append(float(np.median(np.concatenate(ls))))
-    return np.array(out)
 
 
 def _project(K: np.ndarray, pc: np.ndarray) -> np.ndarray:
@@ -251,7 +241,7 @@ class ClipRenderer:
         np.savez_compressed(
             tmp / 'data.npz', keypoints=keypoints, keypoints_mesh=kp_mesh,
             joints_world=joints, joints_camera=joints_cam, joints_rig_world=joints_rig,
-            bone_lengths=_bone_group_lengths(joints), K=K,
+            bone_lengths=body.skeleton.group_lengths(), K=K,
             image_size=np.array([cam.intrinsics.width, cam.intrinsics.height]),
             camera_R=cam.R, camera_position=cam.position, contacts=contacts, view=views,
             rotations=rot, root_positions=joints[:, 0], fps=np.array(float(motion.fps)),
