@@ -156,6 +156,10 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--smooth', type=float, default=0.0, metavar='SIGMA',
                    help='Gaussian smoothing of the keypoints along time before lifting '
                    '(frames; the node parameter smooth_sigma)')
+    p.add_argument('--rendered', nargs='?', const='', default=None, metavar='DIR',
+                   help='also lift the rendered validation clips (mocap data render; default '
+                   'folder ~/.cache/mocap/render) from the detector, from clean projections '
+                   'of the same frames and from detector-placed projections')
     p.add_argument('--out', help='report directory (default: next to the weights)')
     p.add_argument('--device', default='cpu')
     p.add_argument('--real', nargs='*', default=None, metavar='DIR',
@@ -298,7 +302,35 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"{s['skating_mm']:.1f} mm/frame (ground truth "
               f"{real['groundtruth']['skating_mm']:.1f})")
     extra = {'baseline_mean_pose': baseline, 'weights': str(weights),
-             'eval_seconds': round(seconds, 1)}
+             'eval_seconds': round(seconds, 1), 'flip': args.flip, 'smooth': args.smooth}
+    if args.rendered is not None:
+        from mocap_core.render.batch import DEFAULT_OUT
+        from mocap_core.render.clip import iter_done
+
+        from .evaluate import evaluate_rendered
+        root = Path(args.rendered) if args.rendered else DEFAULT_OUT
+        dirs = list(iter_done(root, 'validation'))
+        if not dirs:
+            print(f'mocap eval lifter: error: no rendered validation clip under {root}',
+                  file=sys.stderr)
+            return 2
+        placed = None
+        try:
+            from mocap_core.data.detector_placement import PLACEMENT_PATH, DetectorPlacement
+            placed = DetectorPlacement.load(PLACEMENT_PATH)
+        except (OSError, ValueError):
+            pass
+        rendered = {}
+        for inputs in ('detector', 'projected') + (('placed',) if placed else ()):
+            r = evaluate_rendered(model, dirs, inputs, args.device, flip=args.flip,
+                                  smooth=args.smooth, placement=placed)
+            rendered[inputs] = {k: r[k] for k in ('clips', 'frames', 'summary')}
+            s = r['summary']
+            print(f"rendered ({inputs:9s}, {r['clips']} clips): MPJPE {s['mpjpe_mm']:.1f} mm "
+                  f"(median {s['median_mpjpe_mm']:.1f})  PA-MPJPE {s['pa_mpjpe_mm']:.1f} mm "
+                  f"(median {s['median_pa_mpjpe_mm']:.1f})  MRPE {s['mrpe_mm']:.0f} mm  "
+                  f"MBLE {s['mble_mm']:.1f} mm")
+        extra['rendered_lifter_only'] = rendered
     if is_vtm:
         from .evaluate import evaluate_tpmae
         extra['tpmae'] = evaluate_tpmae(model, val, args.device)['summary']
