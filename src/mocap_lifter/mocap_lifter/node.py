@@ -73,10 +73,12 @@ PARAMETERS = (
     ParamSpec('test_time_flip', True, 'MotioNet: also lift the mirrored keypoints and '
               'average the mirrored-back pose in (test-time flip augmentation; twice the '
               'network time; see docs/rendering.md for its measured effect)', read_only=True),
-    ParamSpec('smooth_sigma', -1.0, 'Gaussian smoothing of the keypoints along time before '
-              'lifting, sigma in frames (0: off; -1: 3 in windowed mode, off in causal mode); '
-              'centred within the look-ahead in windowed mode, one-sided (a lag) in causal '
-              'mode', min_value=-1.0, max_value=10.0, read_only=True),
+    ParamSpec('smooth_sigma', 0.0, 'Gaussian smoothing of the keypoints along time before '
+              'lifting, sigma in frames (0: off; 3 cuts the jitter on real detections 2.7x for '
+              '1.6 mm of validation MPJPE, docs/lifter.md); the frames beyond the look-ahead '
+              'are not yet there, so with chunk > 1 the output differs from frame-by-frame '
+              'lifting (by up to ~1 cm); one-sided (a lag) in causal mode', min_value=0.0,
+              max_value=10.0, read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,
               read_only=True),
@@ -90,18 +92,6 @@ PARAMETERS = (
     ParamSpec('threads', 1, 'Torch CPU threads (1 is fastest for per-frame inference of this '
               'small network, see docs/lifter.md)', min_value=1, read_only=True),
 )
-
-
-#: Keypoint smoothing of ``smooth_sigma = -1`` (docs/lifter.md: sigma 3 frames cuts the jitter
-#: on real detections 2.7x for 1.6 mm of validation MPJPE).
-DEFAULT_SMOOTH_SIGMA = 3.0
-
-
-def default_smoothing(mode: str, sigma: float) -> float:
-    """The smoothing sigma in frames for a ``smooth_sigma`` parameter value."""
-    if sigma >= 0:
-        return float(sigma)
-    return DEFAULT_SMOOTH_SIGMA if mode == 'windowed' else 0.0
 
 
 class LifterNode(Node):
@@ -133,7 +123,7 @@ class LifterNode(Node):
         lifter = OnlineLifter(model, mode, None if p['latency'] < 0 else p['latency'],
                               p['skeleton_frames'], p['max_gap_s'], p['device'],
                               chunk=p['chunk'], flip=p['test_time_flip'],
-                              smooth=default_smoothing(mode, p['smooth_sigma']))
+                              smooth=p['smooth_sigma'])
         self.stream = LifterStream(lifter, StreamIntrinsics(p['horizontal_fov_deg']),
                                    p['person'], p['max_gap_s'])
         self.published_lengths: Optional[np.ndarray] = None

@@ -148,7 +148,7 @@ def test_online_lifter_windowed_emits_every_frame_once_in_order():
     assert [f.stamp_ns for f in got] == stamps and online.pending() == 0
 
 
-@pytest.mark.parametrize('mode', ['windowed', 'causal', 'vtm'])
+@pytest.mark.parametrize('mode', ['windowed', 'causal', 'vtm', 'windowed_flip'])
 def test_online_lifter_chunks_give_the_same_frames_later(mode):
     """chunk = 8 lifts eight frames per network pass: the same poses as frame by frame (the
     network is convolutional; VTM lifts each frame from its frame-by-frame window), emitted in
@@ -162,6 +162,8 @@ def test_online_lifter_chunks_give_the_same_frames_later(mode):
         mode = 'windowed'
     else:
         model = MotioNet(LifterConfig(**SMALL, causal=mode == 'causal')).eval()
+    flip = mode.endswith('_flip')     # test-time flip keeps the equivalence
+    mode = mode.replace('_flip', '')
     intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
     rng = np.random.default_rng(5)
     kp = np.concatenate([rng.uniform(200, 400, (50, 23, 2)), np.ones((50, 23, 1))], -1)
@@ -169,7 +171,7 @@ def test_online_lifter_chunks_give_the_same_frames_later(mode):
     runs = {}
     for chunk in (1, 8):
         # the skeleton is estimated over 30 frames (changing every frame), then held
-        online = OnlineLifter(model, mode, skeleton_frames=30, chunk=chunk)
+        online = OnlineLifter(model, mode, skeleton_frames=30, chunk=chunk, flip=flip)
         got, sizes = [], []
         for i in range(50):
             frames, _ = online.push(stamps[i], kp[i], intr)
