@@ -33,10 +33,14 @@ fi
 # 2. The OSMesa library for CPU rendering (mocap data render, its test). Only data generation
 #    needs it; without it the render command says what is missing and its tests skip.
 if ! ldconfig -p 2>/dev/null | grep -q 'libOSMesa\.so'; then
-  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  as_root=""
+  if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then
+    as_root="sudo -n"
+  fi
+  if { [ "$(id -u)" = 0 ] || [ -n "$as_root" ]; } && command -v apt-get >/dev/null 2>&1; then
     log "installing libosmesa6 (CPU OpenGL for rendering people)"
-    { DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libosmesa6 >/dev/null 2>&1 \
-      || { apt-get update >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends libosmesa6 >/dev/null 2>&1; }; } \
+    { DEBIAN_FRONTEND=noninteractive $as_root apt-get install -y --no-install-recommends libosmesa6 >/dev/null 2>&1 \
+      || { $as_root apt-get update >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive $as_root apt-get install -y --no-install-recommends libosmesa6 >/dev/null 2>&1; }; } \
       || log "could not install libosmesa6: mocap data render will not work (the rest does)"
   else
     log "note: libOSMesa not found; mocap data render needs it (Debian: sudo apt-get install libosmesa6)"
