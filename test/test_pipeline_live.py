@@ -83,6 +83,12 @@ def test_live_nodes_replay_record_and_agree_with_mocap_process(processes, ros2_c
     # lifter's inputs have matched before its first message
     processes.wait_for_text(rec_log, 'Subscribed to topic', 60, rec, count=len(OUTPUTS))
     assert peer.wait_for_publishers(timeout=60), peer.unmatched_subscriptions()
+    # the stages downstream of the lifter have subscribed too (recorder, next stage, this
+    # test): a stage that discovers its input late would miss the first frames
+    downstream = {'/mocap/lifter/motion': 3, '/mocap/physics/motion': 3}
+    assert peer.wait_until(lambda: all(peer.node.count_subscribers(t) >= n
+                                       for t, n in downstream.items()), 60), \
+        {t: peer.node.count_subscribers(t) for t in downstream}
     play = subprocess.run([*ros2_cmd, 'bag', 'play', str(GT_BAG), '--wait-for-subscribers',
                            '--wait-timeout', '60', '--topics', '/mocap/camera_info',
                            '/mocap/keypoints2d'], env=ros_env, capture_output=True, text=True,

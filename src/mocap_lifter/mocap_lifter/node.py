@@ -70,7 +70,7 @@ PARAMETERS = (
     ParamSpec('chunk', 1, 'Frames lifted per network pass: 1 for live use; more (offline, '
               'e.g. mocap process) is faster per frame and adds chunk - 1 frames of delay',
               min_value=1, max_value=256, read_only=True),
-    ParamSpec('test_time_flip', True, 'MotioNet: also lift the mirrored keypoints and '
+    ParamSpec('test_time_flip', False, 'MotioNet: also lift the mirrored keypoints and '
               'average the mirrored-back pose in (test-time flip augmentation; twice the '
               'network time; see docs/rendering.md for its measured effect)', read_only=True),
     ParamSpec('smooth_sigma', 0.0, 'Gaussian smoothing of the keypoints along time before '
