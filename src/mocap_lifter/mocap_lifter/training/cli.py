@@ -169,11 +169,22 @@ def add_eval_parser(sub) -> None:
     p.set_defaults(func=cmd_eval)
 
 
+def split_motions(split: str):
+    """``(train motions, validation motions, validation families or None)`` of the committed
+    split (``'committed'`` / ``'validation'``) or the strict one (``'strict'``)."""
+    if split == 'strict':
+        from mocap_core.data.strict_split import load_strict
+        train, _ = load_strict('strict_train')
+        val, families = load_strict('strict_validation')
+        return train, val, families
+    from mocap_core.data.dataset import load_dataset
+    return load_dataset('train'), load_dataset('validation'), None
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     import shutil
 
     from mocap_core.checkpoint import WeightsError
-    from mocap_core.data.dataset import load_dataset
 
     from .train import TrainConfig, train
 
@@ -195,13 +206,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir or f'runs/lifter_{args.mode}')
     print(f'loading the dataset ({cfg.split} train and validation splits) ...', flush=True)
     t0 = time.time()
-    if cfg.split == 'strict':
-        from mocap_core.data.strict_split import load_strict
-        train_motions, _ = load_strict('strict_train')
-        val_motions, _ = load_strict('strict_validation')
-    else:
-        train_motions = load_dataset('train')
-        val_motions = load_dataset('validation')
+    train_motions, val_motions, _ = split_motions(cfg.split)
     print(f'{len(train_motions)} training clips, {len(val_motions)} validation clips '
           f'({time.time() - t0:.0f} s)', flush=True)
     try:
@@ -235,7 +240,6 @@ def default_real_sequences() -> List[str]:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     from mocap_core.checkpoint import WeightsError
-    from mocap_core.data.dataset import load_dataset
 
     from ..weights import architecture, load_weights
     from .evaluate import (baseline_mean_pose, evaluate, evaluate_real,
@@ -261,14 +265,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         print(f"mocap eval lifter: error: {weights} holds {'VTM' if is_vtm else 'MotioNet'} "
               f'weights but --model {args.model}', file=sys.stderr)
         return 2
-    families = None
-    if args.split == 'strict':
-        from mocap_core.data.strict_split import load_strict
-        val, families = load_strict('strict_validation')
-        train_for_baseline, _ = load_strict('strict_train')
-    else:
-        val = load_dataset('validation')
-        train_for_baseline = load_dataset('train')
+    train_for_baseline, val, families = split_motions(args.split)
     placements = {'joints': [None], 'detector': ['detector'],
                   'both': [None, 'detector']}[args.placement]
     if 'detector' in placements:
