@@ -11,6 +11,13 @@ Usage in a node::
     self.diag.dropped += 1                 # a frame was skipped
     self.diag.set_value('model', 'blazepose_full')
     self.diag.warn('no camera_info yet')   # level WARN until cleared
+    self.diag.watch('motion', publisher)   # its matched subscriptions are reported
+
+Connections: for each watched publisher the status carries ``subscribers_<label>`` (the
+subscriptions this node's publisher has matched), for each watched subscription
+``publishers_<label>`` (the publishers it has matched). Both sides of a connection must have
+matched before a reliable message reaches its subscriber: a stage that discovers its peer late
+misses the messages sent before (volatile durability), and these values tell.
 """
 
 from __future__ import annotations
@@ -41,6 +48,7 @@ class NodeDiagnostics:
         self._values: Dict[str, str] = {}
         self._warning: Optional[str] = None
         self._error: Optional[str] = None
+        self._watched: Dict[str, object] = {}
         self._pub = node.create_publisher(DiagnosticArray, topic, DIAGNOSTICS_QOS)
         self._timer = node.create_timer(period_s, self.publish)
 
@@ -52,6 +60,25 @@ class NodeDiagnostics:
 
     def set_value(self, key: str, value) -> None:
         self._values[str(key)] = str(value)
+
+    def watch(self, label: str, endpoint) -> None:
+        """Report the matched count of ``endpoint`` (an rclpy Publisher or Subscription) as
+        ``subscribers_<label>`` or ``publishers_<label>``."""
+        self._watched[str(label)] = endpoint
+
+    def connections(self) -> Dict[str, str]:
+        """``{'subscribers_<label>' | 'publishers_<label>': count}`` of the watched
+        endpoints (an endpoint already destroyed is left out)."""
+        out: Dict[str, str] = {}
+        for label, ep in self._watched.items():
+            try:
+                if hasattr(ep, 'get_subscription_count'):
+                    out[f'subscribers_{label}'] = str(ep.get_subscription_count())
+                else:
+                    out[f'publishers_{label}'] = str(ep.get_publisher_count())
+            except Exception:  # noqa: BLE001 - destroyed during shutdown
+                continue
+        return out
 
     def warn(self, message: Optional[str]) -> None:
         """Set (or clear with None) the current warning."""
@@ -73,6 +100,7 @@ class NodeDiagnostics:
             'frames_out': str(self.output.total),
             'frames_dropped': str(self.dropped),
             'errors': str(self.errors),
+            **self.connections(),
             **self._values,
         }
         if self._error:

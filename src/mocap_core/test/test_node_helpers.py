@@ -69,6 +69,32 @@ def test_diagnostics_status_fields_and_levels(node):
     d.publish()  # builds and publishes a DiagnosticArray without error
 
 
+def test_diagnostics_report_matched_connections(node):
+    """Watched endpoints report their matched counts: a publisher with its own node's
+    subscription on the topic, an input without a publisher."""
+    import time
+
+    from std_msgs.msg import String
+
+    from mocap_core.diagnostics import NodeDiagnostics
+    from mocap_core.qos import STREAM_QOS
+
+    d = NodeDiagnostics(node, 'stage')
+    pub = node.create_publisher(String, '/helpers_test/out', STREAM_QOS)
+    d.watch('out', pub)
+    d.watch('in', node.create_subscription(String, '/helpers_test/in', lambda m: None,
+                                           STREAM_QOS))
+    values = {kv.key: kv.value for kv in d.status().values}
+    assert values['publishers_in'] == '0' and values['subscribers_out'] == '0'
+    node.create_subscription(String, '/helpers_test/out', lambda m: None, STREAM_QOS)
+    deadline = time.monotonic() + 30
+    while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert {kv.key: kv.value for kv in d.status().values}['subscribers_out'] == '1'
+    node.destroy_publisher(pub)   # a destroyed endpoint is left out, not an error
+    assert 'subscribers_out' not in {kv.key for kv in d.status().values}
+
+
 def test_declare_parameters_with_descriptions_and_ranges(node):
     from rclpy.parameter import Parameter
 

@@ -170,9 +170,10 @@ class GMRNode(Node):
         self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
         self.diag.set_value('static_camera', p['static_camera'])
         self.diag.set_value('nonfinite_outputs', 0)
-        self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'],
-                                 guarded(self, self.on_motion, 'motion'),
-                                 input_qos(STREAM_QOS, p['queue_depth']))
+        self.diag.watch('input', self.create_subscription(
+            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
+            input_qos(STREAM_QOS, p['queue_depth'])))
+        self.diag.watch('motion', self.pub['motion'])
         self.create_timer(0.1, guarded(self, self.on_idle, 'idle'))
         self.get_logger().info(
             f"gmr ready: {path} ({cfg.layers}x{cfg.hidden} GRU at {cfg.fps:g} fps), input "

@@ -147,9 +147,12 @@ class LifterNode(Node):
         self.create_timer(0.1, guarded(self, self.on_idle, 'idle flush'))
         self.create_subscription(CameraInfo, topics.CAMERA_INFO,
                                  guarded(self, self.on_info, 'camera_info'), STREAM_QOS)
-        self.create_subscription(PointCloud2, topics.KEYPOINTS,
-                                 guarded(self, self.on_keypoints, 'keypoints'),
-                                 input_qos(SENSOR_QOS, p['queue_depth']))
+        sub = self.create_subscription(PointCloud2, topics.KEYPOINTS,
+                                       guarded(self, self.on_keypoints, 'keypoints'),
+                                       input_qos(SENSOR_QOS, p['queue_depth']))
+        self.diag.watch('keypoints', sub)
+        self.diag.watch('motion', self.pub['motion'])
+        self.diag.watch('contacts', self.pub['contacts'])
         self.get_logger().info(f'lifter ready: {arch} {path} ({mode}, receptive field '
                                f'{model.cfg.receptive_field()} frames, latency '
                                f'{lifter.latency} frames)')

@@ -236,12 +236,15 @@ class PhysicsNode(Node):
         self.diag.set_value('gains', 'fixed' if not learned else f'learned ({weights})')
         self.diag.set_value('model', 'none yet (waiting for the first motion)')
         qos = input_qos(STREAM_QOS, p['queue_depth'])
-        self.create_subscription(MultiDOFJointTrajectory, p['motion_topic'],
-                                 guarded(self, self.on_motion, 'motion'), qos)
+        self.diag.watch('input', self.create_subscription(
+            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
+            qos))
         self.contacts_sub = None
         if contacts_topic:
             self.contacts_sub = self.create_subscription(
                 JointState, contacts_topic, guarded(self, self.on_contacts, 'contacts'), qos)
+            self.diag.watch('contacts', self.contacts_sub)
+        self.diag.watch('motion', self.pub_motion)
         self.create_timer(0.01, guarded(self, self.on_timer, 'process'))
         self.create_timer(1.0, guarded(self, self.refresh_diagnostics, 'diagnostics'))
         self.get_logger().info(

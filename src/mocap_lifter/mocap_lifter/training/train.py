@@ -64,6 +64,9 @@ class TrainConfig:
     w_contact_velocity: float = 1.0
     w_rotation: float = 0.0
     w_adversarial: float = 0.0
+    #: weight of the acceleration term: mean distance between the predicted and true
+    #: root-relative joint accelerations (m per frame squared). Penalises jitter directly.
+    w_acceleration: float = 0.0
     end_effector_weight: float = 2.0
     clean_fraction: float = 0.25   # share of training windows with clean keypoints
     tpose_fraction: float = 0.0    # share of T-pose windows (reference T-pose loss)
@@ -116,6 +119,10 @@ def losses(out: Dict[str, torch.Tensor], gt: Dict[str, torch.Tensor], cfg: Train
              'contact_velocity': contact_velocity}
     dot = (out['rotations'] * gt['rotations']).sum(dim=-1).abs()
     terms['rotation'] = (1.0 - dot).mean()
+    # second differences over time of the root-relative joints (m / frame^2)
+    acc_p = p[:, 2:] - 2 * p[:, 1:-1] + p[:, :-2]
+    acc_g = g[:, 2:] - 2 * g[:, 1:-1] + g[:, :-2]
+    terms['acceleration'] = (acc_p - acc_g).norm(dim=-1).mean()
     if 'tpose' in gt:   # T-pose windows: their rotations must come out as the T-pose's
         mask = gt['tpose'].to(dot.dtype)
         terms['tpose'] = ((1.0 - dot).mean(dim=(1, 2)) * mask).sum() / mask.sum().clamp_min(1.0)
@@ -130,6 +137,7 @@ def total_loss(terms: Dict[str, torch.Tensor], cfg: TrainConfig) -> torch.Tensor
             + cfg.w_skeleton * terms['skeleton'] + cfg.w_contact * terms['contact']
             + cfg.w_contact_velocity * terms['contact_velocity']
             + cfg.w_rotation * terms['rotation']
+            + cfg.w_acceleration * terms['acceleration']
             + cfg.w_tpose * terms.get('tpose', torch.zeros(()))
             + cfg.w_adversarial * terms.get('adversarial', torch.zeros(())))
 
@@ -204,7 +212,8 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     writer = csv.writer(log)
     if new_log:
         writer.writerow(['step', 'split', 'loss', 'joints_mm', 'root_mm', 'skeleton_mm',
-                         'contact', 'contact_velocity_mm', 'rotation', 'lr', 'seconds'])
+                         'contact', 'contact_velocity_mm', 'rotation', 'lr', 'seconds',
+                         'acceleration_mm'])
     t0 = time.time()
     bar = tqdm(total=cfg.steps, initial=step, disable=not progress, desc='train lifter')
     while step < cfg.steps:
@@ -295,7 +304,7 @@ def _row(step, split, loss, terms, lr, seconds) -> List:
     f = lambda k: float(terms[k]) if k in terms else float('nan')  # noqa: E731
     return [step, split, float(loss), 1000 * f('joints'), 1000 * f('root'),
             1000 * f('skeleton'), f('contact'), 1000 * f('contact_velocity'), f('rotation'),
-            lr, round(seconds, 1)]
+            lr, round(seconds, 1), 1000 * f('acceleration')]
 
 
 @torch.no_grad()
