@@ -162,3 +162,30 @@ def write_camera_info_yaml(calib: CameraCalibration, path) -> None:
                                        0.0, 0.0, 1.0, 0.0]},
     }
     Path(path).write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def world_to_optical(R: np.ndarray, position: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """World points into a moving camera's optical frame.
+
+    Args:
+        R: (F, 3, 3) world-to-optical rotations, one per frame.
+        position: (F, 3) camera centres in the world frame, metres.
+        points: (F, N, 3) world points, metres.
+    Returns:
+        (F, N, 3) points in the optical frame (x right, y down, z forward), metres.
+    """
+    return np.einsum('fij,fkj->fki', np.asarray(R), np.asarray(points) -
+                     np.asarray(position)[:, None])
+
+
+def project_pinhole(K: np.ndarray, points: np.ndarray, min_depth: float = 1e-3
+                    ) -> np.ndarray:
+    """(..., 3) optical-frame points -> (..., 3) pixels u, v and a visibility flag 1; points
+    less than ``min_depth`` metres in front of the camera give (0, 0, 0), the layout's
+    missing point. ``K`` is the (3, 3) pinhole matrix (no skew, no distortion)."""
+    pc = np.asarray(points, dtype=np.float64)
+    z = pc[..., 2:3]
+    ok = z > min_depth
+    uv = pc[..., :2] / np.where(ok, z, 1.0) * np.asarray(K)[[0, 1], [0, 1]] + \
+        np.asarray(K)[:2, 2]
+    return np.where(ok, np.concatenate([uv, np.ones_like(z)], axis=-1), 0.0)

@@ -28,6 +28,7 @@ from typing import Dict, Iterable, List, Optional, Tuple, Union
 
 import numpy as np
 
+from ..camera import world_to_optical
 from ..kinematics import forward_kinematics
 from ..skeleton import JOINT_INDEX, KEYPOINT_NAMES, NUM_KEYPOINTS, PARENTS, Skeleton
 
@@ -102,7 +103,7 @@ def _clip_equations(arrays: Dict[str, np.ndarray], min_confidence: float):
     G = fk.global_rotations                                   # (F, 18, 3, 3) world
     pts = keypoints_3d(sk, rot, root)                          # (F, 23, 3) world
     Rc, C, K = arrays['camera_R'], arrays['camera_position'], arrays['K']
-    pc = np.einsum('fij,fkj->fki', Rc, pts - C[:, None])       # camera frame
+    pc = world_to_optical(Rc, C, pts)                          # camera frame
     z = pc[..., 2]
     f = np.array([K[0, 0], K[1, 1]])
     uv = pc[..., :2] / z[..., None] * f + K[:2, 2]

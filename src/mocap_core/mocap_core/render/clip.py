@@ -42,6 +42,7 @@ from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..camera import project_pinhole
 from ..skeleton import (JOINT_INDEX, KEYPOINT_INDEX, NUM_KEYPOINTS)
 
 #: Bump when the output of :func:`render_clip` changes meaning (old clips are re-rendered).
@@ -85,14 +86,6 @@ def _facing(global_rotations: np.ndarray) -> np.ndarray:
     """(F, 2) horizontal forward direction of the pelvis."""
     f = global_rotations[:, 0, :2, 0]
     return f / np.maximum(np.linalg.norm(f, axis=1, keepdims=True), 1e-9)
-
-
-def _project(K: np.ndarray, pc: np.ndarray) -> np.ndarray:
-    """(..., 3) optical-frame points -> (..., 3) u, v, 1 (0, 0, 0 behind the camera)."""
-    z = pc[..., 2:3]
-    ok = z > 1e-3
-    uv = (pc[..., :2] / np.where(ok, z, 1.0)) * K[[0, 1], [0, 1]] + K[:2, 2]
-    return np.where(ok, np.concatenate([uv, np.ones_like(z)], axis=-1), 0.0)
 
 
 class ClipRenderer:
@@ -192,7 +185,7 @@ class ClipRenderer:
             if lay is not None:
                 kp_world[:, KEYPOINT_INDEX[lay]] = coco[:, i]
                 have[KEYPOINT_INDEX[lay]] = True
-        kp_mesh = _project(K, cam.world_to_camera(kp_world))
+        kp_mesh = project_pinhole(K, cam.world_to_camera(kp_world))
         kp_mesh[:, ~have] = 0.0
 
         out_dir = Path(out_dir)

@@ -255,7 +255,7 @@ def evaluate_rendered(model: MotioNet, clip_dirs: Sequence[Path], inputs: str = 
     people, cameras and motions do. Frame-weighted means; per-clip rows included."""
     import json as _json
 
-    from mocap_core.camera import CameraIntrinsics
+    from mocap_core.camera import CameraIntrinsics, project_pinhole, world_to_optical
     from mocap_core.data.synth2d import keypoints_3d
     from mocap_core.skeleton import Skeleton
 
@@ -280,9 +280,8 @@ def evaluate_rendered(model: MotioNet, clip_dirs: Sequence[Path], inputs: str = 
             sk = Skeleton.from_group_lengths(a['bone_lengths'])
             pts = keypoints_3d(sk, a['rotations'], a['root_positions'],
                                placement=placement if inputs == 'placed' else None)
-            pc = np.einsum('fij,fkj->fki', a['camera_R'], pts - a['camera_position'][:, None])
-            uv = pc[..., :2] / pc[..., 2:] * K[[0, 1], [0, 1]] + K[:2, 2]
-            kp = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
+            kp = project_pinhole(K, world_to_optical(a['camera_R'], a['camera_position'],
+                                                     pts))
         if smooth > 0:
             kp = smooth_keypoints(kp, smooth)
         feats, root_2d, scale, _ = lifter_features(kp, intr)
