@@ -11,7 +11,8 @@ from mocap_core.data.detector_placement import (DetectorPlacement, fit_detector_
                                                 leg_length)
 from mocap_core.data.strict_split import family_of, strict_assignment
 from mocap_core.data.synth2d import keypoints_3d, look_at
-from mocap_core.render.evaluate import aggregate, motion_group, score_clip
+from mocap_core.render.evaluate import (aggregate, detector_swaps, motion_group,
+                                         score_clip)
 from mocap_core.skeleton import JOINT_INDEX, JOINT_MIRROR, KEYPOINT_NAMES, NUM_KEYPOINTS
 
 REPO = Path(__file__).resolve().parents[3]
@@ -114,8 +115,14 @@ def _gt(walk, F=40):
     J = fk.positions[:F] - [0, 0, 0] + np.array([0.0, 0.0, 3.0])  # a 'camera' frame
     meta = {'clip': 'bandai_namco_bvh/x.tar.xz:dataset-2_walk_exhausted_001.bvh',
             'camera': {'kind': 'static'}, 'body_height_m': 1.8, 'detected_fraction': 1.0}
+    K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+    kp = np.zeros((F, NUM_KEYPOINTS, 3))   # a detector that puts knees and ankles exactly
+    for side in ('left', 'right'):
+        for n in ('knee', 'ankle'):
+            p = J[:, JOINT_INDEX[f'{side}_{n}']] @ K.T
+            kp[:, KEYPOINT_NAMES.index(f'{side}_{n}')] = np.c_[p[:, :2] / p[:, 2:], np.ones(F)]
     gt = {'fps': np.array(30.0), 'joints_camera': J, 'joints_world': fk.positions[:F],
-          'view': np.array(['front'] * F)}
+          'view': np.array(['front'] * F), 'K': K, 'keypoints': kp}
     return gt, meta, J
 
 
@@ -143,4 +150,14 @@ def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
     assert r['physics_root_error'] < 1e-6
     agg = aggregate([perfect, score_clip(meta['clip'], meta, gt, swapped, idx)])
     assert agg['clips'] == 2 and agg['by_view']['front']['frames'] == 2 * len(J)
+    # the detector's own swaps: none as placed; every scored frame with its legs exchanged
+    det = detector_swaps(gt)
+    assert (det >= 0).sum() > len(J) // 2 and det.max() == 0
+    assert agg['pooled']['detector_swap_rate'] == 0.0
+    swap = {n: n.replace('left', 'right') if 'left' in n else n.replace('right', 'left')
+            for n in KEYPOINT_NAMES}
+    mirrored = dict(gt, keypoints=gt['keypoints'][:, [KEYPOINT_NAMES.index(swap[n])
+                                                      for n in KEYPOINT_NAMES]])
+    det = detector_swaps(mirrored)
+    assert np.array_equal(det >= 0, detector_swaps(gt) >= 0) and det[det >= 0].min() == 1
     assert motion_group(meta['clip']) == 'walk'

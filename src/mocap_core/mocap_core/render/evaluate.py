@@ -14,6 +14,9 @@ Metrics (positions in metres in, millimetres out):
   toe; pelvis-aligned) are closer to the ground truth with left and right exchanged than as
   labelled; frames whose true legs are less than :data:`SWAP_MIN_SEPARATION_M` apart on
   average are ambiguous and not counted;
+* the detector's own left/right swaps (:func:`detector_swaps`): its knee and ankle keypoints
+  closer to the exact projections with the labels exchanged; the lifter follows its labels,
+  so this tells how many of the lifter's swaps it inherits;
 * physics (``floor`` frame) and world stage (``world`` frame): root trajectory error: the
   whole clip's pelvis path rigidly aligned (rotation + translation, no scale) to the true
   world path; mean error (mm) and that error over the distance the pelvis travelled (RTE, %;
@@ -31,18 +34,47 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from ..camera import project_pinhole
 from ..pose_metrics import procrustes_align
-from ..skeleton import JOINT_INDEX, PARENTS
+from ..skeleton import JOINT_INDEX, KEYPOINT_INDEX, PARENTS
 
 #: Frames whose true left and right legs are closer than this (m, mean over knee, ankle,
 #: toe) are not scored for swaps.
 SWAP_MIN_SEPARATION_M = 0.12
+#: Frames whose true left and right knees and ankles are closer in the image than this
+#: fraction of the person's image height are not scored for detector swaps.
+DETECTOR_SWAP_MIN_SEPARATION = 0.08
+#: Detector keypoints below this confidence are not scored for swaps.
+DETECTOR_SWAP_MIN_CONFIDENCE = 0.3
 #: Clips whose pelvis travels less than this (m) get no RTE percentage.
 RTE_MIN_TRAVEL_M = 1.0
 
 _LEGS = {side: [JOINT_INDEX[f'{side}_{n}'] for n in ('hip', 'knee', 'ankle', 'toe')]
          for side in ('left', 'right')}
 _BONES = [j for j in range(1, len(PARENTS))]
+
+
+def detector_swaps(gt: Dict[str, np.ndarray]) -> np.ndarray:
+    """Per rendered frame: 1 when the detector's left and right knees and ankles are
+    labelled the other way round, 0 when not, -1 when not scored (a point missing or below
+    :data:`DETECTOR_SWAP_MIN_CONFIDENCE`, or the true legs closer in the image than
+    :data:`DETECTOR_SWAP_MIN_SEPARATION` of the person's height). ``gt``: a clip's
+    ``data.npz`` arrays (``keypoints`` (F, 23, 3), ``joints_camera`` (F, 18, 3), ``K``)."""
+    uv = project_pinhole(gt['K'], gt['joints_camera'])[..., :2]
+    kp = np.asarray(gt['keypoints'])
+    names = ('knee', 'ankle')
+    kl = kp[:, [KEYPOINT_INDEX[f'left_{n}'] for n in names]]
+    kr = kp[:, [KEYPOINT_INDEX[f'right_{n}'] for n in names]]
+    gl = uv[:, [JOINT_INDEX[f'left_{n}'] for n in names]]
+    gr = uv[:, [JOINT_INDEX[f'right_{n}'] for n in names]]
+    same = np.linalg.norm(kl[..., :2] - gl, axis=-1).sum(1) + \
+        np.linalg.norm(kr[..., :2] - gr, axis=-1).sum(1)
+    swap = np.linalg.norm(kl[..., :2] - gr, axis=-1).sum(1) + \
+        np.linalg.norm(kr[..., :2] - gl, axis=-1).sum(1)
+    height = np.ptp(uv[..., 1], axis=1)
+    scored = (np.minimum(kl[..., 2].min(1), kr[..., 2].min(1)) > DETECTOR_SWAP_MIN_CONFIDENCE) \
+        & (np.linalg.norm(gl - gr, axis=-1).mean(1) > DETECTOR_SWAP_MIN_SEPARATION * height)
+    return np.where(scored, (swap < same).astype(int), -1)
 
 
 def motion_group(clip_id: str) -> str:
@@ -99,6 +131,10 @@ class ClipScore:
     jitter: float
     jitter_gt: float
     root: Dict[str, Dict[str, float]] = field(default_factory=dict)
+    #: (frames,) the detector's own swaps per rendered frame (:func:`detector_swaps`) and
+    #: the view of every rendered frame
+    detector_swaps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    all_views: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
 
     def summary(self) -> Dict[str, float]:
         s = self.swaps[self.swaps >= 0]
@@ -168,7 +204,8 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
     height = height_class(float(meta.get('body_height_m', 1.7)))
     return ClipScore(clip, motion_group(clip), height, meta['camera']['kind'], F, len(idx),
                      float(meta.get('detected_fraction', float('nan'))), mpjpe, pa, mrpe,
-                     np.asarray(gt['view'])[idx], swaps, mble, jit, jit_gt, root)
+                     np.asarray(gt['view'])[idx], swaps, mble, jit, jit_gt, root,
+                     detector_swaps(gt), np.asarray(gt['view']))
 
 
 # ------------------------------------------------------------------------------------------
@@ -205,6 +242,13 @@ def aggregate(scores: List[ClipScore]) -> dict:
                           'pa_mpjpe': float(pa[m].mean()),
                           'swap_rate': float((sw[sw >= 0]).mean()) if (sw >= 0).any()
                           else float('nan')}
+    det = np.concatenate([s.detector_swaps for s in scores])
+    det_views = np.concatenate([s.all_views for s in scores])
+    out['pooled']['detector_swap_rate'] = float(det[det >= 0].mean()) if (det >= 0).any() \
+        else float('nan')
+    for v, r in by_view.items():
+        d = det[(det_views == v) & (det >= 0)]
+        r['detector_swap_rate'] = float(d.mean()) if len(d) else float('nan')
     out['by_view'] = by_view
     for name, attr in (('by_group', 'group'), ('by_height', 'height'),
                        ('by_camera', 'camera')):
@@ -238,6 +282,8 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"| lifter MBLE (bone lengths) | {_f(m.get('mble'))} mm |",
              f"| left/right leg swaps | {_f(100 * m.get('swap_rate', float('nan')), '{:.2f}')} "
              f"% of frames (pooled {_f(100 * p['swap_rate'], '{:.2f}')} %) |",
+             "| ... the detector's own 2D leg swaps (pooled) | "
+             f"{_f(100 * p.get('detector_swap_rate', float('nan')), '{:.2f}')} % of frames |",
              f"| jitter: lifter / ground truth | {_f(m.get('jitter'))} / "
              f"{_f(m.get('jitter_gt'))} m/s² (ratio {_f(m.get('jitter_ratio'), '{:.2f}')}×) |",
              f"| physics root trajectory error | {_f(m.get('physics_root_error'))} mm "
@@ -246,10 +292,12 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"(RTE {_f(m.get('world_rte'))} %) |",
              f"| person detected | {_f(100 * m.get('detected', float('nan')))} % of frames |",
              '', '## By view (pooled over frames)', '',
-             '| view | frames | MPJPE | PA-MPJPE | leg swaps |', '|---|---|---|---|---|']
+             '| view | frames | MPJPE | PA-MPJPE | leg swaps | detector leg swaps (2D) |',
+             '|---|---|---|---|---|---|']
     for v, r in agg['by_view'].items():
         lines.append(f"| {v} | {r['frames']} | {_f(r['mpjpe'])} | {_f(r['pa_mpjpe'])} | "
-                     f"{_f(100 * r['swap_rate'], '{:.2f}')} % |")
+                     f"{_f(100 * r['swap_rate'], '{:.2f}')} % | "
+                     f"{_f(100 * r.get('detector_swap_rate', float('nan')), '{:.2f}')} % |")
     for name, label in (('by_group', 'motion group'), ('by_height', 'body height'),
                         ('by_camera', 'camera')):
         lines += ['', f'## By {label} (median over clips)', '',
