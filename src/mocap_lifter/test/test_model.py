@@ -243,3 +243,29 @@ def test_tpose_windows_and_their_loss():
     assert float(losses(out, gt, TrainConfig())['tpose']) < 1e-7
     out['rotations'][0] = torch.roll(out['rotations'][0], 1, dims=-1)
     assert float(losses(out, gt, TrainConfig())['tpose']) > 0.1
+
+
+def test_acceleration_loss_counts_jitter_not_smooth_offsets():
+    """The acceleration term: zero for the true motion and for a constant-velocity drift of
+    every joint, positive for frame-to-frame jitter, and in the total only with its weight."""
+    from mocap_lifter.training.train import TrainConfig, losses, total_loss
+
+    rng = np.random.default_rng(1)
+    b, t = 2, 16
+    pos = torch.as_tensor(np.cumsum(rng.normal(0, 0.01, (b, t, NUM_JOINTS, 3)), axis=1))
+    gt = {'positions': pos, 'rotations': torch.zeros(b, t, NUM_JOINTS, 4),
+          'root': torch.ones(b, t, 3), 'lengths': torch.ones(b, 10),
+          'contacts': torch.zeros(b, t, 4)}
+    gt['rotations'][..., 3] = 1.0
+    out = {k: v.clone() for k, v in gt.items() if k != 'contacts'}
+    out.update(depth=gt['root'][..., 2], contacts=torch.zeros(b, t, 4))
+    assert float(losses(out, gt, TrainConfig())['acceleration']) < 1e-12
+    drift = torch.arange(t, dtype=pos.dtype)[None, :, None, None] * 0.01
+    out['positions'] = pos + drift * torch.as_tensor([1.0, 0.0, 0.0])
+    assert float(losses(out, gt, TrainConfig())['acceleration']) < 1e-9
+    out['positions'] = pos + torch.as_tensor(rng.normal(0, 0.005, pos.shape))
+    terms = losses(out, gt, TrainConfig())
+    assert float(terms['acceleration']) > 0.005            # ~ 0.005 * sqrt(6 * 3) per joint
+    off = float(total_loss(terms, TrainConfig(w_acceleration=0.0)))
+    on = float(total_loss(terms, TrainConfig(w_acceleration=2.0)))
+    assert on - off == pytest.approx(2.0 * float(terms['acceleration']), rel=1e-6)
