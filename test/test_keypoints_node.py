@@ -251,6 +251,12 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
                 break
         assert got, 'no cloud came back'
 
+    # image_qos auto: each node subscribes reliably once it has seen this test's reliable
+    # publishers (re-checked every second); a large raw image sent to the first, best-effort
+    # subscription may be lost on a loaded machine
+    processes.wait_for_text(raw_log, 'subscribed to /camera/image_raw (Image, reliable)', 30,
+                            raw)
+    processes.wait_for_text(comp_log, '/compressed (CompressedImage, reliable)', 30, comp)
     warm_up(pub_img, kp_raw, lambda st: _image_msg(frames[0], st), raw)
     warm_up(pub_comp, kp_comp,
             lambda st: bgr_to_compressed_image(frames[0], make_header(st, 'c')), comp)

@@ -320,6 +320,11 @@ class KeypointsNode(Node):
             self.compressed = topic.rstrip('/').endswith('/compressed')
             self.image_type = CompressedImage if self.compressed else Image
             self.image_sub = None
+            self.image_sub_old = None       # the previous subscription while switching
+            # stamps that came through the new (True) and the old (False) subscription while
+            # both exist: an image delivered by both is processed once
+            self.switch_seen = {True: collections.deque(maxlen=32),
+                                False: collections.deque(maxlen=32)}
             self.image_reliability = ''
             self._subscribe_images()
             if p['image_qos'] == 'auto':  # follow the publishers as they come and go
@@ -379,6 +384,18 @@ class KeypointsNode(Node):
         self.guard.trigger()
 
     # --- topic source ------------------------------------------------------------------
+    def _on_image_from(self, sub, msg) -> None:
+        """An image from subscription ``sub``: while an old and a new subscription overlap
+        (a reliability switch), the copy the other one delivered already is skipped."""
+        if self.image_sub_old is not None and sub in (self.image_sub, self.image_sub_old):
+            new = sub is self.image_sub
+            stamp = stamp_to_ns(msg.header.stamp)
+            if stamp in self.switch_seen[not new]:
+                self.switch_seen[not new].remove(stamp)
+                return
+            self.switch_seen[new].append(stamp)
+        self._on_image(msg)
+
     def _on_image(self, msg) -> None:
         self.diag.input.tick()
         stamp = stamp_to_ns(msg.header.stamp)
@@ -456,17 +473,32 @@ class KeypointsNode(Node):
             mode = ('reliable' if infos and all(
                 i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
                 else 'best_effort')
+        if self.image_sub_old is not None and \
+                self.image_sub.get_publisher_count() >= self.image_sub_old.get_publisher_count():
+            # the new subscription has matched what the old one had: retire the old one
+            self.destroy_subscription(self.image_sub_old)
+            self.image_sub_old = None
+            for seen in self.switch_seen.values():
+                seen.clear()
         if mode == self.image_reliability:
             return
         if self.image_sub is not None:
-            self.destroy_subscription(self.image_sub)
+            # Keep the old subscription until the new one has matched the publishers (next
+            # check): destroying it first would lose the images sent meanwhile. Images that
+            # come through both are recognised by their stamps (_on_image).
+            if self.image_sub_old is not None:
+                self.destroy_subscription(self.image_sub_old)
+            self.image_sub_old = self.image_sub
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
                          reliability=(ReliabilityPolicy.RELIABLE if mode == 'reliable'
                                       else ReliabilityPolicy.BEST_EFFORT))
+        holder: List = []   # the subscription, known to its own callback
         self.image_sub = self.create_subscription(
-            self.image_type, topic, guarded(self, self._on_image, 'image'), qos,
+            self.image_type, topic,
+            guarded(self, lambda msg: self._on_image_from(holder[0], msg), 'image'), qos,
             event_callbacks=SubscriptionEventCallbacks(
                 incompatible_qos=self._on_incompatible_qos))
+        holder.append(self.image_sub)
         self.image_reliability = mode
         self.diag.set_value('image_qos', mode)
         self.get_logger().info(f'subscribed to {topic} ({self.image_type.__name__}, '
