@@ -54,6 +54,16 @@ _LEGS = {side: [JOINT_INDEX[f'{side}_{n}'] for n in ('hip', 'knee', 'ankle', 'to
 _BONES = [j for j in range(1, len(PARENTS))]
 
 
+def _labels_swapped(left: np.ndarray, right: np.ndarray, true_left: np.ndarray,
+                    true_right: np.ndarray) -> np.ndarray:
+    """(F, N, D) estimated and true points of the left and right side -> (F,) True where
+    the estimate lies closer to the truth with its left and right labels exchanged."""
+    def dist(a, b):
+        return np.linalg.norm(a - b, axis=-1).sum(axis=1)
+    return dist(left, true_right) + dist(right, true_left) < \
+        dist(left, true_left) + dist(right, true_right)
+
+
 def detector_swaps(gt: Dict[str, np.ndarray]) -> np.ndarray:
     """Per rendered frame: 1 when the detector's left and right knees and ankles are
     labelled the other way round, 0 when not, -1 when not scored (a point missing or below
@@ -67,14 +77,10 @@ def detector_swaps(gt: Dict[str, np.ndarray]) -> np.ndarray:
     kr = kp[:, [KEYPOINT_INDEX[f'right_{n}'] for n in names]]
     gl = uv[:, [JOINT_INDEX[f'left_{n}'] for n in names]]
     gr = uv[:, [JOINT_INDEX[f'right_{n}'] for n in names]]
-    same = np.linalg.norm(kl[..., :2] - gl, axis=-1).sum(1) + \
-        np.linalg.norm(kr[..., :2] - gr, axis=-1).sum(1)
-    swap = np.linalg.norm(kl[..., :2] - gr, axis=-1).sum(1) + \
-        np.linalg.norm(kr[..., :2] - gl, axis=-1).sum(1)
     height = np.ptp(uv[..., 1], axis=1)
     scored = (np.minimum(kl[..., 2].min(1), kr[..., 2].min(1)) > DETECTOR_SWAP_MIN_CONFIDENCE) \
         & (np.linalg.norm(gl - gr, axis=-1).mean(1) > DETECTOR_SWAP_MIN_SEPARATION * height)
-    return np.where(scored, (swap < same).astype(int), -1)
+    return np.where(scored, _labels_swapped(kl[..., :2], kr[..., :2], gl, gr).astype(int), -1)
 
 
 def motion_group(clip_id: str) -> str:
@@ -179,12 +185,9 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
     bl_g = np.linalg.norm(g[:, _BONES] - g[:, [PARENTS[j] for j in _BONES]], axis=-1)
     mble = float(1000 * np.abs(np.median(bl_p, axis=0) - np.median(bl_g, axis=0)).mean())
     L, R = _LEGS['left'], _LEGS['right']
-    same = np.linalg.norm(pr[:, L] - gr[:, L], axis=-1).mean(1) + \
-        np.linalg.norm(pr[:, R] - gr[:, R], axis=-1).mean(1)
-    swap = np.linalg.norm(pr[:, L] - gr[:, R], axis=-1).mean(1) + \
-        np.linalg.norm(pr[:, R] - gr[:, L], axis=-1).mean(1)
     sep = np.linalg.norm(gr[:, L[1:]] - gr[:, R[1:]], axis=-1).mean(1)
-    swaps = np.where(sep < SWAP_MIN_SEPARATION_M, -1, (swap < same).astype(int))
+    swaps = np.where(sep < SWAP_MIN_SEPARATION_M, -1,
+                     _labels_swapped(pr[:, L], pr[:, R], gr[:, L], gr[:, R]).astype(int))
     contiguous = np.all(np.diff(idx) == 1)
     jit = acceleration(P, fps) if contiguous else float('nan')
     jit_gt = acceleration(g, fps)
