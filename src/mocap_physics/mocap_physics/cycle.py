@@ -75,9 +75,10 @@ from mocap_core.pose import Pose
 from mocap_core.skeleton import JOINT_NAMES, Skeleton
 
 from .cycle_params import PhysicsParams
-from .model import PhysicsModel
+from .model import GRAVITY, PhysicsModel
 from .qp import GrfQP, PenetrationQP
 from .results import CycleStats, FootWrench, FrameResult
+from .wbid import WholeBodyID
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -117,6 +118,8 @@ class PhysicsCycle:
         self.grf = GrfQP(4, self.params.friction, self.params.grf_smoothness,
                          moment_weight=self.params.grf_moment_weight)
         self.pen = PenetrationQP(metric=self.params.penetration_metric)
+        self.wbid: Optional[WholeBodyID] = None
+        self._whole_body = self.params.dynamics == 'whole_body'
         self._q: Optional[np.ndarray] = None
         self._v: Optional[np.ndarray] = None
         self._stamp: Optional[float] = None
@@ -125,8 +128,11 @@ class PhysicsCycle:
         self._anchor = np.zeros((4, 2))
         self._anchored = np.zeros(4, dtype=bool)
         self._stick_vertical = True
-        #: the stick needs the residual root actuation (module docstring)
-        self._stick_on = bool(self.params.foot_stick and self.params.root_residual >= 1.0)
+        #: the stick needs the residual root actuation (module docstring); the whole-body
+        #: dynamics holds stance points by its own acceleration rows instead
+        self._stick_on = bool(self.params.foot_stick and self.params.root_residual >= 1.0
+                              and not self._whole_body)
+        self._stance_on = self._whole_body
         if skeleton is not None:
             self.set_skeleton(skeleton)
 
@@ -149,14 +155,19 @@ class PhysicsCycle:
         self._q = self.model.normalize(q)
         self._v = v
         self._stamp = stamp
-        self.grf.reset()
+        self._reset_solvers()
         self._anchored[:] = False
 
     def reset(self) -> None:
         """Forget the state: the next frame re-initialises from its target."""
         self._q = self._v = self._stamp = self._target_prev = None
-        self.grf.reset()
+        self._reset_solvers()
         self._anchored[:] = False
+
+    def _reset_solvers(self) -> None:
+        self.grf.reset()
+        if self.wbid is not None:
+            self.wbid.reset()
 
     def change_frame(self, rotation: np.ndarray, translation: np.ndarray) -> None:
         """Re-express the state in a new floor frame: ``p_new = rotation p_old +
@@ -176,7 +187,7 @@ class PhysicsCycle:
         if self._target_prev is not None:
             self._target_prev = moved(self._target_prev)
         self._anchored[:] = False
-        self.grf.reset()
+        self._reset_solvers()
         self.stats.frame_changes += 1
 
     def set_skeleton(self, skeleton: Skeleton) -> bool:
@@ -195,6 +206,14 @@ class PhysicsCycle:
         model = PhysicsModel(skeleton, self.params.body_mass)
         self.model = model
         self.stats.model_builds += 1
+        if self._whole_body:
+            p = self.params
+            self.wbid = WholeBodyID(model.nv, len(model.contact_frame_ids), p.friction,
+                                    residual_weight=p.residual_weight,
+                                    residual_horizontal_weight=p.residual_horizontal_weight,
+                                    residual_bound=p.residual_bound,
+                                    residual_moment_bound=p.residual_moment_bound,
+                                    smoothness=p.force_smoothness, solver=p.wbid_solver)
         self._kp, self._kd = self.params.gains(model.nv)
         self.dynet = None
         if self._dynet_net is not None:
@@ -218,9 +237,10 @@ class PhysicsCycle:
         return d
 
     def _lift(self, q: np.ndarray) -> np.ndarray:
-        """``q`` raised so that no contact point is below the floor."""
+        """``q`` raised so that no foot guard point (contacts, ankles, soles) is below the
+        floor."""
         q = q.copy()
-        low = float(self.model.contact_positions(q)[:, 2].min())
+        low = float(self.model.guard_positions(q)[:, 2].min())
         if low < 0.0:
             q[2] -= low
         return q
@@ -329,14 +349,14 @@ class PhysicsCycle:
             self.stats.reinitialisations += 1
             self._q = self._lift(q_hat)
             self._v = np.zeros(self.model.nv)
-            self.grf.reset()
+            self._reset_solvers()
         self._target_prev = q_hat.copy()
         self._stamp = stamp
 
         n_sub = max(int(p.substeps), int(np.ceil(frame_dt / p.max_substep - 1e-9)))
         dt = frame_dt / n_sub
         v_ff = v_hat if (p.velocity_feedforward and v_hat is not None) else None
-        if self._stick_on:
+        if self._stick_on or self._stance_on:
             # drag the anchors along with a target that moves away from them; the points
             # then follow at up to stick_speed (why not faster: docs/physics.md)
             tgt = self.model.contact_positions(q_hat)[:, :2]
@@ -344,9 +364,15 @@ class PhysicsCycle:
             dist = np.linalg.norm(d, axis=1)
             far = self._anchored & (dist > p.stick_release)
             if np.any(far):
-                self._anchor[far] += d[far] * (1.0 - p.stick_release / dist[far])[:, None]
+                step = d[far] * (1.0 - p.stick_release / dist[far])[:, None]
+                if self._stance_on:
+                    # at most stick_speed: the stance rows pull the point to its anchor
+                    n = np.linalg.norm(step, axis=1, keepdims=True)
+                    step *= np.minimum(1.0, p.stick_speed * frame_dt / np.maximum(n, 1e-12))
+                self._anchor[far] += step
         try:
-            acc = self._simulate(q_hat, v_ff, mask, alpha, dt, n_sub)
+            simulate = self._simulate_whole_body if self._whole_body else self._simulate
+            acc = simulate(q_hat, v_ff, mask, alpha, dt, n_sub)
         except _Fallback as exc:
             acc = None
             messages.append(f'fallback to the kinematic target: {exc}')
@@ -355,7 +381,7 @@ class PhysicsCycle:
             self._q = self._lift(q_hat)
             v0 = np.zeros(self.model.nv) if v_hat is None else v_hat
             self._v = np.clip(np.nan_to_num(v0), -p.max_speed, p.max_speed)
-            self.grf.reset()
+            self._reset_solvers()
             self._anchored[:] = False
         result = self._result(stamp, acc, events, messages)
         result.time_total = time.perf_counter() - t_start
@@ -505,6 +531,131 @@ class PhysicsCycle:
         self._anchor, self._anchored = anchor, anchored
         return acc
 
+    def _simulate_whole_body(self, q_hat, v_ff, mask, alpha, dt, n_sub) -> dict:
+        """Run n_sub sub-steps of the whole-body dynamics (:mod:`mocap_physics.wbid`).
+
+        Per sub-step: the PD's desired accelerations, the inverse-dynamics QP (joint torques,
+        stance forces in the friction pyramid, bounded root residual), forward dynamics of
+        those torques and forces (``pinocchio.aba``), the velocity update, the penetration QP
+        over the foot guard points as the last guard, and the integration. Raises _Fallback.
+        """
+        m = self.model
+        model, data = m.model, m.data
+        p = self.params
+        kp, kd = self._kp, self._kd
+        n_c = len(m.contact_frame_ids)
+        guards = m.guard_frame_ids
+        q, v = self._q, self._v
+        zeros = np.zeros(m.nv)
+        acc = dict(torques=np.zeros(m.nv), forces=np.zeros((n_c, 3)),
+                   active=np.zeros(n_c, dtype=bool), residual=np.zeros(6), grf_failures=0,
+                   pen_solves=0, t_grf=0.0, t_pen=0.0, n=n_sub, cone=0,
+                   stuck=np.zeros(n_c, dtype=bool), sliding=np.zeros(n_c, dtype=bool),
+                   saturated=0)
+        Jc = np.empty((n_c, 3, m.nv))
+        Jg = np.empty((len(guards), m.nv))
+        pos = np.empty((n_c, 3))
+        vel = np.empty((n_c, 3))
+        zg = np.empty(len(guards))
+        anchor, anchored = self._anchor.copy(), self._anchored.copy()
+        w_s = p.stance_gain
+        feet = m.contact_feet
+        for _ in range(n_sub):
+            pin.computeAllTerms(model, data, q, v)
+            M = np.triu(data.M)
+            M = M + np.triu(M, 1).T
+            h = data.nle.copy()
+            pin.forwardKinematics(model, data, q, v, zeros)   # data.a: drift terms
+            pin.updateFramePlacements(model, data)
+            for c, fid in enumerate(m.contact_frame_ids):
+                Jc[c] = pin.getFrameJacobian(model, data, fid, _LWA)[:3]
+                pos[c] = data.oMf[fid].translation
+                vel[c] = pin.getFrameVelocity(model, data, fid, _LWA).linear
+            drift = np.array([pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear
+                              for fid in m.contact_frame_ids])
+            for g, fid in enumerate(guards):
+                Jg[g] = pin.getFrameJacobian(model, data, fid, _LWA)[2]
+                zg[g] = data.oMf[fid].translation[2]
+            # -- desired accelerations (PD, eq. 7 without the inertia factor) ----------------
+            e = self._difference(q, q_hat)
+            vel_err = v if v_ff is None else v - v_ff
+            if self.dynet is not None:
+                kp, kd, alpha_net = self.dynet(q_hat, q, v, np.diag(M).copy(), e)
+                alpha = alpha_net if alpha is None else alpha_net + alpha
+            a_des = kp * e - kd * vel_err
+            if alpha is not None:
+                a_des = a_des + cho_solve(cho_factor(M), alpha)
+            # -- stance points and their stabilising reference -------------------------------
+            stance = mask & (pos[:, 2] < p.contact_height)
+            new = stance & ~anchored
+            anchor[new] = pos[new, :2]
+            anchored = stance.copy()
+            target = np.zeros((n_c, 3))
+            target[:, :2] = anchor
+            a_ref = -2.0 * w_s * vel - w_s * w_s * (pos - target)
+            # -- whole-body inverse dynamics -------------------------------------------------
+            res = self.wbid.solve(M, h, a_des, Jc, drift, stance, a_ref, pos[:, :2], vel,
+                                  feet, m.body_mass, GRAVITY,
+                                  root_rotation=data.oMi[1].rotation)
+            acc['t_grf'] += res.solve_time
+            if not res.ok:
+                # no consistent solution: the PD alone drives the body for this sub-step
+                acc['grf_failures'] += 1
+                self.stats.grf_failures += 1
+                tau_full = M @ a_des + h
+                lam = np.zeros((n_c, 3))
+            else:
+                tau_full = np.concatenate([res.residual, res.tau])
+                lam = res.forces
+                if res.saturated:
+                    acc['saturated'] += 1
+                    self.stats.residual_saturations += 1
+                if np.any(res.sliding):
+                    anchor[res.sliding] = pos[res.sliding, :2]   # re-anchor where it slid to
+                    acc['sliding'] |= res.sliding
+                    self.stats.sliding_substeps += 1
+            tangential = np.linalg.norm(lam[:, :2], axis=1)
+            cone_bad = int(np.sum((lam[:, 2] < -1e-9)
+                                  | (tangential > p.friction * lam[:, 2] * (1 + 1e-6) + 1e-6)))
+            if cone_bad:
+                acc['cone'] += cone_bad
+                self.stats.cone_violations += cone_bad
+            JtL = np.einsum('cin,ci->n', Jc, lam)
+            # -- forward dynamics of the torques, residual and contact forces ----------------
+            a = pin.aba(model, data, q, v, tau_full + JtL)
+            v_new = v + dt * a
+            # -- last guard: no foot point goes through the floor -----------------------------
+            zdot = Jg @ v_new
+            rows = (zg < p.contact_height) | (zg + dt * zdot < p.contact_height)
+            if np.any(rows):
+                b_all = np.minimum(-zg / dt, p.recovery_speed)
+                d = np.maximum(np.diag(M), 1e-6)
+                res_pen = self.pen.solve(v_new, Jg[rows], b_all[rows],
+                                         solve_metric=lambda X, _d=d: X / _d[:, None],
+                                         scale=m.body_mass)
+                acc['t_pen'] += res_pen.solve_time
+                if res_pen.solved:
+                    acc['pen_solves'] += 1
+                    self.stats.penetration_solves += 1
+                if not res_pen.ok:
+                    self.stats.penetration_failures += 1
+                    raise _Fallback(f'penetration QP failed ({res_pen.status})')
+                v_new = res_pen.velocity
+            if not (np.all(np.isfinite(v_new)) and np.abs(v_new).max() <= p.max_speed):
+                raise _Fallback('the simulated state diverged')
+            q = pin.integrate(model, q, v_new * dt)
+            v = v_new
+            acc['torques'] += tau_full
+            acc['forces'] += lam
+            acc['active'] |= stance
+            acc['residual'] += tau_full[:6]
+            acc['stuck'] = stance & ~(res.sliding if res.ok else False)
+        if not np.all(np.isfinite(q)):
+            raise _Fallback('the simulated pose is not finite')
+        self._q, self._v = q, v
+        self._anchor, self._anchored = anchor, anchored
+        return acc
+
     def _result(self, stamp: float, acc: Optional[dict], events: List[str],
                 messages: List[str]) -> FrameResult:
         m = self.model
@@ -545,7 +696,9 @@ class PhysicsCycle:
             cone_violations=acc['cone'], status=', '.join(events) if events else 'ok',
             messages=messages, grf_failures=acc['grf_failures'],
             penetration_solves=acc['pen_solves'], substeps=acc['n'],
-            time_grf_qp=acc['t_grf'], time_penetration_qp=acc['t_pen'])
+            time_grf_qp=acc['t_grf'], time_penetration_qp=acc['t_pen'],
+            contact_sliding=acc.get('sliding', np.zeros(n_c, dtype=bool)).copy(),
+            residual_saturated=int(acc.get('saturated', 0)))
         return result
 
 

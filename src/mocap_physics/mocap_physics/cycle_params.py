@@ -21,6 +21,8 @@ import numpy as np
 PENETRATION_METRICS = ('diagonal', 'identity', 'mass')
 #: Values of ``gains_mode``.
 GAINS_MODES = ('fixed', 'learned')
+#: Values of ``dynamics``: the whole-body inverse-dynamics QP, or eq. 13 of the paper.
+DYNAMICS_MODES = ('whole_body', 'paper')
 
 
 @dataclass
@@ -31,6 +33,14 @@ class PhysicsParams:
     """
 
     body_mass: float = 70.0               # kg
+    dynamics: str = 'whole_body'          # 'whole_body' (mocap_physics.wbid) or 'paper' (eq. 13)
+    residual_weight: float = 1000.0       # w_r of the whole-body QP: vertical force, moments
+    residual_horizontal_weight: float = 1e4     # w_r of the horizontal residual force rows
+    residual_bound: float = 1.0           # body weights: bound of each residual force row
+    residual_moment_bound: float = 0.5    # body weight x m: bound of each residual moment row
+    stance_gain: float = 20.0             # 1/s: stance points return to their anchor (whole body)
+    force_smoothness: float = 0.01        # w_s of the whole-body QP (forces between sub-steps)
+    wbid_solver: str = 'osqp'             # 'osqp' (deterministic) or 'proxqp' (mocap_physics.wbid)
     substeps: int = 6                     # k of the paper
     frame_period: float = 1.0 / 30.0      # s, used when frames carry no stamps
     max_substep: float = 1.0 / 120.0      # s; longer frames get more sub-steps
@@ -83,6 +93,18 @@ class PhysicsParams:
         elif self.gains_mode == 'learned' and not self.dynet_weights:
             bad.append('gains_mode learned needs dynet_weights (a file from mocap train '
                        'physics)')
+        if self.dynamics not in DYNAMICS_MODES:
+            bad.append(f"dynamics={self.dynamics!r} ('whole_body' or 'paper')")
+        for name in ('residual_weight', 'residual_horizontal_weight', 'stance_gain'):
+            val = getattr(self, name)
+            if not (np.isfinite(val) and val > 0):
+                bad.append(f'{name}={val} (must be > 0)')
+        for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness'):
+            val = getattr(self, name)
+            if not (np.isfinite(val) and val >= 0):
+                bad.append(f'{name}={val} (must be >= 0)')
+        if self.wbid_solver not in ('osqp', 'proxqp'):
+            bad.append(f"wbid_solver={self.wbid_solver!r} ('osqp' or 'proxqp')")
         if self.penetration_metric not in PENETRATION_METRICS:
             bad.append(f'penetration_metric={self.penetration_metric!r} '
                        '(mass | diagonal | identity)')
@@ -98,4 +120,4 @@ class PhysicsParams:
         return kp, kd
 
 
-__all__ = ['PhysicsParams', 'PENETRATION_METRICS', 'GAINS_MODES']
+__all__ = ['PhysicsParams', 'PENETRATION_METRICS', 'GAINS_MODES', 'DYNAMICS_MODES']

@@ -11,7 +11,10 @@ The multibody model of neural PhysCap §3.1 (Shimada et al. 2021), built in code
   masses and inertias as the URDF on ``/mocap/skeleton/urdf``), so the total mass is the body
   mass;
 * four contact frames (``left_heel``, ``left_toe``, ``right_heel``, ``right_toe``) at
-  :meth:`Skeleton.contact_points`.
+  :meth:`Skeleton.contact_points`;
+* eight *foot guard* frames: the four contact points, each ankle joint and each sole midpoint
+  (halfway between the heel point and the toe joint): the points of the whole foot that the
+  cycle keeps above the floor (``guard_names``).
 
 Configuration and velocity layout (Pinocchio's)::
 
@@ -112,6 +115,21 @@ class PhysicsModel:
             frame = pin.Frame(cname, joint_ids[j], pin.SE3(np.eye(3), np.asarray(point, float)),
                               pin.FrameType.OP_FRAME)
             frame_ids.append(model.addFrame(frame))
+        # whole-foot guard points: contacts, ankles, sole midpoints (ankle frame)
+        guard_names = list(self.contact_names)
+        guard_ids = list(frame_ids)
+        index = {n: j for j, n in enumerate(skeleton.joint_names)}
+        for side in ('left', 'right'):
+            ankle, toe = index[f'{side}_ankle'], index[f'{side}_toe']
+            heel = contacts[f'{side}_heel'][1]
+            sole = 0.5 * (np.asarray(heel, float) + np.asarray(skeleton.offsets[toe], float))
+            for gname, point in ((f'{side}_ankle', np.zeros(3)), (f'{side}_sole', sole)):
+                frame = pin.Frame(f'{gname}_guard', joint_ids[ankle],
+                                  pin.SE3(np.eye(3), point), pin.FrameType.OP_FRAME)
+                guard_ids.append(model.addFrame(frame))
+                guard_names.append(gname)
+        self.guard_names: Tuple[str, ...] = tuple(guard_names)
+        self.guard_frame_ids: Tuple[int, ...] = tuple(guard_ids)
         self.model = model
         self.data = model.createData()
         self.nq = model.nq
@@ -185,6 +203,11 @@ class PhysicsModel:
         """(4, 3) world positions of the contact points at ``q``."""
         pin.framesForwardKinematics(self.model, self.data, q)
         return np.array([self.data.oMf[f].translation for f in self.contact_frame_ids])
+
+    def guard_positions(self, q: np.ndarray) -> np.ndarray:
+        """(G, 3) world positions of the foot guard points (``guard_names``) at ``q``."""
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return np.array([self.data.oMf[f].translation for f in self.guard_frame_ids])
 
     def joint_positions(self, q: np.ndarray) -> np.ndarray:
         """(J, 3) world positions of the skeleton joints at ``q``."""

@@ -132,13 +132,32 @@ PARAMETERS = (
     ParamSpec('grf_smoothness', _D.grf_smoothness, 'Weight of the temporal smoothness of the '
               'ground reaction forces (eq. 11) relative to the root residual (eq. 8)',
               min_value=0.0, read_only=True),
-    ParamSpec('root_residual', _D.root_residual, 'Share of the residual direct root actuation '
-              'that is applied: 1 = paper; 0 = root driven by contact forces and gravity only',
-              min_value=0.0, max_value=1.0, read_only=True),
+    ParamSpec('dynamics', _D.dynamics, 'whole_body: one inverse-dynamics QP per sub-step '
+              '(torques, stance forces in friction cones, bounded root residual) drives the '
+              'forward dynamics; paper: eq. 13 of neural PhysCap (residual root actuation, '
+              'PD filter, foot stick)', read_only=True),
+    ParamSpec('residual_weight', _D.residual_weight, 'whole_body: weight of the root '
+              'residual (vertical force, moments; body-weight units)', min_value=1e-6,
+              read_only=True),
+    ParamSpec('residual_horizontal_weight', _D.residual_horizontal_weight, 'whole_body: '
+              'weight of the horizontal root residual force (body-weight units)',
+              min_value=1e-6, read_only=True),
+    ParamSpec('residual_bound', _D.residual_bound, 'whole_body: bound of each residual root '
+              'force component, body weights (reaching it is counted in diagnostics)',
+              min_value=0.0, read_only=True),
+    ParamSpec('residual_moment_bound', _D.residual_moment_bound, 'whole_body: bound of each '
+              'residual root moment component, body weight x m', min_value=0.0,
+              read_only=True),
+    ParamSpec('wbid_solver', _D.wbid_solver, 'whole_body: QP solver, osqp (deterministic) or '
+              'proxqp (faster; last bits vary between runs)', read_only=True),
+    ParamSpec('root_residual', _D.root_residual, 'paper: share of the residual direct root '
+              'actuation that is applied: 1 = paper; 0 = root driven by contact forces and '
+              'gravity only', min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('penetration_metric', _D.penetration_metric, 'Metric of the penetration QP: '
               'diagonal (diag M), identity (paper) or mass (M)', read_only=True),
-    ParamSpec('foot_stick', _D.foot_stick, 'Hold contact points in contact at their anchor '
-              'on the floor (no foot skating; needs root_residual 1)', read_only=True),
+    ParamSpec('foot_stick', _D.foot_stick, 'paper: hold contact points in contact at their '
+              'anchor on the floor (no foot skating; needs root_residual 1); whole_body holds '
+              'stance points by its own acceleration rows', read_only=True),
     ParamSpec('stick_release', _D.stick_release, 'The stick anchor follows the target when '
               'the target foot moves farther than this from it, m', min_value=0.0,
               read_only=True),
@@ -206,7 +225,11 @@ class PhysicsNode(Node):
             root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
             max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'],
             foot_stick=p['foot_stick'], stick_release=p['stick_release'],
-            gains_mode=p['gains_mode'], dynet_weights=weights if learned else '')
+            gains_mode=p['gains_mode'], dynet_weights=weights if learned else '',
+            dynamics=p['dynamics'], residual_weight=p['residual_weight'],
+            residual_horizontal_weight=p['residual_horizontal_weight'],
+            residual_bound=p['residual_bound'],
+            residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'])
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         contacts_topic = p['contacts_topic']
@@ -379,6 +402,9 @@ class PhysicsNode(Node):
         d.set_value('model_builds', st.model_builds)
         d.set_value('friction_cone_violations', st.cone_violations)
         d.set_value('stick_failures', st.stick_failures)
+        d.set_value('dynamics', self.params.dynamics)
+        d.set_value('residual_bound_reached_substeps', st.residual_saturations)
+        d.set_value('sliding_substeps', st.sliding_substeps)
         floor = online.floor
         if online.tracker is not None:
             tr = online.tracker

@@ -67,6 +67,8 @@ class FrameResult:
     time_total: float = 0.0         # s, the whole step
     time_grf_qp: float = 0.0        # s, in the GRF solver
     time_penetration_qp: float = 0.0
+    contact_sliding: Optional[np.ndarray] = None  # (C,) bool: a stance point slid (whole body)
+    residual_saturated: int = 0     # sub-steps whose root residual reached its bound
 
     @property
     def joint_torques(self) -> np.ndarray:
@@ -90,6 +92,8 @@ class CycleStats:
     cone_violations: int = 0
     frame_changes: int = 0
     stick_failures: int = 0
+    residual_saturations: int = 0   # whole-body sub-steps whose root residual hit its bound
+    sliding_substeps: int = 0       # whole-body sub-steps with a stance point sliding
     last_event: str = ''
 
 

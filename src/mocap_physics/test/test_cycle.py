@@ -32,10 +32,18 @@ def _finite(result):
         result.residual_root, result.pose.rotations, result.pose.root_position))
 
 
-@pytest.mark.parametrize('root_residual', [1.0, 0.0])
-def test_standing_weight_supported_and_still(skeleton, root_residual):
+DROP_MODES = {
+    'paper': dict(dynamics='paper'),
+    'paper, passive root': dict(dynamics='paper', root_residual=0.0),
+    'whole body': dict(),
+    'whole body, no residual': dict(residual_bound=0.0, residual_moment_bound=0.0),
+}
+
+
+@pytest.mark.parametrize('mode', ['whole body', 'paper', 'paper, passive root'])
+def test_standing_weight_supported_and_still(skeleton, mode):
     """Rest pose on the floor, 4 contacts, 2 s: vertical GRF = body weight, no drift."""
-    cyc = PhysicsCycle(skeleton, PhysicsParams(root_residual=root_residual))
+    cyc = PhysicsCycle(skeleton, PhysicsParams(**DROP_MODES[mode]))
     rest = Pose.rest(skeleton)
     q_rest = cyc.model.pose_to_q(rest)
     fz = []
@@ -61,11 +69,12 @@ def test_standing_weight_supported_and_still(skeleton, root_residual):
     assert np.all(np.isfinite(r.joint_torques))
 
 
-@pytest.mark.parametrize('root_residual', [0.0, 1.0])
-def test_drop_never_below_floor(skeleton, root_residual):
+@pytest.mark.parametrize('mode', list(DROP_MODES))
+def test_drop_never_below_floor(skeleton, mode):
     """Start 0.3 m above the floor (target on the floor): the feet never go more than 5 mm
-    below it. With root_residual = 0 the body falls freely (only gravity) and lands."""
-    cyc = PhysicsCycle(skeleton, PhysicsParams(root_residual=root_residual))
+    below it. Without a root residual the body falls freely (only gravity) and lands."""
+    cyc = PhysicsCycle(skeleton, PhysicsParams(**DROP_MODES[mode]))
+    free_fall = mode in ('paper, passive root', 'whole body, no residual')
     rest = Pose.rest(skeleton)
     q0 = cyc.model.pose_to_q(rest)
     q0[2] += 0.3
@@ -79,7 +88,7 @@ def test_drop_never_below_floor(skeleton, root_residual):
         speeds.append(r.v[2])
     assert min(lowest) > -0.005
     assert abs(lowest[-1]) < 0.005                              # landed, on the floor
-    if root_residual == 0.0:
+    if free_fall:
         # free fall: about g for the first frames, then the landing
         assert speeds[3] == pytest.approx(-9.81 * 4 / FPS, rel=0.05)
         assert min(speeds) < -2.0
@@ -88,15 +97,19 @@ def test_drop_never_below_floor(skeleton, root_residual):
         assert r.contact_forces[:, 2].sum() == pytest.approx(W, rel=0.05)
 
 
-def test_penetrating_target_is_corrected(skeleton):
+@pytest.mark.parametrize('dynamics', ['whole_body', 'paper'])
+def test_penetrating_target_is_corrected(skeleton, dynamics):
     """A target whose feet are 4 cm under the floor: the output stays above -5 mm."""
-    cyc = PhysicsCycle(skeleton)
+    cyc = PhysicsCycle(skeleton, PhysicsParams(dynamics=dynamics))
     rest = Pose.rest(skeleton)
     sunk = Pose(skeleton, rest.rotations, rest.root_position - [0, 0, 0.04])
     for i in range(int(FPS)):
         r = cyc.step(sunk, i / FPS, [1, 1, 1, 1])
         assert r.contact_heights.min() > -0.005
-    assert cyc.stats.penetration_solves > 0
+        guard = cyc.model.guard_positions(r.q)[:, 2]
+        assert guard.min() > -0.005, dict(zip(cyc.model.guard_names, guard))
+    if dynamics == 'paper':
+        assert cyc.stats.penetration_solves > 0
 
 
 def _noisy_motion(skeleton, n, rng):
@@ -227,7 +240,7 @@ def test_solver_failure_falls_back_to_target(skeleton, monkeypatch):
 
 
 def test_grf_solver_failure_counted(skeleton, monkeypatch):
-    cyc = PhysicsCycle(skeleton)
+    cyc = PhysicsCycle(skeleton, PhysicsParams(dynamics='paper'))
     rest = Pose.rest(skeleton)
     cyc.step(rest, 0.0, [1, 1, 1, 1])
     from mocap_physics.qp import GrfResult
@@ -238,6 +251,27 @@ def test_grf_solver_failure_counted(skeleton, monkeypatch):
     r = cyc.step(rest, 1 / FPS, [1, 1, 1, 1])
     assert r.grf_failures == cyc.params.substeps and _finite(r)
     assert np.all(r.contact_forces == 0)
+
+
+def test_whole_body_solver_failure_counted(skeleton, monkeypatch):
+    """A failed inverse-dynamics QP: the PD drives that sub-step, no force, counted."""
+    cyc = PhysicsCycle(skeleton)
+    rest = Pose.rest(skeleton)
+    cyc.step(rest, 0.0, [1, 1, 1, 1])
+    from mocap_physics.wbid import WbidResult
+
+    def failing(M, h, a_des, Jc, *args, **kwargs):
+        nv = len(h)
+        return WbidResult(np.zeros(nv), np.zeros(nv - 6), np.zeros((4, 3)), np.zeros(6),
+                          np.zeros(4, bool), np.zeros(4, bool), ok=False, status='forced')
+    monkeypatch.setattr(cyc.wbid, 'solve', failing)
+    r = cyc.step(rest, 1 / FPS, [1, 1, 1, 1])
+    assert r.grf_failures == cyc.params.substeps and _finite(r)
+    assert np.all(r.contact_forces == 0)
+    assert cyc.stats.grf_failures == cyc.params.substeps
+    assert r.contact_heights.min() > -0.005
+    monkeypatch.undo()
+    assert cyc.step(rest, 2 / FPS, [1, 1, 1, 1]).grf_failures == 0
 
 
 def test_skeleton_change_rebuilds_model(skeleton):

@@ -50,8 +50,8 @@ def test_untrained_dynet_is_the_fixed_cycle(walk, tmp_path):
     path = tmp_path / 'dynet.pt'
     net.save(path)
     assert DyNet.load(path).config == net.config
-    fixed = PhysicsCycle(clip.skeleton, PhysicsParams())
-    learned = PhysicsCycle(clip.skeleton, PhysicsParams(gains_mode='learned',
+    fixed = PhysicsCycle(clip.skeleton, PhysicsParams(dynamics='paper'))
+    learned = PhysicsCycle(clip.skeleton, PhysicsParams(dynamics='paper', gains_mode='learned',
                                                         dynet_weights=str(path)))
     for i in range(10):
         a = fixed.step(model.q_to_pose(q[i]), i / 30, clip.contacts[i])
@@ -63,7 +63,7 @@ def test_untrained_dynet_is_the_fixed_cycle(walk, tmp_path):
 
 def test_rollout_matches_the_cycle_and_has_gradients(walk):
     clip, model, q = walk
-    params = PhysicsParams()
+    params = PhysicsParams(dynamics='paper')
     cyc = PhysicsCycle(clip.skeleton, params)
     for i in range(12):
         r = cyc.step(model.q_to_pose(q[i]), i / 30, clip.contacts[i])
@@ -87,7 +87,7 @@ def test_rollout_matches_the_cycle_and_has_gradients(walk):
 def test_a_few_steps_reduce_the_tracking_loss(walk):
     """Overfit one short window: the learned gains track it better than the fixed ones."""
     clip, model, q = walk
-    params = PhysicsParams()
+    params = PhysicsParams(dynamics='paper')
     torch.manual_seed(0)
     net = make_dynet(model, params, hidden=32)
     opt = torch.optim.Adam(net.parameters(), lr=3e-3)

@@ -46,12 +46,14 @@ def _skating(cyc, targets):
 
 def test_stick_cuts_skating_of_jittered_standing(skeleton):
     targets = _jittered_standing(skeleton)
-    off, _ = _skating(PhysicsCycle(skeleton, PhysicsParams(foot_stick=False)), targets)
-    cyc = PhysicsCycle(skeleton, PhysicsParams(foot_stick=True))
+    off, _ = _skating(PhysicsCycle(skeleton, PhysicsParams(dynamics='paper',
+                                                           foot_stick=False)), targets)
+    cyc = PhysicsCycle(skeleton, PhysicsParams(dynamics='paper', foot_stick=True))
     on, r = _skating(cyc, targets)
     assert on < 0.5 * off, (on, off)
     # the target's feet jitter by up to ~5 cm: with a longer release the feet stay put
-    held, _ = _skating(PhysicsCycle(skeleton, PhysicsParams(stick_release=0.2)), targets)
+    held, _ = _skating(PhysicsCycle(skeleton, PhysicsParams(dynamics='paper',
+                                                            stick_release=0.2)), targets)
     assert held < 1e-3                                  # under a millimetre per frame
     assert r.contact_stuck.all() and cyc.stats.stick_failures == 0
     assert r.contact_heights.min() > -1e-3
@@ -63,7 +65,7 @@ def test_stick_cuts_skating_of_jittered_standing(skeleton):
 def test_stick_releases_a_sliding_foot(skeleton):
     """A target whose feet slide 1 m at 0.5 m/s while 'in contact' (a wrong contact): the
     anchors are dragged along and the simulated feet follow at stick_speed (0.2 m/s)."""
-    cyc = PhysicsCycle(skeleton, PhysicsParams(stick_release=0.05))
+    cyc = PhysicsCycle(skeleton, PhysicsParams(dynamics='paper', stick_release=0.05))
     rest = Pose.rest(skeleton)
     feet0 = None
     for i in range(60):
@@ -79,11 +81,11 @@ def test_stick_releases_a_sliding_foot(skeleton):
 
 def test_no_stick_without_contact_or_with_passive_root(skeleton):
     targets = _jittered_standing(skeleton, n=20)
-    cyc = PhysicsCycle(skeleton, PhysicsParams())
+    cyc = PhysicsCycle(skeleton, PhysicsParams(dynamics='paper'))
     for i, t in enumerate(targets):
         r = cyc.step(t, i / FPS, [0, 0, 0, 0])
     assert not r.contact_stuck.any()
-    cyc = PhysicsCycle(skeleton, PhysicsParams(root_residual=0.0))
+    cyc = PhysicsCycle(skeleton, PhysicsParams(dynamics='paper', root_residual=0.0))
     for i, t in enumerate(targets):
         r = cyc.step(t, i / FPS, [1, 1, 1, 1])
     assert not r.contact_stuck.any()
@@ -91,7 +93,7 @@ def test_no_stick_without_contact_or_with_passive_root(skeleton):
 
 def test_change_frame_keeps_the_pose(skeleton):
     """Re-expressing the state in a new floor frame changes only the root placement."""
-    cyc = PhysicsCycle(skeleton, PhysicsParams())
+    cyc = PhysicsCycle(skeleton, PhysicsParams(dynamics='paper'))
     targets = _jittered_standing(skeleton, n=10)
     for i, t in enumerate(targets):
         r = cyc.step(t, i / FPS, [1, 1, 1, 1])

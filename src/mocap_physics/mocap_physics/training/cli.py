@@ -65,17 +65,19 @@ def _configs(quick: bool, dynet: Optional[str]) -> List['EvalConfig']:
     from .evaluate import EvalConfig
 
     cfgs = [EvalConfig('physics, true floor', PhysicsParams(), 'gt'),
-            EvalConfig('physics, est. floor', PhysicsParams(), 'estimate')]
+            EvalConfig('physics, est. floor', PhysicsParams(), 'estimate'),
+            EvalConfig('paper (eq. 13), true floor', PhysicsParams(dynamics='paper'), 'gt')]
     if not quick:
-        cfgs += [EvalConfig('no stick', PhysicsParams(foot_stick=False), 'gt'),
-                 EvalConfig('eq. 15 plain norm, no stick',
-                            PhysicsParams(foot_stick=False, penetration_metric='identity'),
-                            'gt'),
-                 EvalConfig('stiff root (kp 3600, kd 120)',
-                            PhysicsParams(kp_root=3600.0, kd_root=120.0), 'gt')]
+        cfgs += [EvalConfig('whole body, ProxQP', PhysicsParams(wbid_solver='proxqp'), 'gt'),
+                 EvalConfig('paper, no stick', PhysicsParams(dynamics='paper',
+                                                             foot_stick=False), 'gt'),
+                 EvalConfig('paper, stiff root (kp 3600, kd 120)',
+                            PhysicsParams(dynamics='paper', kp_root=3600.0, kd_root=120.0),
+                            'gt')]
     if dynet:
-        cfgs.append(EvalConfig('DyNet gains, true floor',
-                               PhysicsParams(gains_mode='learned', dynet_weights=dynet), 'gt'))
+        cfgs.append(EvalConfig('paper, DyNet gains, true floor',
+                               PhysicsParams(dynamics='paper', gains_mode='learned',
+                                             dynet_weights=dynet), 'gt'))
     return cfgs
 
 

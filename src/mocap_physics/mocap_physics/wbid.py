@@ -1,0 +1,483 @@
+"""Whole-body inverse dynamics of one physics sub-step, as one QP (no ROS imports).
+
+The dynamically consistent mode of the physics cycle (``dynamics='whole_body'``, the default;
+``docs/physics.md`` explains the choice and the measurements). Each sub-step finds the joint
+accelerations ``qdd`` (nv,), the joint torques ``tau`` (nv - 6,), the contact forces
+``lambda_c`` (3,) of the stance contact points (world axes, N) and a residual root wrench
+``r`` (6,) such that the equation of motion of the floating base holds::
+
+    M(q) qdd + h(q, qd) = S^T tau + J_c^T lambda + S_root^T r
+
+where ``S = [0 | I]`` selects the actuated joints and ``S_root = [I | 0]`` the free-flyer.
+The joint rows define ``tau``, so only the six root rows remain as equality constraints. The
+variables are ``x = [qdd, lambda / (m g), r_w / (m g)]`` with ``r_w`` the residual force and
+moment on world axes (Pinocchio's root velocity, hence ``r``, is in the root frame:
+``r = blockdiag(R^T, R^T) r_w``). The cycle then runs Pinocchio's forward dynamics (``aba``)
+on ``S^T tau + J^T lambda + S_root^T r``, so the forces are what moves the body.
+
+Constraints (per sub-step):
+
+* root rows of the equation of motion (6 equalities);
+* stance contacts do not accelerate, the dynamic form of the foot stick::
+
+      J_c qdd + Jdot_c qd = a_ref,c = -2 k v_c - k^2 (p_c - p_anchor,c)
+
+  (``a_ref``, with ``k = stance_gain``, is a critically damped stabilisation that holds a
+  point at its anchor on the floor, z = 0; heel and toe of one foot are one rigid body, so
+  with both in stance the rows are the heel's x, y, z, the toe's z and the toe's horizontal
+  acceleration across the heel-toe line: :func:`stance_rows`);
+* every stance force inside the friction pyramid inscribed in the cone of coefficient ``mu``
+  (``|lambda_x|, |lambda_y| <= mu / sqrt(2) lambda_z``, ``lambda_z >= 0``);
+* the residual bounded on world axes: ``|r_w,i| <= residual_bound m g`` (force rows, N) and
+  ``residual_moment_bound m g`` (moment rows, N m).
+
+Objective (dimensionless, body-weight units)::
+
+    sum_i w_i (qdd_i - a_des,i)^2 + w_h |r_w,xy / m g|^2 + w_r |r_w,z / m g|^2
+    + w_r |m_w / m g|^2 + w_s |lambda - lambda_prev|^2 / (m g)^2 + w_f |lambda|^2 / (m g)^2
+
+with ``w_i = max(M_ii / m, 1e-3)`` (the inertia-scaled metric of the cycle's PD, floored for
+conditioning) and ``a_des`` the PD's desired acceleration (eq. 7 without the inertia factor).
+
+Sliding: when the total force of a foot's stance points ends on the pyramid's edge (friction
+saturated) and holding the feet needed a horizontal residual force of at least
+``slide_threshold`` body weights, the QP is solved again with that foot's horizontal rows
+released and the friction of each of its points fixed to the kinetic value
+``mu / sqrt(2) lambda_z`` (inside the pyramid) against the sliding direction (the point's
+horizontal velocity, or the direction of the force the foot needed). A foot therefore slides
+when the motion asks for more friction than the floor can give, and sticks otherwise.
+
+Losing balance: the residual is the only force that can hold a body whose target the feet do
+not support. Its weights make it expensive and its bounds limit it; :class:`WbidResult` says
+whether a bound was reached so that the cycle can count it.
+
+Solvers: OSQP (default; deterministic, every run bit-identical) or ProxQP's dense solver
+(``solver='proxqp'``: about 1.5x faster here, but its result varies in the last bits from
+run to run, which would break the bit-identical output of ``mocap process``). One solver is
+kept per problem structure (stance rows, sliding points) and warm-started.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Optional, Sequence, Tuple
+
+import numpy as np
+
+import osqp
+import scipy.sparse as sp
+
+try:
+    from proxsuite import proxqp
+except ImportError:  # pragma: no cover - optional (solver='proxqp')
+    proxqp = None
+
+from .qp import _OSQP_OK, PYRAMID_FACTOR, _status_name
+
+
+
+
+#: QP solvers the whole-body QP can use.
+SOLVERS = ('osqp', 'proxqp')
+
+
+class WbidUnavailable(RuntimeError):
+    """ProxQP (proxsuite) is not installed."""
+
+
+@dataclass
+class WbidResult:
+    """Solution of one whole-body inverse-dynamics QP.
+
+    qdd: (nv,) joint accelerations (root: linear and angular, root frame).
+    tau: (nv - 6,) joint torques, N m (each ball joint's torque in its own frame).
+    forces: (C, 3) contact forces, world (floor) axes, N (zero off stance).
+    residual: (6,) root residual wrench r (force N, moment N m, root frame).
+    stance: (C,) points held by the stance rows. sliding: (C,) stance points that slid.
+    saturated: the residual reached its bound on some row.
+    ok: the solver converged. status: solver status text. solve_time: s. solves: QPs solved.
+    """
+
+    qdd: np.ndarray
+    tau: np.ndarray
+    forces: np.ndarray
+    residual: np.ndarray
+    stance: np.ndarray
+    sliding: np.ndarray
+    saturated: bool = False
+    ok: bool = True
+    status: str = 'solved'
+    solve_time: float = 0.0
+    solves: int = 0
+
+
+def stance_rows(feet: Sequence[str], stance: np.ndarray, xy: np.ndarray,
+                free_tangent: np.ndarray) -> Tuple[list, list]:
+    """The (point, direction) pairs of the stance acceleration rows.
+
+    Args:
+        feet: (C,) foot of each contact point ('left' / 'right'); points of one foot are one
+            rigid body.
+        stance: (C,) bool, points held. xy: (C, 2) their horizontal positions, m.
+        free_tangent: (C,) bool, points whose horizontal rows are released (sliding).
+    Returns:
+        two lists of the same length: the contact index of each row and its world direction
+        (3,) (unit x, y, z, or the horizontal normal of the heel-toe line).
+    """
+    ex, ey, ez = np.eye(3)
+    idx: list = []
+    dirs: list = []
+    done = np.zeros(len(stance), dtype=bool)
+    for c in np.flatnonzero(stance):
+        if done[c]:
+            continue
+        done[c] = True
+        idx.append(c)
+        dirs.append(ez)
+        mates = [k for k in np.flatnonzero(stance) if k != c and feet[k] == feet[c]
+                 and not done[k]]
+        if not free_tangent[c]:
+            idx += [c, c]
+            dirs += [ex, ey]
+        for k in mates:
+            done[k] = True
+            idx.append(k)
+            dirs.append(ez)
+            if free_tangent[k]:
+                continue
+            if free_tangent[c]:
+                idx += [k, k]
+                dirs += [ex, ey]
+                continue
+            line = xy[k] - xy[c]
+            length = float(np.linalg.norm(line))
+            if length < 1e-3:
+                continue
+            idx.append(k)
+            dirs.append(np.array([-line[1], line[0], 0.0]) / length)
+    return idx, dirs
+
+
+class WholeBodyID:
+    """The whole-body inverse-dynamics QP (module docstring), one instance per cycle.
+
+    One dense ProxQP solver is kept per problem size (number of stance rows, sliding points
+    and stance points) and warm-started from its previous solution.
+
+    Args:
+        nv: velocity dimension of the model. num_contacts: C.
+        friction: Coulomb coefficient mu (the pyramid uses mu / sqrt(2)).
+        residual_weight: w_r of the vertical force and the moment rows.
+        residual_horizontal_weight: w_r of the horizontal force rows (world axes).
+        residual_bound: force bound, body weights.
+        residual_moment_bound: moment bound, body weight metres.
+        smoothness: w_s. force_regularization: w_f (> 0: the least internal force).
+        slide_threshold: body weights; a foot whose friction is saturated slides only when
+            the feet-fixed solution needed a residual root force at least this large.
+        eps: solver tolerance (dimensionless units).
+        solver: 'osqp' (default: deterministic, bit-identical runs) or 'proxqp' (ProxQP's
+            dense solver: faster, but its result varies in the last bits from run to run;
+            the comparison is in ``docs/physics.md``).
+    """
+
+    def __init__(self, nv: int, num_contacts: int = 4, friction: float = 0.8,
+                 residual_weight: float = 1e3, residual_horizontal_weight: float = 1e3,
+                 residual_bound: float = 1.0,
+                 residual_moment_bound: float = 0.5, smoothness: float = 1e-2,
+                 force_regularization: float = 1e-4, slide_threshold: float = 0.05,
+                 eps: float = 1e-7, max_iter: int = 1000, solver: str = 'osqp') -> None:
+        if solver not in SOLVERS:
+            raise ValueError(f'solver must be one of {SOLVERS}, got {solver!r}')
+        if solver == 'proxqp' and proxqp is None:
+            raise WbidUnavailable('solver proxqp needs proxsuite (pip install proxsuite)')
+        self.solver = solver
+        #: OSQP's tolerance (an ADMM solver: polishing gives the accuracy of an active set)
+        self.osqp_eps = 1e-5
+        if not friction > 0 or residual_weight <= 0 or force_regularization <= 0:
+            raise ValueError('friction, residual_weight and force_regularization must be > 0')
+        if residual_bound < 0 or residual_moment_bound < 0 or smoothness < 0:
+            raise ValueError('residual bounds and smoothness must be >= 0')
+        self.nv = int(nv)
+        self.num_contacts = int(num_contacts)
+        self.friction = float(friction)
+        self.mu_pyramid = self.friction * PYRAMID_FACTOR
+        self.residual_weight = float(residual_weight)
+        self.residual_horizontal_weight = float(residual_horizontal_weight)
+        self.residual_bound = float(residual_bound)
+        self.residual_moment_bound = float(residual_moment_bound)
+        self.smoothness = float(smoothness)
+        self.force_regularization = float(force_regularization)
+        self.slide_threshold = float(slide_threshold)
+        self.eps = float(eps)
+        self.max_iter = int(max_iter)
+        self._prev = np.zeros((self.num_contacts, 3))
+        self._solvers: dict = {}
+
+    def reset(self) -> None:
+        """Forget the previous forces (smoothness term) and the warm starts."""
+        self._prev[:] = 0.0
+        self._solvers.clear()
+
+    # ------------------------------------------------------------------------------------
+    def solve(self, M: np.ndarray, h: np.ndarray, a_des: np.ndarray, Jc: np.ndarray,
+              drift: np.ndarray, stance: np.ndarray, a_ref: np.ndarray, xy: np.ndarray,
+              velocity: np.ndarray, feet: Sequence[str], body_mass: float,
+              gravity: float = 9.81, root_rotation: Optional[np.ndarray] = None
+              ) -> WbidResult:
+        """Solve one sub-step.
+
+        Args:
+            M: (nv, nv) joint-space inertia (full, symmetric). h: (nv,) nonlinear effects.
+            a_des: (nv,) desired accelerations (PD). Jc: (C, 3, nv) contact Jacobians
+                (linear, world-aligned axes). drift: (C, 3) ``Jdot_c qd``, m/s^2.
+            stance: (C,) bool, points in stance (they carry forces and do not accelerate).
+            a_ref: (C, 3) stabilising reference acceleration of each stance point, m/s^2.
+            xy: (C, 2) horizontal positions, m. velocity: (C, 3) point velocities, m/s.
+            feet: (C,) foot of each point. body_mass: kg. gravity: m/s^2.
+            root_rotation: (3, 3) root orientation (root frame -> world); the residual's
+                weights and bounds apply on world axes (identity when None).
+        """
+        R = np.eye(3) if root_rotation is None else np.asarray(root_rotation, dtype=float)
+        t0 = time.perf_counter()
+        stance = np.asarray(stance, dtype=bool)
+        sliding = np.zeros(self.num_contacts, dtype=bool)
+        slide_dir = np.zeros((self.num_contacts, 2))
+        res = self._solve(M, h, a_des, Jc, drift, stance, a_ref, xy, sliding, slide_dir,
+                          feet, body_mass, gravity, R)
+        solves = 1
+        if res is not None and np.any(stance):
+            lam, r1 = res[1], res[2]
+            # a foot slides when its total friction is saturated: one point of a rigid foot
+            # at its own pyramid's edge is held by the other one
+            sat = np.zeros(self.num_contacts, dtype=bool)
+            for foot in set(feet):
+                pts = np.array([c for c in range(self.num_contacts)
+                                if feet[c] == foot and stance[c]], dtype=int)
+                if len(pts) == 0:
+                    continue
+                f = lam[pts].sum(axis=0)
+                if f[2] > 1e-6 and np.abs(f[:2]).max() >= self.mu_pyramid * f[2] * (1 - 1e-3):
+                    sat[pts] = True
+            # ... and holding it needed the residual: the feet-fixed solution leaned on a
+            # root force the floor could not give (a body that can follow its target with
+            # the friction it has keeps its feet where they are)
+            if np.linalg.norm((R @ r1[:3])[:2]) < self.slide_threshold * body_mass * gravity:
+                sat[:] = False
+            if np.any(sat):
+                for c in np.flatnonzero(sat):
+                    v = velocity[c, :2]
+                    speed = float(np.linalg.norm(v))
+                    if speed > 1e-2:
+                        slide_dir[c] = -v / speed       # friction opposes the sliding
+                    else:
+                        f = lam[[k for k in range(self.num_contacts)
+                                 if feet[k] == feet[c] and stance[k]], :2].sum(axis=0)
+                        slide_dir[c] = f / max(float(np.linalg.norm(f)), 1e-12)
+                sliding = sat
+                res2 = self._solve(M, h, a_des, Jc, drift, stance, a_ref, xy, sliding,
+                                   slide_dir, feet, body_mass, gravity, R)
+                solves += 1
+                if res2 is not None:
+                    res = res2
+                else:
+                    sliding = np.zeros(self.num_contacts, dtype=bool)
+        elapsed = time.perf_counter() - t0
+        n_c = self.num_contacts
+        if res is None:
+            return WbidResult(np.zeros(self.nv), np.zeros(self.nv - 6), np.zeros((n_c, 3)),
+                              np.zeros(6), stance, sliding, ok=False, status='failed',
+                              solve_time=elapsed, solves=solves)
+        qdd, lam, r, status = res
+        weight = body_mass * gravity
+        saturated = bool((self.residual_bound > 0 and np.any(
+            np.abs(r[:3]) >= weight * self.residual_bound * (1 - 1e-3)))
+            or (self.residual_moment_bound > 0 and np.any(
+                np.abs(r[3:]) >= weight * self.residual_moment_bound * (1 - 1e-3))))
+        tau = M[6:] @ qdd + h[6:] - np.einsum('cin,ci->n', Jc[:, :, 6:], lam)
+        self._prev = lam.copy()
+        return WbidResult(qdd, tau, lam, r, stance, sliding, saturated, True, status,
+                          elapsed, solves)
+
+    # ------------------------------------------------------------------------------------
+    def _solve(self, M, h, a_des, Jc, drift, stance, a_ref, xy, sliding, slide_dir, feet,
+               body_mass, gravity, R):
+        """Build and solve the QP; returns (qdd, lambda N, r, status) or None on failure."""
+        nv = self.nv
+        C = self.num_contacts
+        mg = body_mass * gravity
+        act = np.flatnonzero(stance)
+        k = len(act)
+        n = nv + 3 * k + 6
+        o_l, o_r = nv, nv + 3 * k
+        row_c, row_d = stance_rows(feet, stance, xy, sliding)
+        n_slide = int(np.sum(sliding & stance))
+        n_eq = 6 + len(row_c) + 2 * n_slide
+        # -- objective -------------------------------------------------------------------
+        H = np.zeros((n, n))
+        g = np.zeros(n)
+        # (floored: the lightest DoFs, e.g. the toes, would make the problem ill-conditioned)
+        w = np.maximum(np.diag(M) / body_mass, 1e-3)
+        H[np.arange(nv), np.arange(nv)] = w
+        g[:nv] = -w * a_des
+        lam_diag = self.smoothness + self.force_regularization
+        il = np.arange(o_l, o_r)
+        H[il, il] = lam_diag
+        prev = (self._prev[act] / mg).reshape(-1)
+        g[o_l:o_r] = -self.smoothness * prev
+        ir = np.arange(o_r, n)
+        H[ir, ir] = self.residual_weight
+        H[ir[:2], ir[:2]] = self.residual_horizontal_weight
+        # -- equalities ------------------------------------------------------------------
+        A = np.zeros((n_eq, n))
+        b = np.zeros(n_eq)
+        A[:6, :nv] = M[:6] / body_mass
+        for i, c in enumerate(act):
+            A[:6, o_l + 3 * i:o_l + 3 * i + 3] = -gravity * Jc[c, :, :6].T
+        # r in world axes; the free-flyer's generalised force is in the root frame
+        A[:3, o_r:o_r + 3] = -gravity * R.T
+        A[3:6, o_r + 3:] = -gravity * R.T
+        b[:6] = -h[:6] / body_mass
+        row = 6
+        for c, d in zip(row_c, row_d):
+            A[row, :nv] = d @ Jc[c]
+            b[row] = d @ (a_ref[c] - drift[c])
+            row += 1
+        for i, c in enumerate(act):
+            if not sliding[c]:
+                continue
+            # kinetic friction: lambda_t = mu' lambda_z * direction (inside the pyramid)
+            for axis in (0, 1):
+                A[row, o_l + 3 * i + axis] = 1.0
+                A[row, o_l + 3 * i + 2] = -self.mu_pyramid * slide_dir[c, axis]
+                row += 1
+        # -- inequalities: pyramid (stance points not sliding) and residual bounds --------
+        stick = [i for i, c in enumerate(act) if not sliding[c]]
+        n_in = 5 * len(stick) + len(act) - len(stick) + 6
+        Cm = np.zeros((n_in, n))
+        lo = np.full(n_in, -1e20)
+        up = np.full(n_in, 1e20)
+        row = 0
+        mu = self.mu_pyramid
+        for i, c in enumerate(act):
+            j = o_l + 3 * i
+            Cm[row, j + 2] = 1.0
+            lo[row] = 0.0
+            row += 1
+            if sliding[c]:
+                continue
+            for axis in (0, 1):
+                Cm[row, j + axis] = 1.0
+                Cm[row, j + 2] = -mu
+                up[row] = 0.0
+                row += 1
+                Cm[row, j + axis] = -1.0
+                Cm[row, j + 2] = -mu
+                up[row] = 0.0
+                row += 1
+        for i in range(6):
+            Cm[row, o_r + i] = 1.0
+            bound = self.residual_bound if i < 3 else self.residual_moment_bound
+            lo[row], up[row] = -bound, bound
+            row += 1
+        key = (k, len(row_c), n_slide, n_in, tuple(row_c), tuple(np.flatnonzero(sliding)))
+        if self.solver == 'osqp':
+            x = self._run_osqp(key, H, g, A, b, Cm, lo, up, nv, 6 + len(row_c))
+            status = 'solved' if x is not None else 'failed'
+        else:
+            x, status = self._run_proxqp(key, H, g, A, b, Cm, lo, up)
+        if x is None:
+            return None
+        qdd = x[:nv].copy()
+        lam = np.zeros((C, 3))
+        lam[act] = x[o_l:o_r].reshape(k, 3) * mg
+        # solver tolerance must not put a force outside the pyramid (or, sliding, the cone)
+        lam[:, 2] = np.maximum(lam[:, 2], 0.0)
+        bound = self.mu_pyramid * lam[:, 2]
+        lam[:, 0] = np.clip(lam[:, 0], -bound, bound)
+        lam[:, 1] = np.clip(lam[:, 1], -bound, bound)
+        r_world = x[o_r:] * mg
+        r = np.concatenate([R.T @ r_world[:3], R.T @ r_world[3:]])   # root frame
+        return qdd, lam, r, status
+
+    def _run_osqp(self, key, H, g, A, b, Cm, lo, up, nv, n_dense):
+        """OSQP on the stacked constraints; one solver per key, values updated in place."""
+        Aall = np.vstack([A, Cm])
+        lower = np.concatenate([b, np.where(lo <= -1e19, -np.inf, lo)])
+        upper = np.concatenate([b, np.where(up >= 1e19, np.inf, up)])
+        entry = self._solvers.get(('osqp',) + key)
+        fresh = entry is None
+        if fresh:
+            mask = Aall != 0.0
+            mask[:n_dense, :nv] = True          # equation-of-motion and stance rows
+            mask[:6, nv:] = True                # root rows: forces and residual
+            cols, rows = np.nonzero(mask.T)     # column-major order
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=Aall.shape[1]))])
+            A_sp = sp.csc_matrix((Aall[rows, cols], rows, indptr), shape=Aall.shape)
+            n = H.shape[0]
+            P_sp = sp.csc_matrix((np.diag(H).copy(), np.arange(n), np.arange(n + 1)),
+                                 shape=(n, n))
+            solver = osqp.OSQP()
+            solver.setup(P=P_sp, q=g, A=A_sp, l=lower, u=upper, verbose=False,
+                         eps_abs=self.osqp_eps, eps_rel=self.osqp_eps, max_iter=self.max_iter * 4,
+                         polishing=True, warm_starting=True, adaptive_rho=True)
+            entry = (solver, rows, cols)
+            self._solvers[('osqp',) + key] = entry
+        else:
+            solver, rows, cols = entry
+            solver.update(Px=np.diag(H).copy(), q=g, Ax=Aall[rows, cols], l=lower, u=upper)
+        try:
+            res = solver.solve(raise_error=False)
+        except Exception:  # noqa: BLE001 - an OSQP error is a solver failure
+            self._solvers.pop(('osqp',) + key, None)
+            return None
+        x = np.asarray(res.x, dtype=float) if res.x is not None else None
+        self.last_status = _status_name(res.info.status_val)
+        status = res.info.status_val
+        if (status == osqp.SolverStatus.OSQP_MAX_ITER_REACHED and x is not None
+                and res.info.prim_res < 1e-4 and res.info.dual_res < 1e-3):
+            status = osqp.SolverStatus.OSQP_SOLVED_INACCURATE   # feasible, nearly optimal
+        ok = status in _OSQP_OK and x is not None and np.all(np.isfinite(x))
+        if not ok:
+            self._solvers.pop(('osqp',) + key, None)
+            if not fresh:     # a warm start from a very different problem: one cold retry
+                return self._run_osqp(key, H, g, A, b, Cm, lo, up, nv, n_dense)
+            return None
+        return x
+
+    def _run_proxqp(self, key, H, g, A, b, Cm, lo, up):
+        n, n_eq, n_in = H.shape[0], A.shape[0], Cm.shape[0]
+        qp = self._solvers.get(('proxqp',) + key)
+        fresh = qp is None
+        if fresh:
+            qp = proxqp.dense.QP(n, n_eq, n_in)
+            qp.settings.eps_abs = self.eps
+            qp.settings.max_iter = self.max_iter
+            qp.settings.initial_guess = proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+            qp.settings.verbose = False
+            qp.init(H, g, A, b, Cm, lo, up)
+            self._solvers[('proxqp',) + key] = qp
+        else:
+            qp.update(H, g, A, b, Cm, lo, up)
+        qp.solve()
+        status = qp.results.info.status
+        x = qp.results.x
+        if status != proxqp.QPSolverOutput.PROXQP_SOLVED or not np.all(np.isfinite(x)):
+            del self._solvers[('proxqp',) + key]
+            if not fresh:     # a stale warm start can stall: one cold retry
+                return self._run_proxqp(key, H, g, A, b, Cm, lo, up)
+            return None, 'failed'
+        return np.array(x, dtype=float), str(status).split('.')[-1]
+
+
+def frame_drift(model, data, frame_ids: Sequence[int], reference) -> np.ndarray:
+    """(C, 3) ``Jdot_c qd`` of each frame: its classical linear acceleration with qdd = 0.
+
+    ``pinocchio.forwardKinematics(model, data, q, v, 0)`` must have run.
+    """
+    import pinocchio as pin
+    return np.array([pin.getFrameClassicalAcceleration(model, data, f, reference).linear
+                     for f in frame_ids])
+
+
+__all__ = ['WholeBodyID', 'WbidResult', 'WbidUnavailable', 'stance_rows', 'frame_drift']

@@ -1,0 +1,194 @@
+"""The whole-body dynamics (the default): the physics itself on small cases.
+
+Standing needs the body's weight from the floor and no residual; free flight gets no force
+and a parabolic centre of mass; a foot held by friction inside the cone does not slide, one
+that needs more friction than the cone gives slides; a target the feet cannot support is
+held by a bounded residual that is counted, and the body does not fall over.
+"""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from mocap_core.pose import Pose
+from mocap_core.skeleton import Skeleton
+from mocap_physics.cycle import PhysicsCycle
+from mocap_physics.cycle_params import PhysicsParams
+from mocap_physics.wbid import WholeBodyID, stance_rows
+
+FPS = 30.0
+
+
+@pytest.fixture(scope='module')
+def skeleton():
+    return Skeleton.default()
+
+
+def test_standing_needs_the_weight_and_no_residual(skeleton):
+    cyc = PhysicsCycle(skeleton)
+    rest = Pose.rest(skeleton)
+    for i in range(int(FPS)):
+        r = cyc.step(rest, i / FPS, [1, 1, 1, 1])
+    W = cyc.model.weight
+    assert r.contact_forces[:, 2].sum() == pytest.approx(W, rel=0.01)
+    assert r.residual_ratio < 0.005
+    assert np.abs(r.contact_forces[:, :2]).sum() < 0.02 * W     # no internal shear to speak of
+    assert np.abs(r.q[:3] - cyc.model.pose_to_q(rest)[:3]).max() < 2e-3
+
+
+def test_free_flight_no_force_and_parabolic_com(skeleton):
+    """No contact, no residual: the centre of mass follows g exactly from its initial
+    velocity, whatever the joints do; no contact force appears."""
+    cyc = PhysicsCycle(skeleton, PhysicsParams(residual_bound=0.0, residual_moment_bound=0.0))
+    rest = Pose.rest(skeleton)
+    q0 = cyc.model.pose_to_q(rest)
+    q0[2] += 2.0
+    v0 = np.zeros(cyc.model.nv)
+    v0[:3] = [1.0, 0.5, 3.0]                     # root frame = world at the rest pose
+    cyc.set_state(q0, v0, stamp=0.0)
+    c0 = cyc.model.center_of_mass(q0)
+    # a target that bends the knees: internal torques only
+    bent = rest.rotations.copy()
+    from mocap_core.rotations import axis_angle_to_quat
+    from mocap_core.skeleton import JOINT_INDEX
+    for k in ('left_knee', 'right_knee'):
+        bent[JOINT_INDEX[k]] = axis_angle_to_quat(np.array([0.0, 0.8, 0.0]))
+    target = Pose(skeleton, bent, rest.root_position + [0, 0, 2.0])
+    for i in range(1, 10):
+        r = cyc.step(target, i / FPS, [0, 0, 0, 0])
+        assert np.all(r.contact_forces == 0.0)
+        assert np.abs(r.residual_root).max() < 1e-3    # N, solver tolerance
+    t = 9 / FPS
+    expected = c0 + np.array([1.0, 0.5, 3.0]) * t + 0.5 * np.array([0, 0, -9.81]) * t ** 2
+    # semi-implicit Euler over k = 6 sub-steps per frame: O(dt) from the exact parabola
+    np.testing.assert_allclose(r.center_of_mass, expected, atol=0.01)
+    # the joints did move (so the test is not trivially a rigid body)
+    assert np.abs(r.q[7:] - q0[7:]).max() > 0.05
+
+
+def _on_slope(skeleton, slope: float, frames: int = 15):
+    """Rest pose on a floor tilted by atan(slope) about y: gravity gets a component along
+    x. Returns the cycle, the feet's horizontal displacement (m) and the last result."""
+    cyc = PhysicsCycle(skeleton)
+    g = 9.81 / np.sqrt(1 + slope ** 2)
+    cyc.model.model.gravity = pin.Motion(np.array([g * slope, 0.0, -g]), np.zeros(3))
+    rest = Pose.rest(skeleton)
+    r = cyc.step(rest, 0.0, [1, 1, 1, 1])
+    start = cyc.model.contact_positions(r.q)[:, :2]
+    for i in range(1, frames):
+        r = cyc.step(rest, i / FPS, [1, 1, 1, 1])
+    moved = np.linalg.norm(cyc.model.contact_positions(r.q)[:, :2] - start, axis=1)
+    return cyc, moved, r
+
+
+def test_friction_inside_the_cone_holds_the_feet(skeleton):
+    """tan = 0.3 < mu / sqrt(2): friction holds the body; no sliding, no residual."""
+    cyc, moved, r = _on_slope(skeleton, 0.3)
+    assert moved.max() < 1e-3
+    assert cyc.stats.sliding_substeps == 0
+    # no horizontal residual force: the floor carries the pull (an upright body on a slope
+    # cannot balance the pull's moment with its short feet, so a residual moment remains)
+    R = pin.XYZQUATToSE3(r.q[:7]).rotation
+    assert np.linalg.norm((R @ r.residual_root[:3])[:2]) < 0.05 * cyc.model.weight
+    # the friction carries the slope's pull: sum of x forces = - m g_x
+    gx = cyc.model.model.gravity.linear[0]
+    assert r.contact_forces[:, 0].sum() == pytest.approx(-cyc.model.body_mass * gx, rel=0.15)
+
+
+def test_friction_outside_the_cone_slides(skeleton):
+    """tan = 1.0 > mu / sqrt(2): the feet slide down the slope, friction at its limit."""
+    cyc, moved, r = _on_slope(skeleton, 1.0)
+    assert cyc.stats.sliding_substeps > 0
+    assert moved.min() > 0.01                     # every contact point slid
+    f = r.contact_forces[r.contact_active]
+    assert np.all(np.abs(f[:, 0]) <= 0.8 / np.sqrt(2) * f[:, 2] * (1 + 1e-6) + 1e-6)
+
+
+@pytest.mark.parametrize('bound', [0.6, 1.0])
+def test_unsupported_target_is_held_by_the_bounded_residual(skeleton, bound):
+    """A target 0.5 m up with no contact at all (the lifter says flight) that stays there:
+    the residual holds the body up to its bound, counted. Below one body weight the body
+    sinks and lands on its feet; it never falls over or goes through the floor."""
+    cyc = PhysicsCycle(skeleton, PhysicsParams(residual_bound=bound))
+    rest = Pose.rest(skeleton)
+    target = Pose(skeleton, rest.rotations, rest.root_position + [0, 0, 0.5])
+    q = cyc.model.pose_to_q(target)
+    cyc.set_state(q, np.zeros(cyc.model.nv), stamp=0.0)
+    for i in range(1, int(FPS)):
+        r = cyc.step(target, i / FPS, [0, 0, 0, 0])
+        assert r.contact_heights.min() > -0.005
+        up = pin.XYZQUATToSE3(r.q[:7]).rotation[:, 2]
+        assert up[2] > 0.95                                  # upright
+    assert cyc.stats.residual_saturations > 0
+    assert r.residual_ratio == pytest.approx(bound, abs=0.03)     # at its bound
+    if bound < 1.0:
+        assert r.contact_heights.min() < 0.005               # landed on its feet
+
+
+def test_dynamics_hold_with_the_solution(skeleton):
+    """The QP's accelerations, torques, forces and residual satisfy the equation of motion
+    M qdd + h = S^T tau + J^T lambda + S_root^T r (checked with Pinocchio's RNEA)."""
+    cyc = PhysicsCycle(skeleton)
+    m = cyc.model
+    rest = Pose.rest(skeleton)
+    cyc.step(rest, 0.0, [1, 1, 1, 1])
+    q, v = cyc.state
+    v = v + np.random.default_rng(0).normal(scale=0.2, size=m.nv)
+    model, data = m.model, m.data
+    pin.computeAllTerms(model, data, q, v)
+    M = np.triu(data.M) + np.triu(data.M, 1).T
+    h = data.nle.copy()
+    pin.forwardKinematics(model, data, q, v, np.zeros(m.nv))
+    pin.updateFramePlacements(model, data)
+    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    Jc = np.array([pin.getFrameJacobian(model, data, f, lwa)[:3] for f in m.contact_frame_ids])
+    drift = np.array([pin.getFrameClassicalAcceleration(model, data, f, lwa).linear
+                      for f in m.contact_frame_ids])
+    pos = np.array([data.oMf[f].translation for f in m.contact_frame_ids])
+    vel = np.array([pin.getFrameVelocity(model, data, f, lwa).linear
+                    for f in m.contact_frame_ids])
+    a_des = np.random.default_rng(1).normal(scale=2.0, size=m.nv)
+    wb = WholeBodyID(m.nv)
+    stance = np.ones(4, dtype=bool)
+    res = wb.solve(M, h, a_des, Jc, drift, stance, np.zeros((4, 3)), pos[:, :2], vel,
+                   m.contact_feet, m.body_mass, root_rotation=data.oMi[1].rotation)
+    assert res.ok
+    tau_full = np.concatenate([res.residual, res.tau])
+    rnea = pin.rnea(model, data, q, v, res.qdd)
+    JtL = np.einsum('cin,ci->n', Jc, res.forces)
+    scale = m.weight
+    assert np.abs(rnea - (tau_full + JtL)).max() < 1e-3 * scale
+    # stance points do not accelerate (up to the solver's tolerance)
+    acc = np.einsum('cin,n->ci', Jc, res.qdd) + drift
+    assert np.abs(acc[:, 2]).max() < 1e-2
+    # pinocchio's forward dynamics of those torques and forces gives the same accelerations
+    a = pin.aba(model, data, q, v, tau_full + JtL)
+    np.testing.assert_allclose(a, res.qdd, atol=1e-2)
+
+
+def test_stance_rows_of_a_rigid_foot():
+    feet = ('left', 'left', 'right', 'right')
+    xy = np.array([[0.0, 0.1], [0.2, 0.1], [0.0, -0.1], [0.2, -0.1]])
+    idx, dirs = stance_rows(feet, np.array([1, 1, 0, 1], bool), xy, np.zeros(4, bool))
+    # left foot: heel x y z + toe z + toe across the heel-toe line; right toe: x y z
+    assert sorted(idx) == [0, 0, 0, 1, 1, 3, 3, 3]
+    across = [d for c, d in zip(idx, dirs) if c == 1 and d[2] == 0]
+    np.testing.assert_allclose(across[0], [0, 1, 0], atol=1e-12)
+    # a sliding foot keeps only its vertical rows
+    idx, _ = stance_rows(feet, np.array([1, 1, 0, 0], bool), xy, np.array([1, 1, 0, 0], bool))
+    assert sorted(idx) == [0, 1]
+
+
+def test_runs_are_bit_identical(skeleton):
+    """The default solver gives the same bits on every run (mocap process is deterministic)."""
+    rng = np.random.default_rng(3)
+    rest = Pose.rest(skeleton)
+    targets = [Pose(skeleton, rest.rotations, rest.root_position
+                    + rng.normal(scale=0.01, size=3)) for _ in range(20)]
+    outs = []
+    for _ in range(3):
+        cyc = PhysicsCycle(skeleton)
+        outs.append(np.array([cyc.step(t, i / FPS, [1, 1, 0.9, 0.2]).q
+                              for i, t in enumerate(targets)]))
+        _ = [np.zeros(int(k)) for k in rng.integers(1, 50, size=10)]   # vary the heap
+    assert all(np.array_equal(outs[0], o) for o in outs[1:])
