@@ -15,6 +15,11 @@ Publishes, stamped with the input's stamps, in ``frame_id`` (default ``world``):
 pose, twist in the root frame), ``/mocap/world/path`` (nav_msgs/Path), ``/mocap/world/markers``
 (MarkerArray) and ``/diagnostics``.
 
+One floor for all outputs: when the input is in a floor frame (the physics output, z up,
+floor z = 0; ``vertical_from_input`` 'auto' decides by the input's frame_id), the root's
+height and tilt are the input's and GMR gives the heading and the horizontal path, so the
+world output's feet are never below z = 0 and stand where the physics put them vertically.
+
 ``static_camera:=true`` (beyond the paper) fuses the GMR motion with the input's root
 trajectory, which does not drift when the camera does not move
 (:class:`~mocap_global.online.StaticCameraFusion`).
@@ -92,6 +97,10 @@ PARAMETERS = (
               'correction towards the input root', min_value=0.0),
     ParamSpec('fusion_orientation_time_constant_s', 1.0, 'Time constant of the orientation '
               'correction towards the input root', min_value=0.0),
+    ParamSpec('vertical_from_input', 'auto', "Keep the input's height and tilt (GMR gives "
+              "heading and horizontal translation): 'true' for an input in a floor frame (z "
+              "up, floor z = 0, the physics output: one floor for all outputs), 'false', or "
+              "'auto' (true unless the input frame is an optical frame)"),
     ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
     ParamSpec('path_length', 3000, 'Poses kept in /mocap/world/path (0 = all)', min_value=0),
     ParamSpec('flush_after_s', 0.3, 'When no input arrives for this long, emit the frames '
@@ -136,6 +145,9 @@ class GMRNode(Node):
         self.model = with_tta(load_weights(path, p['device']), p['test_time_augmentation'])
         cfg = self.model.cfg
         self.fps = cfg.fps
+        if str(p['vertical_from_input']).lower() not in ('auto', 'true', 'false'):
+            raise ValueError("vertical_from_input must be 'auto', 'true' or 'false', got "
+                             f"{p['vertical_from_input']!r}")
         if p['input_up'] not in ('auto', 'estimate'):
             parse_up(p['input_up'])              # fail early on a malformed vector
         window = p['window'] or cfg.window
@@ -200,9 +212,15 @@ class GMRNode(Node):
         model_up = None
         if self.model.cfg.root_input == 'up':
             model_up = up if up is not None else np.array([0.0, -1.0, 0.0])
+        mode = str(p['vertical_from_input']).lower()
+        on_floor = ('optical' not in frame_id) if mode == 'auto' else mode == 'true'
+        self.diag.set_value('vertical_from_input', on_floor)
+        if on_floor:
+            self.get_logger().info(f"the input '{frame_id}' is a floor frame: height and tilt "
+                                   'from the input, heading and horizontal path from GMR')
         return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
                          p['tilt_correction'], fusion, model_up, p['device'],
-                         chunk=p['chunk'])
+                         chunk=p['chunk'], floor_input=on_floor)
 
     def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
         """One input frame: convert, check the stamp, push to :class:`OnlineGMR`, publish

@@ -15,6 +15,12 @@ on the floor z = 0. With ``tilt_correction`` = a > 0, every accumulated orientat
 by the fraction a of the rotation that takes its body-frame up ``R_k^T e_z`` to the
 estimated up (pitch and roll only; heading and position are not corrected).
 
+Floor input (``floor_input``, the physics stage's output: z up, floor z = 0): GMR gives the
+heading and the horizontal translation (its accumulation is unchanged); the emitted root's
+height and tilt are the input's
+(one floor for all outputs: the world output's feet are exactly as high above z = 0 as the
+physics put them, never below it).
+
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
@@ -158,13 +164,18 @@ class OnlineGMR:
         chunk: frames emitted per network pass (1 = each frame as soon as its look-ahead has
             arrived); more is faster per frame offline, and the earlier frames of a chunk see
             more than ``lookahead`` future frames.
+        floor_input: the input is in a floor frame (z up, floor z = 0: the physics stage's
+            output). The world pose then keeps the input's height and tilt (pitch, roll):
+            GMR gives the heading and the horizontal translation, physics the vertical, so
+            the world output stands on the floor the physics established (module
+            docstring).
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
                  max_gap_s: float = 0.25, tilt_correction: float = 0.0,
                  fusion: Optional[StaticCameraFusion] = None,
                  input_up: Optional[np.ndarray] = None, device: str = 'cpu',
-                 chunk: int = 1) -> None:
+                 chunk: int = 1, floor_input: bool = False) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -179,6 +190,7 @@ class OnlineGMR:
         self.max_gap_ns = int(max_gap_s * 1e9)
         self.tilt_correction = float(tilt_correction)
         self.fusion = fusion
+        self.floor_input = bool(floor_input)
         if self.cfg.root_input == 'up' and input_up is None:
             raise ValueError("this model needs the input frame's up direction (input_up)")
         self.input_up = None if input_up is None else np.asarray(input_up, dtype=np.float64)
@@ -200,6 +212,8 @@ class OnlineGMR:
         self._emitted = 0           # frames of this segment emitted
         self._R: Optional[np.ndarray] = None
         self._T: Optional[np.ndarray] = None
+        self._R_out: Optional[np.ndarray] = None     # the last emitted pose
+        self._T_out: Optional[np.ndarray] = None
         self._cache: Optional[Tuple[int, dict]] = None
         self._last_motion: Tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))
         self._last_up = _EZ.copy()
@@ -295,6 +309,16 @@ class OnlineGMR:
         T = self._R @ dT + self._T                      # eq. 4
         return R, T
 
+    @staticmethod
+    def _on_floor(R: np.ndarray, T: np.ndarray, pose: Pose) -> Tuple[np.ndarray, np.ndarray]:
+        """GMR's heading and horizontal position with the floor-frame input's tilt and
+        height: ``R = Rz(yaw(R) - yaw(R_in)) R_in``, ``T_z = T_in,z``. Turning a pose about
+        the vertical does not change any height, so every joint and contact point is as
+        high above z = 0 as in the input."""
+        R_in = quat_to_matrix(pose.rotations[0])
+        R = heading_rotation(yaw_of(R) - yaw_of(R_in)) @ R_in
+        return R, np.array([T[0], T[1], float(pose.root_position[2])])
+
     def _emit(self) -> WorldFrame:
         k = self._emitted                               # segment index of the frame
         first_in_buffer = self._received - len(self._stamps)
@@ -305,6 +329,7 @@ class OnlineGMR:
         lin = np.zeros(3)
         ang = np.zeros(3)
         fused = False
+        dt = 0.0
         if k == 0:
             R = tilt_rotation(up)
             T = np.array([0.0, 0.0, 0.0])
@@ -328,15 +353,18 @@ class OnlineGMR:
                 R, T, fused = self.fusion.step(R, T, quat_to_matrix(pose.rotations[0]),
                                                pose.root_position, up)
             dt = (self._stamps[pos] - self._stamps[pos - 1]) * 1e-9
-            if dt > 0:
-                lin = R.T @ (T - self._T) / dt
-                ang = matrix_to_axis_angle(self._R.T @ R) / dt
         if k == 0 and self.fusion is not None:
             R, T, fused = self.fusion.step(R, T, quat_to_matrix(pose.rotations[0]),
                                            pose.root_position, up, first=True)
         if k % 64 == 0:
             R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
-        self._R, self._T = R, T
+        self._R, self._T = R, T                         # the accumulation stays GMR's
+        if self.floor_input:
+            R, T = self._on_floor(R, T, pose)
+        if k > 0 and dt > 0:
+            lin = R.T @ (T - self._T_out) / dt
+            ang = matrix_to_axis_angle(self._R_out.T @ R) / dt
+        self._R_out, self._T_out = R, T
         self._emitted += 1
         self.nonfinite_outputs += int(held)
         if k == 0:

@@ -415,6 +415,50 @@ def test_full_tilt_correction_follows_the_estimated_up():
     np.testing.assert_allclose(up_in_body(R), up, atol=1e-5)
 
 
+def test_floor_input_keeps_the_physics_height_and_tilt():
+    """An input in a floor frame (the physics output): the world output's root height and
+    tilt are the input's, every contact point as high above z = 0 as in the input; GMR
+    still decides the heading and the horizontal path."""
+    model = _small_model()
+    poses = _poses(40)
+    # a floor-frame input: lift each pose so its lowest contact point is 2 cm above z = 0,
+    # and give it a tilt that changes over time
+    lifted = []
+    for i, p in enumerate(poses):
+        tilt = axis_angle_to_matrix(np.array([0.1 * np.sin(i / 5), 0.05, 0.0]))
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(tilt @ quat_to_matrix(rot[0]))
+        q = Pose(p.skeleton, rot, p.root_position)
+        low = min(c[2] for c in q.contact_positions().values())
+        lifted.append(Pose(p.skeleton, rot, q.root_position + [0, 0, 0.02 - low]))
+    runs = {}
+    for floor in (False, True):
+        online = OnlineGMR(model, lookahead=5, floor_input=floor)
+        frames = []
+        for i, p in enumerate(lifted):
+            frames += online.push(i * 33_333_333, p)[0]
+        frames += online.flush()
+        runs[floor] = frames
+    for f, p in zip(runs[True], lifted):
+        assert f.pose.root_position[2] == pytest.approx(p.root_position[2], abs=1e-12)
+        lows = [c[2] for c in f.pose.contact_positions().values()]
+        assert min(lows) == pytest.approx(0.02, abs=1e-9)
+        # the same tilt: the body's up axis makes the same angle with +z
+        up_out = quat_to_matrix(f.pose.rotations[0])[2]
+        up_in = quat_to_matrix(p.rotations[0])[2]
+        assert up_out[2] == pytest.approx(up_in[2], abs=1e-9)
+    # heading and horizontal path are GMR's: the same with and without the floor input
+    from mocap_global.se3 import yaw_of
+    for a, b in zip(runs[False], runs[True]):
+        np.testing.assert_allclose(a.pose.root_position[:2], b.pose.root_position[:2],
+                                   atol=1e-9)
+        assert yaw_of(quat_to_matrix(a.pose.rotations[0])) == pytest.approx(
+            yaw_of(quat_to_matrix(b.pose.rotations[0])), abs=1e-9)
+    # without it, the accumulated height drifts away from the input's
+    assert any(abs(a.pose.root_position[2] - p.root_position[2]) > 1e-3
+               for a, p in zip(runs[False], lifted))
+
+
 def test_position_input_is_the_root_frame_joints_and_ignores_leaf_twist():
     R, T = circle_walk(10)
     m = _motion(R, T)

@@ -87,6 +87,7 @@ def test_mocap_eval_physics_cli(tmp_path):
     assert res.returncode == 0, res.stderr
     data = json.loads(out.with_suffix('.json').read_text())
     assert {r['config'] for r in data['results']} == {'physics, true floor',
-                                                       'physics, est. floor'}
+                                                       'physics, est. floor',
+                                                       'paper (eq. 13), true floor'}
     md = out.with_suffix('.md').read_text()
     assert 'friction-cone violations' in md and 'PA-MPJPE' in md

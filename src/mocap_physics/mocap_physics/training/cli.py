@@ -2,12 +2,15 @@
 
     mocap eval physics [--bags B [B ...]] [--noise none|lifter|both] [--dataset-clips N]
                        [--max-frames F] [--seed S] [--out docs/benchmarks/physics_eval]
+    mocap eval gait [--bags B [B ...]] [--body-mass KG] [--out docs/benchmarks/physics_gait]
     mocap train physics [--steps N] [--run-dir runs/physics_dynet] [--device cpu|cuda]
 
 Evaluation runs the physics cycle on ground-truth motion (the committed ``bags/gt_*`` bags in
 the camera frame, and clips of the dataset's validation split in the world frame), clean and
 with lifter-like noise, and writes a JSON + Markdown report
-(:mod:`mocap_physics.training.evaluate`). Training fits the DyNet gains
+(:mod:`mocap_physics.training.evaluate`). ``mocap eval gait`` reports the forces and torques
+on walking against gait biomechanics (:mod:`mocap_physics.training.gait`). Training fits the
+DyNet gains
 (:mod:`mocap_physics.dynet`, :mod:`mocap_physics.training.train_dynet`) on the train split.
 """
 
@@ -24,6 +27,7 @@ if TYPE_CHECKING:
 
 REPO = Path(__file__).resolve().parents[4]
 DEFAULT_BAGS = ('gt_cmu_walk_12_02', 'gt_bandai_walk_exhausted', 'gt_bandai_wave_normal')
+WALKING_BAGS = ('gt_cmu_walk_12_02', 'gt_bandai_walk_exhausted')
 
 
 def add_train_parser(sub: argparse._SubParsersAction) -> None:
@@ -58,6 +62,16 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument('--out', default=str(REPO / 'docs' / 'benchmarks' / 'physics_eval'),
                    help='report path without suffix (.json and .md are written)')
     p.set_defaults(func=cmd_eval)
+    g = sub.add_parser('gait', help='ground reaction forces and joint moments of the physics '
+                       'on walking, against published gait data')
+    g.add_argument('--bags', nargs='*', default=None,
+                   help='ground-truth walking bags (default: the committed walking bags)')
+    g.add_argument('--body-mass', type=float, default=70.0,
+                   help='body mass, kg (forces in body weights and moments per kg do not '
+                        'depend on it: the segment masses are fractions of it)')
+    g.add_argument('--out', default=str(REPO / 'docs' / 'benchmarks' / 'physics_gait'),
+                   help='report path without suffix (.json, .md and .png are written)')
+    g.set_defaults(func=cmd_gait)
 
 
 def _configs(quick: bool, dynet: Optional[str]) -> List['EvalConfig']:
@@ -126,6 +140,99 @@ def cmd_eval(args: argparse.Namespace) -> int:
     }
     path = write_report(results, Path(args.out), 'Physics cycle on ground-truth motion', meta)
     print(f'report: {path} (+ .json)')
+    return 0
+
+
+def gait_markdown(results: dict, meta: dict) -> str:
+    """The gait report (``mocap eval gait``) as Markdown."""
+    lines = ['# Physics on walking: forces and torques against gait biomechanics', '',
+             'Made by:', '', '```', meta['command'], '```', '',
+             f"- clips: {meta['clips']}", f"- body mass: {meta['body_mass']} kg (forces in "
+             'body weights and moments per kg do not depend on it)',
+             '- input: the ground-truth motion (clean), the true floor, ground-truth contact '
+             'labels', '',
+             'Published normal walking (`mocap_physics.training.gait` cites the sources): '
+             'vertical GRF peaks about 1.1-1.3 BW with a mid-stance trough of about 0.7-0.8; '
+             'ankle plantarflexion peak about 1.5 N m/kg; knee and hip peaks differ between '
+             'laboratories (about 0.2-0.9 and 0.4-1.4 N m/kg).', '',
+             '![GRF and moments over the gait cycle](physics_gait.png)', '']
+    modes = list(results)
+    lines += ['| measure | ' + ' | '.join(modes) + ' | published |',
+              '|---|' + '---|' * (len(modes) + 1)]
+
+    def row(name, get, fmt, ref):
+        vals = []
+        for m in modes:
+            try:
+                vals.append(fmt.format(get(results[m])))
+            except (KeyError, TypeError):
+                vals.append('-')
+        lines.append(f'| {name} | ' + ' | '.join(vals) + f' | {ref} |')
+    row('strides', lambda r: r['strides'], '{:d}', '')
+    row('mean total vertical GRF (BW)', lambda r: r['mean_total_vertical_grf_bw'], '{:.3f}',
+        '1.0')
+    row('residual root force / weight, median', lambda r: r['residual_root_over_weight_median'],
+        '{:.3f}', '0')
+    row('vertical GRF, first peak (BW, % of cycle)',
+        lambda r: (r['peak_1_bw'], 100 * r['peak_1_at']), '{0[0]:.2f} at {0[1]:.0f} %',
+        '1.1-1.3 at ~15 %')
+    row('vertical GRF, trough (BW)', lambda r: r['trough_bw'], '{:.2f}', '0.7-0.8')
+    row('vertical GRF, second peak (BW, % of cycle)',
+        lambda r: (r['peak_2_bw'], 100 * r['peak_2_at']), '{0[0]:.2f} at {0[1]:.0f} %',
+        '1.1-1.3 at ~45-50 %')
+    refs = {'ankle': '~1.5 (plantarflexion)', 'knee': '0.2-0.9', 'hip': '0.4-1.4'}
+    for j in ('ankle', 'knee', 'hip'):
+        row(f'{j}: peak sagittal moment (N m/kg, +max / -min)',
+            lambda r, j=j: (r['moments_per_kg'][f'{j}_sagittal']['peak_positive'],
+                            r['moments_per_kg'][f'{j}_sagittal']['peak_negative']),
+            '+{0[0]:.2f} / {0[1]:.2f}', refs[j])
+        row(f'{j}: peak moment magnitude (N m/kg)',
+            lambda r, j=j: r['moments_per_kg'][f'{j}_magnitude']['peak_abs'], '{:.2f}', '')
+    return '\n'.join(lines) + '\n'
+
+
+def cmd_gait(args: argparse.Namespace) -> int:
+    import json
+    from dataclasses import replace as dc_replace
+
+    from ..cycle_params import PhysicsParams
+    from .evaluate import load_gt_bag
+    from .gait import analyse, plot, run_gait
+
+    bags = args.bags if args.bags is not None else [str(REPO / 'bags' / b)
+                                                    for b in WALKING_BAGS]
+    clips = []
+    for b in bags:
+        try:
+            clips.append(load_gt_bag(b))
+        except Exception as exc:  # noqa: BLE001 - report and go on with the others
+            print(f'mocap eval gait: skipping {b}: {exc}', file=sys.stderr)
+    if not clips:
+        print('mocap eval gait: error: no clip to evaluate', file=sys.stderr)
+        return 1
+    base = PhysicsParams(body_mass=args.body_mass)
+    modes = {'whole body (default)': base,
+             'paper (eq. 13)': dc_replace(base, dynamics='paper')}
+    results = {}
+    for name, params in modes.items():
+        runs = [run_gait(c, params) for c in clips]
+        results[name] = analyse(runs)
+        r = results[name]
+        print(f"{name}: {r['strides']} strides, mean GRF {r['mean_total_vertical_grf_bw']:.3f} "
+              f"BW, peaks {r.get('peak_1_bw', float('nan')):.2f} / "
+              f"{r.get('peak_2_bw', float('nan')):.2f} BW, ankle "
+              f"{r['moments_per_kg'].get('ankle_sagittal', {}).get('peak_abs', float('nan')):.2f}"
+              ' N m/kg')
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    meta = {'command': 'mocap eval gait ' + ' '.join(sys.argv[3:]) if len(sys.argv) > 3
+            and sys.argv[1:3] == ['eval', 'gait'] else 'mocap eval gait',
+            'clips': ', '.join(c.name for c in clips), 'body_mass': args.body_mass}
+    out.with_suffix('.json').write_text(json.dumps({'meta': meta, 'results': results},
+                                                   indent=1))
+    plot(results['whole body (default)'], out.with_suffix('.png'))
+    out.with_suffix('.md').write_text(gait_markdown(results, meta))
+    print(f'report: {out.with_suffix(".md")} (+ .json, .png)')
     return 0
 
 

@@ -22,8 +22,9 @@ the true world frame (floor z = 0) for the input (the kinematic target) and the 
 
 Metrics (:func:`motion_metrics`), per clip, then frame-weighted means over clips:
 
-* penetration: depth of the lowest heel/toe point below the floor per frame (0 if above):
-  max and mean (mm), share of frames deeper than 1 mm and than 5 mm;
+* penetration: depth of the lowest point of either foot (heel and toe points, ankle joints)
+  below the floor per frame (0 if above): max (also after the first 1 and 2 s) and mean
+  (mm), share of frames deeper than 1 mm and than 5 mm;
 * floating: mean height (mm) above the floor of the points labelled in contact (ground-truth
   labels), share of them higher than 20 mm;
 * skating: mean horizontal displacement (mm per frame) of the points labelled in contact in
@@ -315,7 +316,11 @@ def motion_metrics(skeleton: Skeleton, rotations: np.ndarray, root: np.ndarray,
     """Metrics of a world-frame motion (module docstring) against the ground truth."""
     joints, cp = _contact_points(skeleton, rotations, root)
     z = cp[..., 2]
-    depth = np.maximum(0.0, -z.min(axis=1))
+    # the whole foot: heel and toe points and the ankle joints (the toe points are the toe
+    # joints)
+    ankles = [skeleton.joint_names.index(n) for n in ('left_ankle', 'right_ankle')]
+    z_foot = np.concatenate([z, joints[:, ankles, 2]], axis=1)
+    depth = np.maximum(0.0, -z_foot.min(axis=1))
     lab = np.asarray(labels, dtype=bool)
     h = np.maximum(z[lab], 0.0)
     both = lab[1:] & lab[:-1]
@@ -341,6 +346,7 @@ def motion_metrics(skeleton: Skeleton, rotations: np.ndarray, root: np.ndarray,
         'accel_error': float(np.linalg.norm(acc - acc_gt, axis=-1).mean()),
         'jitter': float(np.linalg.norm(jerk, axis=-1).mean()),
         'e_smooth_mm': float(np.abs(step - step_gt).mean() * 1e3),
+        'penetration_max_after_1s_mm': float(depth[int(fps):].max(initial=0.0) * 1e3),
         'penetration_max_after_2s_mm': float(depth[int(2 * fps):].max(initial=0.0) * 1e3),
         'pa_mpjpe_mm': float(np.linalg.norm(procrustes(joints, gt_joints) - gt_joints,
                                             axis=-1).mean() * 1e3),
@@ -374,6 +380,7 @@ def evaluate_clip(clip: Clip, params: PhysicsParams, floor: str = 'gt',
         'penetration_own_floor_max_mm': float(own.max() * 1e3),
         'cone_violations': int(run.cone_violations),
         'residual_root_over_weight_mean': float(resid.mean()) if resid.size else 0.0,
+        'residual_root_over_weight_median': float(np.median(resid)) if resid.size else 0.0,
         'residual_root_over_weight_p95': float(np.percentile(resid, 95)) if resid.size else 0.0,
         'ms_per_frame_median': float(np.median(t)),
         'ms_per_frame_p95': float(np.percentile(t, 95)),
@@ -473,6 +480,7 @@ _ROWS = [
     ('penetration mean (mm)', 'penetration_mean_mm', '{:.2f}'),
     ('frames penetrating > 1 mm', 'penetration_frames_over_1mm', '{:.1%}'),
     ('frames penetrating > 5 mm', 'penetration_frames_over_5mm', '{:.1%}'),
+    ('penetration max after the first 1 s (mm)', 'penetration_max_after_1s_mm', '{:.1f}'),
     ('penetration max after the first 2 s (mm)', 'penetration_max_after_2s_mm', '{:.1f}'),
     ('floating in contact, mean (mm)', 'floating_mean_mm', '{:.1f}'),
     ('floating in contact > 20 mm', 'floating_over_20mm', '{:.1%}'),
@@ -489,6 +497,7 @@ _PHYS = [
     ('penetration vs own floor, max (mm)', 'penetration_own_floor_max_mm', '{:.2f}'),
     ('friction-cone violations', 'cone_violations', '{:d}'),
     ('residual root force / weight, mean', 'residual_root_over_weight_mean', '{:.3f}'),
+    ('residual root force / weight, median', 'residual_root_over_weight_median', '{:.3f}'),
     ('residual root force / weight, p95', 'residual_root_over_weight_p95', '{:.3f}'),
     ('time per frame, median (ms)', 'ms_per_frame_median', '{:.2f}'),
     ('time per frame, p95 (ms)', 'ms_per_frame_p95', '{:.2f}'),
