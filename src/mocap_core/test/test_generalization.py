@@ -11,7 +11,7 @@ from mocap_core.data.detector_placement import (DetectorPlacement, fit_detector_
                                                 leg_length)
 from mocap_core.data.strict_split import family_of, strict_assignment
 from mocap_core.data.synth2d import keypoints_3d, look_at
-from mocap_core.render.evaluate import (aggregate, detector_swaps, motion_group,
+from mocap_core.render.evaluate import (aggregate, detector_swaps, foot_scores, motion_group,
                                          score_clip)
 from mocap_core.skeleton import JOINT_INDEX, JOINT_MIRROR, KEYPOINT_NAMES, NUM_KEYPOINTS
 
@@ -161,3 +161,32 @@ def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
     det = detector_swaps(mirrored)
     assert np.array_equal(det >= 0, detector_swaps(gt) >= 0) and det[det >= 0].min() == 1
     assert motion_group(meta['clip']) == 'walk'
+
+
+def test_foot_scores_against_the_stage_floor(walk):
+    """Feet on the floor score 0; feet sunk 2 cm after the first second, or sliding while
+    in contact, are measured."""
+    fk = walk.fk()
+    W = fk.positions[:60].copy()
+    feet = [JOINT_INDEX[n] for n in ('left_ankle', 'left_toe', 'right_ankle', 'right_toe')]
+    W[..., 2] -= W[:, feet, 2].min()                  # lowest foot joint of the clip on z = 0
+    idx = np.arange(len(W))
+    contacts = np.zeros((len(W), 4), dtype=bool)
+    contacts[:, :2] = True                            # left foot in contact throughout
+    s = foot_scores(W, idx, contacts, 30.0)
+    assert s['penetration_after_1s_mm'] == pytest.approx(
+        max(0.0, -1000 * W[30:, feet, 2].min()), abs=1e-9)
+    sunk = W.copy()
+    sunk[35, :, 2] -= 0.02 + sunk[35, feet, 2].min()   # one late frame 2 cm under the floor
+    sunk[10, :, 2] -= 0.5                              # an early one does not count
+    s2 = foot_scores(sunk, idx, contacts, 30.0)
+    assert s2['penetration_after_1s_mm'] == pytest.approx(20.0, abs=1e-6)
+    assert s2['frames_below_5mm'] == pytest.approx(1 / 30)
+    # a left foot that slides 1 cm per frame while in contact
+    slid = W.copy()
+    slid[:, [feet[0], feet[1]], 0] = 0.01 * idx[:, None]
+    slid[:, [feet[0], feet[1]], 1] = 0.0
+    s3 = foot_scores(slid, idx, contacts, 30.0)
+    assert s3['skating_mm'] == pytest.approx(10.0, abs=1e-6)
+    # only frames whose index is consecutive are compared
+    assert np.isnan(foot_scores(W, idx, np.zeros_like(contacts), 30.0)['skating_mm'])

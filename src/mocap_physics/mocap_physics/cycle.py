@@ -213,7 +213,8 @@ class PhysicsCycle:
                                     residual_horizontal_weight=p.residual_horizontal_weight,
                                     residual_bound=p.residual_bound,
                                     residual_moment_bound=p.residual_moment_bound,
-                                    smoothness=p.force_smoothness, solver=p.wbid_solver)
+                                    smoothness=p.force_smoothness,
+                                    slide_threshold=p.slide_threshold, solver=p.wbid_solver)
         self._kp, self._kd = self.params.gains(model.nv)
         self.dynet = None
         if self._dynet_net is not None:
@@ -362,9 +363,10 @@ class PhysicsCycle:
             tgt = self.model.contact_positions(q_hat)[:, :2]
             d = tgt - self._anchor
             dist = np.linalg.norm(d, axis=1)
-            far = self._anchored & (dist > p.stick_release)
+            release = p.stance_release if self._stance_on else p.stick_release
+            far = self._anchored & (dist > release)
             if np.any(far):
-                step = d[far] * (1.0 - p.stick_release / dist[far])[:, None]
+                step = d[far] * (1.0 - release / dist[far])[:, None]
                 if self._stance_on:
                     # at most stick_speed: the stance rows pull the point to its anchor
                     n = np.linalg.norm(step, axis=1, keepdims=True)

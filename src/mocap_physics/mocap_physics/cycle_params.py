@@ -39,6 +39,10 @@ class PhysicsParams:
     residual_bound: float = 1.0           # body weights: bound of each residual force row
     residual_moment_bound: float = 0.5    # body weight x m: bound of each residual moment row
     stance_gain: float = 20.0             # 1/s: stance points return to their anchor (whole body)
+    stance_release: float = 0.15          # m: whole body: a stance anchor follows the target
+    #                                       point when it is farther (at most stick_speed)
+    slide_threshold: float = 0.05         # body weights: horizontal residual that lets a foot
+    #                                       with saturated friction slide (whole body)
     force_smoothness: float = 0.01        # w_s of the whole-body QP (forces between sub-steps)
     wbid_solver: str = 'osqp'             # 'osqp' (deterministic) or 'proxqp' (mocap_physics.wbid)
     substeps: int = 6                     # k of the paper
@@ -99,7 +103,8 @@ class PhysicsParams:
             val = getattr(self, name)
             if not (np.isfinite(val) and val > 0):
                 bad.append(f'{name}={val} (must be > 0)')
-        for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness'):
+        for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness',
+                     'stance_release', 'slide_threshold'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0):
                 bad.append(f'{name}={val} (must be >= 0)')

@@ -116,7 +116,7 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     for stage, topic in (('physics', T.PHYSICS_JOINTS3D), ('world', T.WORLD_JOINTS3D)):
         s, j = data[topic]
         if len(j):
-            roots[stage] = (j[:, 0], _index(s, first, fps))
+            roots[stage] = (j, _index(s, first, fps))   # all joints: the feet are scored
     return score_clip(meta['clip'], meta, gt, lj if len(lj) else None, _index(ls, first, fps),
                       roots)
 

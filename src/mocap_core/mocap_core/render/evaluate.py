@@ -20,7 +20,12 @@ Metrics (positions in metres in, millimetres out):
 * physics (``floor`` frame) and world stage (``world`` frame): root trajectory error: the
   whole clip's pelvis path rigidly aligned (rotation + translation, no scale) to the true
   world path; mean error (mm) and that error over the distance the pelvis travelled (RTE, %;
-  only clips travelling at least :data:`RTE_MIN_TRAVEL_M`).
+  only clips travelling at least :data:`RTE_MIN_TRAVEL_M`);
+* the same two stages' feet (:func:`foot_scores`), each against its own floor (z = 0 of its
+  output frame): the deepest ankle or toe joint below it after the first second (mm), the
+  share of frames with one more than 5 mm below, and foot skating: the mean horizontal
+  displacement (mm per frame) of an ankle or toe joint while the ground truth says that
+  heel or toe is on the floor in both frames.
 
 Breakdowns: per frame by view (front / side / back: the person's facing against the
 direction to the camera), per clip by motion group, body height, camera kind.
@@ -100,6 +105,43 @@ def height_class(height_m: float) -> str:
         'medium (1.60-1.75 m)' if height_m < 1.75 else 'tall (>= 1.75 m)')
 
 
+_FOOT_JOINTS = [JOINT_INDEX[n] for n in ('left_ankle', 'left_toe', 'right_ankle',
+                                          'right_toe')]
+
+
+def foot_scores(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
+                fps: float) -> Dict[str, float]:
+    """Feet of one stage against its own floor (module docstring).
+
+    Args:
+        joints: (N, 18, 3) the stage's joints in its output frame (z up, floor z = 0), m.
+        index: (N,) rendered frame of each. contacts: (F, 4) true contacts of the rendered
+            frames (left heel, left toe, right heel, right toe). fps: frame rate.
+    Returns: ``penetration_after_1s_mm``, ``frames_below_5mm`` (share, after the first
+    second), ``skating_mm`` (mm per frame; NaN without contact frames).
+    """
+    joints = np.asarray(joints, dtype=float)
+    idx = np.asarray(index, dtype=int)
+    feet = joints[:, _FOOT_JOINTS]                       # (N, 4, 3): ankle, toe, ankle, toe
+    depth = np.maximum(0.0, -feet[..., 2].min(axis=1))
+    late = idx >= int(round(fps))
+    c = np.asarray(contacts, dtype=bool)
+    ok = (idx >= 0) & (idx < len(c))
+    lab = np.zeros((len(idx), 4), dtype=bool)
+    lab[ok] = c[idx[ok]]
+    # the same columns: the ankle moves with the heel label, the toe joint with the toe's
+    consecutive = np.diff(idx) == 1
+    both = lab[1:] & lab[:-1] & consecutive[:, None]
+    step = np.linalg.norm(np.diff(feet[..., :2], axis=0), axis=-1)
+    return {
+        'penetration_after_1s_mm': float(1000 * depth[late].max()) if late.any()
+        else float('nan'),
+        'frames_below_5mm': float(np.mean(depth[late] > 0.005)) if late.any()
+        else float('nan'),
+        'skating_mm': float(1000 * step[both].mean()) if both.any() else float('nan'),
+    }
+
+
 def _rigid_align(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     """(F, 3) ``pred`` rigidly (rotation, translation) aligned onto ``gt``."""
     mp, mg = pred.mean(axis=0), gt.mean(axis=0)
@@ -166,7 +208,9 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
         lifter: (N, 18, 3) the lifter's joints, camera optical frame (None: nothing out).
         lifter_index: (N,) the rendered frame index of each lifter output.
         stage_roots: ``{'physics': (pelvis (M, 3), index (M,)), 'world': ...}`` the stages'
-            pelvis paths in their own frames with their frame indices.
+            pelvis paths in their own frames with their frame indices, or
+            ``(joints (M, 18, 3), index (M,))``: then the feet are scored too
+            (:func:`foot_scores`).
     """
     fps = float(gt['fps'])
     F = len(gt['joints_camera'])
@@ -196,14 +240,19 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
     travel = float(np.linalg.norm(np.diff(travel_path[:, :2], axis=0), axis=-1).sum())
     for stage, (pel, sidx) in (stage_roots or {}).items():
         sidx = np.asarray(sidx, dtype=int)
+        pel = np.asarray(pel)
         ok = (sidx >= 0) & (sidx < F)
         if ok.sum() < 3:
             continue
-        est, true = np.asarray(pel)[ok], travel_path[sidx[ok]]
+        full = pel if pel.ndim == 3 else None
+        pel = pel[:, 0] if pel.ndim == 3 else pel
+        est, true = pel[ok], travel_path[sidx[ok]]
         err = float(1000 * np.linalg.norm(_rigid_align(est, true) - true, axis=-1).mean())
         root[stage] = {'root_error': err,
                        'rte': 100 * err / 1000 / travel if travel >= RTE_MIN_TRAVEL_M
                        else float('nan')}
+        if full is not None and 'contacts' in gt:
+            root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
     height = height_class(float(meta.get('body_height_m', 1.7)))
     return ClipScore(clip, motion_group(clip), height, meta['camera']['kind'], F, len(idx),
                      float(meta.get('detected_fraction', float('nan'))), mpjpe, pa, mrpe,
@@ -262,7 +311,11 @@ def aggregate(scores: List[ClipScore]) -> dict:
                                               for k in ('mpjpe', 'pa_mpjpe', 'swap_rate',
                                                         'jitter_ratio', 'detected',
                                                         'physics_root_error',
-                                                        'world_root_error')}}
+                                                        'world_root_error',
+                                                        'physics_penetration_after_1s_mm',
+                                                        'world_penetration_after_1s_mm',
+                                                        'physics_skating_mm',
+                                                        'world_skating_mm')}}
                      for g, ps in sorted(groups.items())}
     return out
 
@@ -293,6 +346,11 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"(RTE {_f(m.get('physics_rte'))} %) |",
              f"| world root trajectory error | {_f(m.get('world_root_error'))} mm "
              f"(RTE {_f(m.get('world_rte'))} %) |",
+             *[f"| {st} feet: deepest ankle/toe joint below its own floor after 1 s / "
+               f"frames more than 5 mm below / skating in contact | "
+               f"{_f(m.get(f'{st}_penetration_after_1s_mm'))} mm / "
+               f"{_f(100 * m.get(f'{st}_frames_below_5mm', float('nan')))} % / "
+               f"{_f(m.get(f'{st}_skating_mm'))} mm per frame |" for st in ('physics', 'world')],
              f"| person detected | {_f(100 * m.get('detected', float('nan')))} % of frames |",
              '', '## By view (pooled over frames)', '',
              '| view | frames | MPJPE | PA-MPJPE | leg swaps | detector leg swaps (2D) |',
@@ -305,12 +363,15 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                         ('by_camera', 'camera')):
         lines += ['', f'## By {label} (median over clips)', '',
                   f'| {label} | clips | MPJPE | PA-MPJPE | leg swaps | jitter ratio | '
-                  'detected | physics root | world root |',
-                  '|---|---|---|---|---|---|---|---|---|']
+                  'detected | physics root | world root | feet below floor after 1 s, '
+                  'physics / world (mm) |',
+                  '|---|---|---|---|---|---|---|---|---|---|']
         for g, r in agg[name].items():
             lines.append(
                 f"| {g} | {r['clips']} | {_f(r['mpjpe'])} | {_f(r['pa_mpjpe'])} | "
                 f"{_f(100 * r['swap_rate'], '{:.2f}')} % | {_f(r['jitter_ratio'], '{:.2f}')} | "
                 f"{_f(100 * r['detected'], '{:.0f}')} % | {_f(r['physics_root_error'], '{:.0f}')}"
-                f" | {_f(r['world_root_error'], '{:.0f}')} |")
+                f" | {_f(r['world_root_error'], '{:.0f}')} | "
+                f"{_f(r.get('physics_penetration_after_1s_mm'))} / "
+                f"{_f(r.get('world_penetration_after_1s_mm'))} |")
     return '\n'.join(lines) + '\n'
