@@ -16,7 +16,7 @@ pose, twist in the root frame), ``/mocap/world/path`` (nav_msgs/Path), ``/mocap/
 (MarkerArray) and ``/diagnostics``.
 
 One floor for all outputs: when the input is in a floor frame (the physics output, z up,
-floor z = 0; ``vertical_from_input`` 'auto' decides by the input's frame_id), the root's
+floor z = 0; ``vertical`` 'auto' decides by the input's frame_id), the root's
 height and tilt are the input's and GMR gives the heading and the horizontal path, so the
 world output's feet are never below z = 0 and stand where the physics put them vertically.
 
@@ -97,10 +97,16 @@ PARAMETERS = (
               'correction towards the input root', min_value=0.0),
     ParamSpec('fusion_orientation_time_constant_s', 1.0, 'Time constant of the orientation '
               'correction towards the input root', min_value=0.0),
-    ParamSpec('vertical_from_input', 'auto', "Keep the input's height and tilt (GMR gives "
-              "heading and horizontal translation): 'true' for an input in a floor frame (z "
-              "up, floor z = 0, the physics output: one floor for all outputs), 'false', or "
-              "'auto' (true unless the input frame is an optical frame)"),
+    ParamSpec('vertical', 'auto', "Where the root's height and tilt come from: 'input' (an "
+              "input in a floor frame, z up, floor z = 0, e.g. the physics output: one floor "
+              "for all outputs; GMR gives heading and horizontal path), 'gmr' (accumulated "
+              "like the rest) or 'auto' ('input' unless the input frame is an optical "
+              "frame)"),
+    ParamSpec('foot_lock', True, "With the vertical from the input: contact points standing "
+              "on the floor (below lock_height) stay where they touched down in the world; "
+              "GMR's translation moves the body only while no foot stands"),
+    ParamSpec('lock_height', 0.02, 'Height above the floor below which a contact point '
+              'stands (foot_lock), m', min_value=0.0),
     ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
     ParamSpec('path_length', 3000, 'Poses kept in /mocap/world/path (0 = all)', min_value=0),
     ParamSpec('flush_after_s', 0.3, 'When no input arrives for this long, emit the frames '
@@ -145,9 +151,9 @@ class GMRNode(Node):
         self.model = with_tta(load_weights(path, p['device']), p['test_time_augmentation'])
         cfg = self.model.cfg
         self.fps = cfg.fps
-        if str(p['vertical_from_input']).lower() not in ('auto', 'true', 'false'):
-            raise ValueError("vertical_from_input must be 'auto', 'true' or 'false', got "
-                             f"{p['vertical_from_input']!r}")
+        if p['vertical'] not in ('auto', 'input', 'gmr'):
+            raise ValueError(f"vertical must be 'auto', 'input' or 'gmr', got "
+                             f"{p['vertical']!r}")
         if p['input_up'] not in ('auto', 'estimate'):
             parse_up(p['input_up'])              # fail early on a malformed vector
         window = p['window'] or cfg.window
@@ -212,15 +218,16 @@ class GMRNode(Node):
         model_up = None
         if self.model.cfg.root_input == 'up':
             model_up = up if up is not None else np.array([0.0, -1.0, 0.0])
-        mode = str(p['vertical_from_input']).lower()
-        on_floor = ('optical' not in frame_id) if mode == 'auto' else mode == 'true'
-        self.diag.set_value('vertical_from_input', on_floor)
+        mode = p['vertical']
+        on_floor = ('optical' not in frame_id) if mode == 'auto' else mode == 'input'
+        self.diag.set_value('vertical', 'input' if on_floor else 'gmr')
         if on_floor:
             self.get_logger().info(f"the input '{frame_id}' is a floor frame: height and tilt "
                                    'from the input, heading and horizontal path from GMR')
         return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
                          p['tilt_correction'], fusion, model_up, p['device'],
-                         chunk=p['chunk'], floor_input=on_floor)
+                         chunk=p['chunk'], floor_input=on_floor,
+                         foot_lock=p['foot_lock'], lock_height=p['lock_height'])
 
     def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
         """One input frame: convert, check the stamp, push to :class:`OnlineGMR`, publish

@@ -21,6 +21,13 @@ height and tilt are the input's
 (one floor for all outputs: the world output's feet are exactly as high above z = 0 as the
 physics put them, never below it).
 
+Foot lock (``foot_lock``, with a floor input): a contact point lower than ``lock_height``
+above the floor stands; the world root is placed so that the standing points stay where they
+touched down (the mean over them of ``anchor - (R p_local)_xy``), and GMR's step moves the
+root only while no point stands. The body then moves in the world by its own legs, as the
+physics put its feet, and its feet do not skate in the world output; GMR still gives the
+heading.
+
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
@@ -51,6 +58,7 @@ import torch
 from mocap_core.pose import Pose
 from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat,
                                   quat_from_two_vectors, quat_to_matrix)
+from mocap_core.skeleton import CONTACT_POINT_NAMES
 
 from .features import features_for
 from .model import GMR
@@ -169,13 +177,16 @@ class OnlineGMR:
             GMR gives the heading and the horizontal translation, physics the vertical, so
             the world output stands on the floor the physics established (module
             docstring).
+        foot_lock: with ``floor_input``, hold the contact points that stand on the floor
+            (lower than ``lock_height`` m) where they touched down (module docstring).
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
                  max_gap_s: float = 0.25, tilt_correction: float = 0.0,
                  fusion: Optional[StaticCameraFusion] = None,
                  input_up: Optional[np.ndarray] = None, device: str = 'cpu',
-                 chunk: int = 1, floor_input: bool = False) -> None:
+                 chunk: int = 1, floor_input: bool = False, foot_lock: bool = False,
+                 lock_height: float = 0.02) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -191,6 +202,8 @@ class OnlineGMR:
         self.tilt_correction = float(tilt_correction)
         self.fusion = fusion
         self.floor_input = bool(floor_input)
+        self.foot_lock = bool(foot_lock)
+        self.lock_height = float(lock_height)
         if self.cfg.root_input == 'up' and input_up is None:
             raise ValueError("this model needs the input frame's up direction (input_up)")
         self.input_up = None if input_up is None else np.asarray(input_up, dtype=np.float64)
@@ -214,6 +227,8 @@ class OnlineGMR:
         self._T: Optional[np.ndarray] = None
         self._R_out: Optional[np.ndarray] = None     # the last emitted pose
         self._T_out: Optional[np.ndarray] = None
+        self._T_gmr_prev: Optional[np.ndarray] = None
+        self._anchors: dict = {}                      # contact point -> world xy (lock)
         self._cache: Optional[Tuple[int, dict]] = None
         self._last_motion: Tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))
         self._last_up = _EZ.copy()
@@ -309,6 +324,27 @@ class OnlineGMR:
         T = self._R @ dT + self._T                      # eq. 4
         return R, T
 
+    def _lock_feet(self, k: int, R: np.ndarray, T: np.ndarray, T_gmr: np.ndarray,
+                   pose: Pose) -> np.ndarray:
+        """The output root position with the feet that stand on the floor held where they
+        touched down (module docstring, foot lock). ``R``, ``T``: the output pose on the
+        floor; ``T_gmr``: GMR's own position this frame."""
+        probe = Pose(pose.skeleton, np.concatenate([matrix_to_quat(R)[None],
+                                                    pose.rotations[1:]]), np.zeros(3))
+        local = np.array([probe.contact_positions()[n] for n in CONTACT_POINT_NAMES])
+        down = local[:, 2] + T[2] < self.lock_height
+        if k == 0 or self._T_gmr_prev is None:
+            xy = T[:2].copy()
+        else:
+            xy = self._T_out[:2] + (T_gmr[:2] - self._T_gmr_prev[:2])   # GMR's step
+            held = [c for c in range(len(down)) if down[c] and c in self._anchors]
+            if held:
+                xy = np.mean([self._anchors[c] - local[c, :2] for c in held], axis=0)
+        self._anchors = {c: self._anchors.get(c, xy + local[c, :2])
+                         for c in range(len(down)) if down[c]}
+        self._T_gmr_prev = T_gmr.copy()
+        return np.array([xy[0], xy[1], T[2]])
+
     @staticmethod
     def _on_floor(R: np.ndarray, T: np.ndarray, pose: Pose) -> Tuple[np.ndarray, np.ndarray]:
         """GMR's heading and horizontal position with the floor-frame input's tilt and
@@ -358,9 +394,12 @@ class OnlineGMR:
                                            pose.root_position, up, first=True)
         if k % 64 == 0:
             R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
+        T_gmr = T
         self._R, self._T = R, T                         # the accumulation stays GMR's
         if self.floor_input:
             R, T = self._on_floor(R, T, pose)
+            if self.foot_lock:
+                T = self._lock_feet(k, R, T, T_gmr, pose)
         if k > 0 and dt > 0:
             lin = R.T @ (T - self._T_out) / dt
             ang = matrix_to_axis_angle(self._R_out.T @ R) / dt

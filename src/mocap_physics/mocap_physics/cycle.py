@@ -626,15 +626,35 @@ class PhysicsCycle:
             # -- forward dynamics of the torques, residual and contact forces ----------------
             a = pin.aba(model, data, q, v, tau_full + JtL)
             v_new = v + dt * a
-            # -- last guard: no foot point goes through the floor -----------------------------
+            # -- last guard: no foot point goes through the floor; a stance point that
+            # arrives with a velocity is stopped at once (the plastic impact of touchdown:
+            # the velocity rows of the foot stick, which leave a point already held by the
+            # dynamics unchanged) -------------------------------------------------------------
             zdot = Jg @ v_new
             rows = (zg < p.contact_height) | (zg + dt * zdot < p.contact_height)
-            if np.any(rows):
+            hold = stance & ~(res.sliding if res.ok else np.zeros(n_c, dtype=bool)) \
+                if self.params.foot_stick else np.zeros(n_c, dtype=bool)
+            A_eq = b_eq = None
+            if np.any(hold):
+                target = p.stick_gain * (anchor - pos[:, :2])
+                speed = np.linalg.norm(target, axis=1, keepdims=True)
+                target *= np.minimum(1.0, p.stick_speed / np.maximum(speed, 1e-12))
+                zc = Jc[:, 2, :] @ v_new
+                zc_keep = np.maximum(zc, np.minimum(-pos[:, 2] / dt, p.recovery_speed))
+                A_eq, b_eq = self._stick_rows(Jc, pos[:, :2], target, hold, zc_keep)
+            if np.any(rows) or A_eq is not None:
                 b_all = np.minimum(-zg / dt, p.recovery_speed)
                 d = np.maximum(np.diag(M), 1e-6)
-                res_pen = self.pen.solve(v_new, Jg[rows], b_all[rows],
-                                         solve_metric=lambda X, _d=d: X / _d[:, None],
-                                         scale=m.body_mass)
+
+                def metric(X, _d=d):
+                    return X / _d[:, None]
+                res_pen = self.pen.solve(v_new, Jg[rows], b_all[rows], solve_metric=metric,
+                                         scale=m.body_mass, A_eq=A_eq, b_eq=b_eq)
+                if not res_pen.ok and A_eq is not None:
+                    self.stats.stick_failures += 1
+                    acc['t_pen'] += res_pen.solve_time
+                    res_pen = self.pen.solve(v_new, Jg[rows], b_all[rows],
+                                             solve_metric=metric, scale=m.body_mass)
                 acc['t_pen'] += res_pen.solve_time
                 if res_pen.solved:
                     acc['pen_solves'] += 1

@@ -148,6 +148,12 @@ PARAMETERS = (
     ParamSpec('residual_moment_bound', _D.residual_moment_bound, 'whole_body: bound of each '
               'residual root moment component, body weight x m', min_value=0.0,
               read_only=True),
+    ParamSpec('stance_release', _D.stance_release, 'whole_body: a stance point\'s anchor '
+              'follows the target point when it is farther than this, at most stick_speed, m',
+              min_value=0.0, read_only=True),
+    ParamSpec('slide_threshold', _D.slide_threshold, 'whole_body: a foot whose friction is '
+              'saturated slides when holding it needs a horizontal residual root force above '
+              'this, body weights', min_value=0.0, read_only=True),
     ParamSpec('wbid_solver', _D.wbid_solver, 'whole_body: QP solver, osqp (deterministic) or '
               'proxqp (faster; last bits vary between runs)', read_only=True),
     ParamSpec('root_residual', _D.root_residual, 'paper: share of the residual direct root '
@@ -229,7 +235,8 @@ class PhysicsNode(Node):
             dynamics=p['dynamics'], residual_weight=p['residual_weight'],
             residual_horizontal_weight=p['residual_horizontal_weight'],
             residual_bound=p['residual_bound'],
-            residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'])
+            residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
+            stance_release=p['stance_release'], slide_threshold=p['slide_threshold'])
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         contacts_topic = p['contacts_topic']

@@ -25,7 +25,8 @@ Metrics (positions in metres in, millimetres out):
   output frame): the deepest ankle or toe joint below it after the first second (mm), the
   share of frames with one more than 5 mm below, and foot skating: the mean horizontal
   displacement (mm per frame) of an ankle or toe joint while the ground truth says that
-  heel or toe is on the floor in both frames.
+  heel or toe is on the floor in both frames; and their PA-MPJPE (per-frame similarity
+  alignment, so the frame does not matter).
 
 Breakdowns: per frame by view (front / side / back: the person's facing against the
 direction to the camera), per clip by motion group, body height, camera kind.
@@ -251,8 +252,12 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
         root[stage] = {'root_error': err,
                        'rte': 100 * err / 1000 / travel if travel >= RTE_MIN_TRAVEL_M
                        else float('nan')}
-        if full is not None and 'contacts' in gt:
-            root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
+        if full is not None:
+            g_s = G[sidx[ok]]
+            root[stage]['pa_mpjpe'] = float(1000 * np.linalg.norm(
+                procrustes_align(full[ok], g_s) - g_s, axis=-1).mean())
+            if 'contacts' in gt:
+                root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
     height = height_class(float(meta.get('body_height_m', 1.7)))
     return ClipScore(clip, motion_group(clip), height, meta['camera']['kind'], F, len(idx),
                      float(meta.get('detected_fraction', float('nan'))), mpjpe, pa, mrpe,
@@ -346,6 +351,8 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"(RTE {_f(m.get('physics_rte'))} %) |",
              f"| world root trajectory error | {_f(m.get('world_root_error'))} mm "
              f"(RTE {_f(m.get('world_rte'))} %) |",
+             *[f"| {st} PA-MPJPE | {_f(m.get(f'{st}_pa_mpjpe'))} mm |"
+               for st in ('physics', 'world')],
              *[f"| {st} feet: deepest ankle/toe joint below its own floor after 1 s / "
                f"frames more than 5 mm below / skating in contact | "
                f"{_f(m.get(f'{st}_penetration_after_1s_mm'))} mm / "
