@@ -40,7 +40,8 @@ def _read_output(bag: Path) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
     from ..ros_conversions import cloud_to_positions, stamp_to_ns
     from ..skeleton import NUM_JOINTS
     from .. import topics as T
-    want = [T.KEYPOINTS, T.LIFTER_JOINTS3D, T.PHYSICS_JOINTS3D, T.WORLD_JOINTS3D]
+    want = [T.KEYPOINTS, T.LIFTER_JOINTS3D, T.PHYSICS_JOINTS3D, T.WORLD_JOINTS3D,
+            T.PHYSICS_FLOOR]
     acc: Dict[str, Tuple[list, list]] = {t: ([], []) for t in want}
     with BagReader(bag) as reader:
         present = [t for t in want if t in reader.topics]
@@ -49,6 +50,11 @@ def _read_output(bag: Path) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
             stamp = stamp_to_ns(msg.header.stamp)
             if m.topic == T.KEYPOINTS:
                 acc[m.topic][0].append(stamp)
+                continue
+            if m.topic == T.PHYSICS_FLOOR:       # (x y z w, tx ty tz) of the floor frame
+                r, t = msg.transform.rotation, msg.transform.translation
+                acc[m.topic][0].append(stamp)
+                acc[m.topic][1].append([r.x, r.y, r.z, r.w, t.x, t.y, t.z])
                 continue
             try:
                 joints = cloud_to_positions(msg, NUM_JOINTS)[:NUM_JOINTS]
@@ -117,8 +123,14 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
         s, j = data[topic]
         if len(j):
             roots[stage] = (j, _index(s, first, fps))   # all joints: the feet are scored
-    return score_clip(meta['clip'], meta, gt, lj if len(lj) else None, _index(ls, first, fps),
-                      roots)
+    score = score_clip(meta['clip'], meta, gt, lj if len(lj) else None,
+                       _index(ls, first, fps), roots)
+    fs, fv = data[T.PHYSICS_FLOOR]
+    if len(fv) and 'camera_R' in gt and 'physics' in score.root:
+        from ..render.evaluate import floor_errors
+        score.root['physics'].update(floor_errors(fv[:, :4], fv[:, 4:], _index(fs, first, fps),
+                                                  gt))
+    return score
 
 
 def _plots(scores, agg: dict, out: Path) -> List[Path]:

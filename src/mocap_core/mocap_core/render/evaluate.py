@@ -26,7 +26,9 @@ Metrics (positions in metres in, millimetres out):
   share of frames with one more than 5 mm below, and foot skating: the mean horizontal
   displacement (mm per frame) of an ankle or toe joint while the ground truth says that
   heel or toe is on the floor in both frames; and their PA-MPJPE (per-frame similarity
-  alignment, so the frame does not matter).
+  alignment, so the frame does not matter);
+* the physics stage's floor estimate (:func:`floor_errors`): tilt and height of the
+  estimated floor under the person against the true floor, at 1 s and after.
 
 Breakdowns: per frame by view (front / side / back: the person's facing against the
 direction to the camera), per clip by motion group, body height, camera kind.
@@ -141,6 +143,47 @@ def foot_scores(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
         else float('nan'),
         'skating_mm': float(1000 * step[both].mean()) if both.any() else float('nan'),
     }
+
+
+def floor_errors(quats: np.ndarray, translations: np.ndarray, index: np.ndarray,
+                 gt: Dict[str, np.ndarray]) -> Dict[str, float]:
+    """The physics stage's floor estimate against the true floor (z = 0 of the world).
+
+    Args:
+        quats: (N, 4) x, y, z, w and translations: (N, 3): the estimated floor frame's pose
+            in the camera optical frame (``/mocap/physics/floor``), per output frame.
+        index: (N,) rendered frame of each. gt: the clip's ``data.npz`` arrays
+            (``camera_R`` (F, 3, 3) with ``p_camera = R (p_world - camera_position)``,
+            ``camera_position`` (F, 3), ``joints_world`` (F, 18, 3), ``fps``).
+    Returns: ``floor_tilt_1s_deg`` / ``floor_height_1s_mm``: the angle between the estimated
+    and the true floor normal and the height of the estimated floor under the person (true
+    pelvis), one second in; ``floor_tilt_deg`` / ``floor_height_mm``: their medians over the
+    frames after the first second.
+    """
+    from ..rotations import quat_to_matrix
+    idx = np.asarray(index, dtype=int)
+    F = len(gt['joints_world'])
+    ok = (idx >= 0) & (idx < F)
+    if not ok.any():
+        return {}
+    idx = idx[ok]
+    R_cf = quat_to_matrix(np.asarray(quats, dtype=float)[ok])
+    t_cf = np.asarray(translations, dtype=float)[ok]
+    R_wc = np.transpose(np.asarray(gt['camera_R'])[idx], (0, 2, 1))
+    n = np.einsum('fij,fj->fi', R_wc, R_cf[:, :, 2])
+    o = np.einsum('fij,fj->fi', R_wc, t_cf) + np.asarray(gt['camera_position'])[idx]
+    pel = np.asarray(gt['joints_world'])[idx, 0]
+    nz = np.where(np.abs(n[:, 2]) > 1e-6, n[:, 2], 1e-6)
+    z = o[:, 2] - (n[:, 0] * (pel[:, 0] - o[:, 0]) + n[:, 1] * (pel[:, 1] - o[:, 1])) / nz
+    tilt = np.degrees(np.arccos(np.clip(n[:, 2], -1.0, 1.0)))
+    fps = float(gt['fps'])
+    one = int(np.argmin(np.abs(idx - round(fps))))
+    late = idx >= round(fps)
+    nan = float('nan')
+    return {'floor_tilt_1s_deg': float(tilt[one]), 'floor_height_1s_mm': float(1000 * z[one]),
+            'floor_tilt_deg': float(np.median(tilt[late])) if late.any() else nan,
+            'floor_height_mm': float(1000 * np.median(np.abs(z[late]))) if late.any()
+            else nan}
 
 
 def _rigid_align(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -351,6 +394,12 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"(RTE {_f(m.get('physics_rte'))} %) |",
              f"| world root trajectory error | {_f(m.get('world_root_error'))} mm "
              f"(RTE {_f(m.get('world_rte'))} %) |",
+             "| physics floor estimate against the true floor: tilt / height under the person, "
+             f"at 1 s | {_f(m.get('physics_floor_tilt_1s_deg'))} deg / "
+             f"{_f(m.get('physics_floor_height_1s_mm'))} mm |",
+             "| ... after the first second (median over frames) | "
+             f"{_f(m.get('physics_floor_tilt_deg'))} deg / "
+             f"{_f(m.get('physics_floor_height_mm'))} mm |",
              *[f"| {st} PA-MPJPE | {_f(m.get(f'{st}_pa_mpjpe'))} mm |"
                for st in ('physics', 'world')],
              *[f"| {st} feet: deepest ankle/toe joint below its own floor after 1 s / "
