@@ -169,7 +169,8 @@ def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path]
 def plot_run(run: PipelineRun, out_dir: Path) -> Dict[str, Path]:
     """PNG plots: ``root_trajectory.png`` (world root, top view and height), ``grf.png``
     (vertical ground reaction force per foot with body weight), ``torques.png`` (hip, knee and
-    ankle flexion torques). Returns the files written."""
+    ankle flexion torques), ``gait.png`` (:func:`plot_gait`, when the run has strides).
+    Returns the files written."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -234,7 +235,80 @@ def plot_run(run: PipelineRun, out_dir: Path) -> Dict[str, Path]:
         written['torques'] = out_dir / 'torques.png'
         fig.savefig(written['torques'], dpi=100)
         plt.close(fig)
+    gait = plot_gait(run, out_dir / 'gait.png')
+    if gait is not None:
+        written['gait'] = gait
     return written
+
+
+def gait_cycles(run: PipelineRun, min_strides: int = 2) -> Optional[dict]:
+    """The physics stage's vertical GRF (body weights) and sagittal hip, knee and ankle
+    torques (N m/kg) over the gait cycle of each foot, averaged over strides: a stride runs
+    from the frame the foot's vertical force rises above 5 % of the body weight to the next
+    such frame (:mod:`mocap_core.gait`). None without a body mass or with fewer than
+    ``min_strides`` strides (a person who does not walk)."""
+    from .gait import heel_strikes, stride_curves
+    physics = run.stages.get('physics')
+    if (physics is None or run.grf is None or len(run.grf) != len(physics.stamps)
+            or not np.isfinite(run.body_mass) or run.body_mass <= 0):
+        return None
+    weight = run.body_mass * 9.81
+    grf, moments, strides = [], {}, 0
+    for side, foot in enumerate(('left', 'right')):
+        fz = run.grf[:, side, 2] / weight
+        strikes = heel_strikes(fz > 0.05)
+        curves = stride_curves(fz, strikes)
+        if not len(curves):
+            continue
+        strides += len(curves)
+        grf.append(curves)
+        if run.efforts is not None and len(run.efforts) == len(physics.stamps):
+            for joint in ('hip', 'knee', 'ankle'):
+                name = f'{foot}_{joint}_ry'
+                if name in run.effort_names:
+                    tau = run.efforts[:, run.effort_names.index(name)] / run.body_mass
+                    moments.setdefault(joint, []).append(stride_curves(tau, strikes))
+    if strides < min_strides:
+        return None
+    return {'strides': strides, 'grf_bw': np.concatenate(grf),
+            'moments_per_kg': {j: np.concatenate(c) for j, c in moments.items()}}
+
+
+def plot_gait(run: PipelineRun, path: Path) -> Optional[Path]:
+    """``gait.png``: :func:`gait_cycles` as mean +- std over strides, with the published
+    normal-walking ranges (vertical GRF peaks 1.1-1.3 body weights; ankle plantarflexion
+    peak about 1.5 N m/kg; sources in ``mocap_physics.training.gait``). None when the run
+    has no strides."""
+    cycles = gait_cycles(run)
+    if cycles is None:
+        return None
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    x = np.linspace(0, 100, cycles['grf_bw'].shape[1])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    m, sd = cycles['grf_bw'].mean(axis=0), cycles['grf_bw'].std(axis=0)
+    axes[0].plot(x, m, color='tab:blue', label=f"mean of {cycles['strides']} strides")
+    axes[0].fill_between(x, m - sd, m + sd, color='tab:blue', alpha=0.2, label='+- 1 std')
+    axes[0].axhspan(1.1, 1.3, color='tab:green', alpha=0.15, label='published peaks')
+    axes[0].set_xlabel('gait cycle of the foot (%)')
+    axes[0].set_ylabel('vertical GRF (body weights)')
+    axes[0].set_title('ground reaction force over the gait cycle')
+    axes[0].legend(fontsize=8)
+    for (joint, curves), colour in zip(cycles['moments_per_kg'].items(),
+                                      ('tab:blue', 'tab:orange', 'tab:red')):
+        axes[1].plot(x, curves.mean(axis=0), color=colour, label=joint)
+    axes[1].axhspan(1.3, 1.6, color='tab:red', alpha=0.1,
+                    label='published ankle peak (magnitude)')
+    axes[1].axhspan(-1.6, -1.3, color='tab:red', alpha=0.1)
+    axes[1].set_xlabel('gait cycle of the foot (%)')
+    axes[1].set_ylabel('sagittal torque (N m/kg)')
+    axes[1].set_title('joint torques over the gait cycle')
+    axes[1].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
 
 
 def _fmt(v: float, digits: int = 1) -> str:

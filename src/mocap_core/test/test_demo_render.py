@@ -2,6 +2,7 @@
 the report text."""
 
 import numpy as np
+import pytest
 
 from mocap_core.demo_render import SkeletonView, report_markdown, video_frame_indices
 from mocap_core.pose import Pose
@@ -43,3 +44,40 @@ def test_report_lists_stages_and_nodes():
     assert text.startswith('# A run') and '- note one' in text
     assert '| lifter: lifter | 4 | 4 |' in text and '| lifter | 4 | 0.0 |' in text
     assert '2.0 frames/s' in text
+
+
+def _walking_run(n=150, period=30, mass=70.0):
+    """A physics stage whose feet alternate: each foot loaded for 60 % of a 1 s stride with a
+    vertical force of 1 BW, its sagittal ankle torque 1.5 N m/kg while loaded."""
+    from mocap_core.run_report import StageData
+    t = np.arange(n)
+    stamps = t.astype(np.int64) * 33_333_333
+    grf = np.zeros((n, 2, 3))
+    names = ['left_ankle_ry', 'right_ankle_ry']
+    efforts = np.zeros((n, 2))
+    for side, shift in ((0, 0), (1, period // 2)):
+        on = ((t - shift) % period) < 0.6 * period
+        on &= t >= shift
+        grf[on, side, 2] = mass * 9.81
+        efforts[on, side] = 1.5 * mass
+    physics = StageData(stamps, np.zeros((n, 18, 3)), np.zeros((n, 4, 3)), np.zeros((n, 9)),
+                        np.zeros((n, 3)))
+    return PipelineRun(stamps, np.zeros((n, 23, 3)), {'physics': physics}, grf=grf,
+                       efforts=efforts, effort_names=names, body_mass=mass)
+
+
+def test_gait_cycles_of_the_physics_forces(tmp_path):
+    from mocap_core.demo_render import gait_cycles, plot_gait
+    run = _walking_run()
+    cycles = gait_cycles(run)
+    assert cycles is not None and cycles['strides'] >= 6
+    m = cycles['grf_bw'].mean(axis=0)
+    assert m[:55].min() == pytest.approx(1.0) and m[65:95].max() == pytest.approx(0.0)
+    assert cycles['moments_per_kg']['ankle'].mean(axis=0).max() == pytest.approx(1.5)
+    assert plot_gait(run, tmp_path / 'gait.png').stat().st_size > 10000
+    # no body mass, or a person who never lifts a foot: no gait plot
+    run.body_mass = float('nan')
+    assert gait_cycles(run) is None
+    standing = _walking_run()
+    standing.grf[:, :, 2] = 350.0
+    assert gait_cycles(standing) is None and plot_gait(standing, tmp_path / 'x.png') is None

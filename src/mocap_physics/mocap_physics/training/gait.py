@@ -34,14 +34,14 @@ from typing import Dict, List, Sequence
 
 import numpy as np
 
+from mocap_core.gait import CYCLE_POINTS, heel_strikes, stride_curves
+
 from ..cycle_params import PhysicsParams
 from ..online import OnlinePhysics
 from .evaluate import Clip
 
 #: leg joints reported, per side
 LEG_JOINTS = ('hip', 'knee', 'ankle')
-#: points of the gait cycle
-CYCLE_POINTS = 101
 
 
 @dataclass
@@ -83,33 +83,6 @@ def run_gait(clip: Clip, params: PhysicsParams) -> GaitRun:
         resid[i] = r.residual_ratio
     return GaitRun(clip.name, clip.fps, fz, tq, np.asarray(clip.labels, dtype=bool),
                    params.body_mass, resid)
-
-
-def heel_strikes(heel_contact: np.ndarray, min_frames: int = 10) -> np.ndarray:
-    """Frames where a heel's contact label turns on (after at least ``min_frames`` off or
-    the start of a new stride)."""
-    c = np.asarray(heel_contact, dtype=bool)
-    on = np.flatnonzero(c[1:] & ~c[:-1]) + 1
-    keep: List[int] = []
-    for f in on:
-        if not keep or f - keep[-1] >= min_frames:
-            keep.append(int(f))
-    return np.array(keep, dtype=int)
-
-
-def stride_curves(values: np.ndarray, strikes: Sequence[int], min_len: int = 15,
-                  max_len: int = 90) -> np.ndarray:
-    """(S, CYCLE_POINTS) ``values`` over each stride between consecutive strikes, resampled
-    to 0..100 % (strides shorter than ``min_len`` or longer than ``max_len`` frames, e.g. a
-    missed strike, are skipped)."""
-    out = []
-    x = np.linspace(0.0, 1.0, CYCLE_POINTS)
-    for a, b in zip(strikes[:-1], strikes[1:]):
-        if not min_len <= b - a <= max_len:
-            continue
-        seg = values[a:b + 1]
-        out.append(np.interp(x, np.linspace(0.0, 1.0, len(seg)), seg))
-    return np.array(out).reshape(-1, CYCLE_POINTS)
 
 
 def _peaks(curve: np.ndarray) -> Dict[str, float]:
