@@ -30,7 +30,7 @@ from typing import Dict, Iterable, Mapping, Optional, Sequence, Tuple
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import (Point, Pose as PoseMsg, PoseStamped, Quaternion, Transform,
-                               Vector3, Wrench, WrenchStamped)
+                               TransformStamped, Vector3, Wrench, WrenchStamped)
 from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import CameraInfo, JointState, PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header, String
@@ -39,6 +39,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from .camera import CameraIntrinsics
 from .pose import Pose
+from .rotations import matrix_to_quat
 from .skeleton import CONTACT_POINT_NAMES, JOINT_NAMES, NUM_KEYPOINTS, Skeleton
 from .urdf import revolute_joint_names
 
@@ -329,6 +330,24 @@ def wrench_to_msg(force: np.ndarray, torque: np.ndarray, header: Header) -> Wren
     """Force (3,) N and moment (3,) N m -> WrenchStamped."""
     return WrenchStamped(header=header, wrench=Wrench(force=_vec_msg(np.asarray(force)),
                                                       torque=_vec_msg(np.asarray(torque))))
+
+
+def transform_stamped(header: Header, child_frame_id: str, rotation: np.ndarray,
+                      translation: np.ndarray) -> TransformStamped:
+    """geometry_msgs/TransformStamped of the frame ``child_frame_id`` in ``header.frame_id``
+    (as tf2 stores it: ``p_parent = rotation @ p_child + translation``). ``rotation``: (3, 3)
+    matrix or (4,) quaternion x, y, z, w; ``translation``: (3,) m."""
+    r = np.asarray(rotation, dtype=float)
+    q = matrix_to_quat(r) if r.shape == (3, 3) else r.reshape(4)
+    return TransformStamped(header=header, child_frame_id=child_frame_id,
+                            transform=Transform(translation=_vec_msg(np.asarray(translation)),
+                                                rotation=_quat_msg(q)))
+
+
+def transform_stamped_to_arrays(msg: TransformStamped) -> Tuple[np.ndarray, np.ndarray]:
+    """TransformStamped -> (quaternion (4,) x, y, z, w, translation (3,) m)."""
+    r, t = msg.transform.rotation, msg.transform.translation
+    return np.array([r.x, r.y, r.z, r.w]), np.array([t.x, t.y, t.z])
 
 
 def msg_to_wrench(msg: WrenchStamped) -> Tuple[np.ndarray, np.ndarray]:

@@ -32,6 +32,10 @@ PHYSICS_COM = '/mocap/physics/com'
 # world stage
 WORLD_ODOM = '/mocap/world/odom'
 WORLD_PATH = '/mocap/world/path'
+#: geometry_msgs/TransformStamped: the pose of the world stage's input frame (the physics
+#: floor frame, or the camera frame) in ``world``; with a floor input a turn about z and a
+#: shift along the floor
+WORLD_FLOOR = '/mocap/world/floor'
 
 # ground truth written by the data tools (bags for tests and evaluation)
 GROUNDTRUTH_MOTION = '/mocap/groundtruth/motion'
@@ -73,6 +77,6 @@ WORLD_MARKERS = stage_topic('world', 'markers')
 
 #: Every output topic of the pipeline (what ``record:=true`` of the launch file records).
 ALL = [KEYPOINTS, CAMERA_INFO, SKELETON_URDF, DIAGNOSTICS, LIFTER_CONTACTS, PHYSICS_GRF_LEFT,
-       PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH] + [
+       PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH, WORLD_FLOOR] + [
     stage_topic(stage, leaf) for stage in STAGES
     for leaf in ('motion', 'joints3d', 'joint_states', 'markers')]

@@ -13,7 +13,10 @@ Publishes, stamped with the input's stamps, in ``frame_id`` (default ``world``):
 ``/mocap/world/motion`` (MultiDOFJointTrajectory), ``/mocap/world/joints3d`` (PointCloud2),
 ``/mocap/world/joint_states`` (JointState), ``/mocap/world/odom`` (nav_msgs/Odometry: root
 pose, twist in the root frame), ``/mocap/world/path`` (nav_msgs/Path), ``/mocap/world/markers``
-(MarkerArray) and ``/diagnostics``.
+(MarkerArray), ``/mocap/world/floor`` (geometry_msgs/TransformStamped: the pose of the input
+frame, e.g. the physics floor frame, in ``frame_id``; with a floor input a turn about z and a
+shift along the floor, so that the physics floor and the world floor are one plane) and
+``/diagnostics``.
 
 One floor for all outputs: when the input is in a floor frame (the physics output, z up,
 floor z = 0; ``vertical`` 'auto' decides by the input's frame_id), the root's
@@ -44,6 +47,7 @@ from typing import List, Optional, Sequence
 
 import numpy as np
 import torch
+from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry, Path as PathMsg
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, PointCloud2
@@ -179,7 +183,9 @@ class GMRNode(Node):
             'odom': self.create_publisher(Odometry, topics.WORLD_ODOM, STREAM_QOS),
             'path': self.create_publisher(PathMsg, topics.WORLD_PATH, STREAM_QOS),
             'markers': self.create_publisher(MarkerArray, topics.WORLD_MARKERS, STREAM_QOS),
+            'floor': self.create_publisher(TransformStamped, topics.WORLD_FLOOR, STREAM_QOS),
         }
+        self.input_frame = ''
         self.diag = NodeDiagnostics(self, 'gmr', hardware_id=path.name)
         self.diag.set_value('model', f'GMR {cfg.layers}x{cfg.hidden} bi-GRU, '
                             f'{cfg.fps:g} fps, window {window}, '
@@ -200,6 +206,7 @@ class GMRNode(Node):
 
     def _make_online(self, frame_id: str) -> OnlineGMR:
         p = self.p
+        self.input_frame = frame_id
         fusion = None
         up = None
         if p['input_up'] == 'auto':
@@ -340,6 +347,8 @@ class GMRNode(Node):
             rc.append_to_path(self.path, odom, self.p['path_length'])
             self.pub['path'].publish(self.path)
             self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='world'))
+            self.pub['floor'].publish(rc.transform_stamped(
+                header, self.input_frame or 'input', f.input_rotation, f.input_translation))
             self.diag.output.tick()
         if self.online is not None:
             self._report_nonfinite(self.online.nonfinite_outputs)

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Deque, List, Optional, Tuple
 
 import numpy as np
@@ -78,6 +78,13 @@ class WorldFrame:
     first: bool                     # first frame of a segment (accumulation (re)started)
     fused: bool                     # the static-camera fusion corrected this frame
     held: bool = False              # the network output was not finite: last motion held
+    #: (3, 3) rotation and (3,) translation: the pose of the input frame (the physics floor
+    #: frame, or the camera frame when the lifter feeds the stage) in the world, so that
+    #: ``p_world = input_rotation @ p_input + input_translation`` holds for the root of this
+    #: frame. With a floor input it is a turn about z and a shift along the floor
+    #: (translation z = 0): the two floors are one plane.
+    input_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    input_translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 class StaticCameraFusion:
@@ -410,5 +417,10 @@ class OnlineGMR:
             self.segments += 1
         rot = np.array(pose.rotations)
         rot[0] = matrix_to_quat(R)
+        R_wi = R @ quat_to_matrix(pose.rotations[0]).T
+        t_wi = T - R_wi @ np.asarray(pose.root_position, dtype=float)
+        if self.floor_input:        # exact: a turn about z, the floors coincide (z = 0)
+            R_wi = heading_rotation(yaw_of(R_wi))
+            t_wi[2] = 0.0
         return WorldFrame(self._stamps[pos], Pose(pose.skeleton, rot, T), lin, ang, k == 0,
-                          fused, held)
+                          fused, held, R_wi, t_wi)

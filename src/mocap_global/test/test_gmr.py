@@ -447,6 +447,17 @@ def test_floor_input_keeps_the_physics_height_and_tilt():
         up_out = quat_to_matrix(f.pose.rotations[0])[2]
         up_in = quat_to_matrix(p.rotations[0])[2]
         assert up_out[2] == pytest.approx(up_in[2], abs=1e-9)
+        # the published input frame in the world: a turn about z on the floor, and it maps
+        # every input joint onto the output joint
+        Rw, tw = f.input_rotation, f.input_translation
+        np.testing.assert_allclose(Rw[2], [0, 0, 1], atol=1e-9)
+        assert tw[2] == 0.0
+        np.testing.assert_allclose(p.joint_positions() @ Rw.T + tw, f.pose.joint_positions(),
+                                   atol=1e-9)
+    # with a camera-frame input the transform is the general one (not a turn about z)
+    for f, p in zip(runs[False], lifted):
+        np.testing.assert_allclose(p.joint_positions() @ f.input_rotation.T
+                                   + f.input_translation, f.pose.joint_positions(), atol=1e-9)
     # heading and horizontal path are GMR's: the same with and without the floor input
     from mocap_global.se3 import yaw_of
     for a, b in zip(runs[False], runs[True]):

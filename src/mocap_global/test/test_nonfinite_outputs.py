@@ -154,6 +154,10 @@ def test_gmr_node_publishes_finite_frames_after_a_nan_output():
         assert all(np.all(np.isfinite(p.joint_positions())) for p in world)
         odom = [rc.odometry_to_root(m)[0] for t, m in out if t == topics.WORLD_ODOM]
         assert len(odom) == len(poses) and np.all(np.isfinite(odom))
+        floors = [m for t, m in out if t == topics.WORLD_FLOOR]
+        assert len(floors) == len(poses)
+        assert all(m.header.frame_id == 'world' and m.child_frame_id == 'floor'
+                   and m.transform.translation.z == 0.0 for m in floors)
         values = {kv.key: kv.value for kv in node.diag.status().values}
         assert values['nonfinite_outputs'] == '1'
         assert values['errors'] == '0' and values['frames_dropped'] == '0'
