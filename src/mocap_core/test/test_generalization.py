@@ -190,3 +190,27 @@ def test_foot_scores_against_the_stage_floor(walk):
     assert s3['skating_mm'] == pytest.approx(10.0, abs=1e-6)
     # only frames whose index is consecutive are compared
     assert np.isnan(foot_scores(W, idx, np.zeros_like(contacts), 30.0)['skating_mm'])
+
+
+def test_stage_change_from_the_lifter_is_paired_by_frame():
+    """A stage is compared with the lifter on the frames both have: the lifter itself gives
+    a change of 0 and a jitter ratio of 1 whatever frames it drops; a smoothed copy of the
+    lifter (moving average) gives a ratio below 1; a noisier one a positive change."""
+    from mocap_core.render.evaluate import _paired_with_lifter
+    rng = np.random.default_rng(0)
+    F = 60
+    t = np.arange(F)[:, None, None] / 30.0
+    G = np.sin(t + np.arange(18)[None, :, None] * 0.1 + np.arange(3) * 0.5)
+    lifter = G + rng.normal(0, 0.01, G.shape)
+    idx = np.arange(F)
+    keep = np.r_[5:F]                             # the stage starts 5 frames later
+    same = _paired_with_lifter(lifter[keep], idx[keep], lifter, idx, G, 30.0)
+    assert same['pa_mpjpe_change'] == pytest.approx(0.0, abs=1e-9)
+    assert same['jitter_vs_lifter'] == pytest.approx(1.0)
+    kernel = np.ones(5) / 5
+    smooth = np.apply_along_axis(lambda x: np.convolve(x, kernel, mode='same'), 0, lifter)
+    sm = _paired_with_lifter(smooth[keep], idx[keep], lifter, idx, G, 30.0)
+    assert sm['jitter_vs_lifter'] < 0.3
+    noisy = _paired_with_lifter(lifter + rng.normal(0, 0.02, G.shape), idx, lifter, idx, G,
+                                30.0)
+    assert noisy['pa_mpjpe_change'] > 5.0 and noisy['jitter_vs_lifter'] > 1.5

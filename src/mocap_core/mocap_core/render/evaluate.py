@@ -242,6 +242,31 @@ class ClipScore:
         return out
 
 
+def _paired_with_lifter(stage: np.ndarray, stage_idx: np.ndarray, lifter: np.ndarray,
+                        lifter_idx: np.ndarray, G: np.ndarray, fps: float) -> Dict[str, float]:
+    """A stage's change from the lifter on the frames both have: ``pa_mpjpe_change`` (mm,
+    stage minus lifter PA-MPJPE) and, over the longest run of consecutive frames,
+    ``jitter_vs_lifter`` (mean joint acceleration, stage over lifter; PA-MPJPE and
+    acceleration do not depend on the frame the joints are in)."""
+    pos = {int(f): i for i, f in enumerate(lifter_idx)}
+    both = [(i, pos[int(f)]) for i, f in enumerate(stage_idx) if int(f) in pos]
+    if len(both) < 3:
+        return {}
+    si, li = (np.array(x) for x in zip(*both))
+    g = G[stage_idx[si]]
+    pa_s = np.linalg.norm(procrustes_align(stage[si], g) - g, axis=-1).mean()
+    pa_l = np.linalg.norm(procrustes_align(lifter[li], g) - g, axis=-1).mean()
+    out = {'pa_mpjpe_change': float(1000 * (pa_s - pa_l))}
+    frames = stage_idx[si]
+    breaks = np.flatnonzero(np.diff(frames) != 1) + 1
+    runs = np.split(np.arange(len(frames)), breaks)
+    run = max(runs, key=len)
+    if len(run) >= 10:
+        a_l = acceleration(lifter[li[run]], fps)
+        out['jitter_vs_lifter'] = acceleration(stage[si[run]], fps) / max(a_l, 1e-9)
+    return out
+
+
 def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
                lifter: Optional[np.ndarray], lifter_index: np.ndarray,
                stage_roots: Optional[Dict[str, tuple]] = None) -> ClipScore:
@@ -299,6 +324,7 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
             g_s = G[sidx[ok]]
             root[stage]['pa_mpjpe'] = float(1000 * np.linalg.norm(
                 procrustes_align(full[ok], g_s) - g_s, axis=-1).mean())
+            root[stage].update(_paired_with_lifter(full[ok], sidx[ok], P, idx, G, fps))
             if 'contacts' in gt:
                 root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
     height = height_class(float(meta.get('body_height_m', 1.7)))
@@ -400,7 +426,9 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              "| ... after the first second (median over frames) | "
              f"{_f(m.get('physics_floor_tilt_deg'))} deg / "
              f"{_f(m.get('physics_floor_height_mm'))} mm |",
-             *[f"| {st} PA-MPJPE | {_f(m.get(f'{st}_pa_mpjpe'))} mm |"
+             *[f"| {st} PA-MPJPE | {_f(m.get(f'{st}_pa_mpjpe'))} mm (change from the lifter "
+               f"on the same frames {_f(m.get(f'{st}_pa_mpjpe_change'), '{:+.1f}')} mm; "
+               f"jitter {_f(m.get(f'{st}_jitter_vs_lifter'), '{:.2f}')}× the lifter's) |"
                for st in ('physics', 'world')],
              *[f"| {st} feet: deepest ankle/toe joint below its own floor after 1 s / "
                f"frames more than 5 mm below / skating in contact | "

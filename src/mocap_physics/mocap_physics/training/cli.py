@@ -52,6 +52,9 @@ def add_eval_parser(sub: argparse._SubParsersAction) -> None:
                    help='input: the clean ground truth, corrupted like a lifter, or both')
     p.add_argument('--dataset-clips', type=int, default=6,
                    help='also this many clips of the validation split (0: none)')
+    p.add_argument('--family-clips', type=int, default=1,
+                   help='also this many clips per held-out motion family of the strict split '
+                        '(dance, martial arts, style old, style exhausted; 0: none)')
     p.add_argument('--max-frames', type=int, default=300,
                    help='frames per validation-split clip')
     p.add_argument('--seed', type=int, default=0, help='seed of the noise')
@@ -119,6 +122,25 @@ def cmd_eval(args: argparse.Namespace) -> int:
             clips += [dataset_clip(m, args.max_frames) for m in chosen]
             val_names = [m.name for m in chosen]
         print(f'{len(val_names)} validation clips ({time.time() - t0:.0f} s)', flush=True)
+    fam_names: List[str] = []
+    if args.family_clips > 0:
+        from mocap_core.data.dataset import load_dataset
+        from mocap_core.data.strict_split import HELD_OUT_FAMILIES, family_of
+        print('loading the held-out families of the strict split ...', flush=True)
+        t0 = time.time()
+        by_family: dict = {f: [] for f in HELD_OUT_FAMILIES}
+        for m in sorted(load_dataset('train'), key=lambda m: m.name):
+            fam = family_of(m.name)
+            if fam is not None and m.num_frames >= 60:
+                by_family[fam].append(m)
+        for fam, motions in by_family.items():
+            if motions:
+                step = max(1, len(motions) // args.family_clips)
+                chosen = motions[step // 2::step][:args.family_clips]
+                clips += [dataset_clip(m, args.max_frames, 'held-out families (strict split)')
+                          for m in chosen]
+                fam_names += [f'{m.name} ({fam})' for m in chosen]
+        print(f'{len(fam_names)} held-out family clips ({time.time() - t0:.0f} s)', flush=True)
     if not clips:
         print('mocap eval physics: error: no clip to evaluate', file=sys.stderr)
         return 1
@@ -133,6 +155,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         'clips': ', '.join(c.name for c in clips),
         'bags (camera frame)': ', '.join(Path(b).name for b in bags),
         'validation-split clips (world frame, true floor only)': ', '.join(val_names) or 'none',
+        'held-out family clips of the strict split (world frame, true floor only; '
+        'mocap_core.data.strict_split)': ', '.join(fam_names) or 'none',
         'noise': 'lifter = evaluate.NoiseModel() (per-joint rotation noise 1 deg white + 5 deg '
                  'smooth, root jitter 5 mm / 15 mm along depth + 30 mm smooth drift, noisy '
                  f'contact probabilities), seed {args.seed}',

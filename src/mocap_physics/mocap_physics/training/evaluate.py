@@ -145,15 +145,17 @@ def load_gt_bag(path: Union[str, Path]) -> Clip:
                 'camera')
 
 
-def dataset_clip(motion: 'Motion', max_frames: Optional[int] = None) -> Clip:
-    """A :class:`mocap_core.data.motion.Motion` (world frame) as a :class:`Clip`."""
+def dataset_clip(motion: 'Motion', max_frames: Optional[int] = None,
+                 group: str = 'validation split') -> Clip:
+    """A :class:`mocap_core.data.motion.Motion` (world frame) as a :class:`Clip` of the
+    report group ``group``."""
     n = motion.num_frames if max_frames is None else min(motion.num_frames, max_frames)
     lab = np.asarray(motion.contacts[:n], dtype=bool)
     return Clip(motion.name, float(motion.fps), np.arange(n) / motion.fps, motion.skeleton,
                 np.asarray(motion.rotations[:n], float), np.asarray(motion.root_positions[:n],
                                                                     float),
                 lab.astype(float), lab, FloorFrame.identity('world'), 'world',
-                group='validation split')
+                group=group)
 
 
 # ---------------------------------------------------------------------------------------------
