@@ -34,8 +34,8 @@ class PhysicsParams:
 
     body_mass: float = 70.0               # kg
     dynamics: str = 'whole_body'          # 'whole_body' (mocap_physics.wbid) or 'paper' (eq. 13)
-    residual_weight: float = 1000.0       # w_r of the whole-body QP: vertical force, moments
-    residual_horizontal_weight: float = 1e4     # w_r of the horizontal residual force rows
+    residual_weight: float = 300.0        # w_r of the whole-body QP: vertical force, moments
+    residual_horizontal_weight: float = 3000.0  # w_r of the horizontal residual force rows
     residual_bound: float = 1.0           # body weights: bound of each residual force row
     residual_moment_bound: float = 0.5    # body weight x m: bound of each residual moment row
     stance_gain: float = 20.0             # 1/s: stance points return to their anchor (whole body)

@@ -182,7 +182,7 @@ class WholeBodyID:
     """
 
     def __init__(self, nv: int, num_contacts: int = 4, friction: float = 0.8,
-                 residual_weight: float = 1e3, residual_horizontal_weight: float = 1e3,
+                 residual_weight: float = 300.0, residual_horizontal_weight: float = 3000.0,
                  residual_bound: float = 1.0,
                  residual_moment_bound: float = 0.5, smoothness: float = 1e-2,
                  force_regularization: float = 1e-4, slide_threshold: float = 0.05,
