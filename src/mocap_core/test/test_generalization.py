@@ -214,3 +214,34 @@ def test_stage_change_from_the_lifter_is_paired_by_frame():
     noisy = _paired_with_lifter(lifter + rng.normal(0, 0.02, G.shape), idx, lifter, idx, G,
                                 30.0)
     assert noisy['pa_mpjpe_change'] > 5.0 and noisy['jitter_vs_lifter'] > 1.5
+
+
+def test_video_runs_compared_side_by_side(tmp_path):
+    """``mocap eval video --compare``: each run's medians land in its own column; a bad
+    argument or an unreadable report is an error, not a traceback."""
+    import argparse
+    import json
+
+    from mocap_core.cli.eval_video import add_eval_parser
+    reports = {}
+    for name, change in (('a', 2.0), ('b', -1.5)):
+        path = tmp_path / f'{name}.json'
+        path.write_text(json.dumps({'aggregate': {'clips': 3, 'median': {
+            'pa_mpjpe': 70.0, 'physics_pa_mpjpe_change': change,
+            'world_frames_below_5mm': 0.25}}}))
+        reports[name] = path
+    parser = argparse.ArgumentParser()
+    add_eval_parser(parser.add_subparsers(dest='model'))
+    out = tmp_path / 'cmp.md'
+    args = parser.parse_args(['video', '--compare', f"a={reports['a']}", f"b={reports['b']}",
+                              '-o', str(out), '--title', 'T'])
+    assert args.func(args) == 0
+    md = out.read_text()
+    assert '| physics PA-MPJPE change from the lifter, same frames (mm) | +2.0 | -1.5 |' in md
+    assert '| world frames with a foot joint > 5 mm below the floor (%) | 25.0 | 25.0 |' in md
+    assert '| physics skating in contact (mm/frame) | – | – |' in md
+    bad = parser.parse_args(['video', '--compare', 'nameonly', '-o', str(out)])
+    assert bad.func(bad) == 2
+    missing = parser.parse_args(['video', '--compare', f'x={tmp_path / "none.json"}',
+                                 '-o', str(out)])
+    assert missing.func(missing) == 2

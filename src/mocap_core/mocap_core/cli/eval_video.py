@@ -160,7 +160,39 @@ def _plots(scores, agg: dict, out: Path) -> List[Path]:
     return paths
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    """``--compare NAME=REPORT.json ...``: one side-by-side table of earlier runs."""
+    from ..render.evaluate import comparison_markdown
+    reports = []
+    for item in args.compare:
+        name, sep, path = item.partition('=')
+        if not sep or not name or not path:
+            print(f'mocap eval video: error: --compare takes NAME=REPORT.json, got {item!r}',
+                  file=sys.stderr)
+            return 2
+        try:
+            reports.append((name, json.loads(Path(path).read_text())))
+        except (OSError, ValueError) as exc:
+            print(f'mocap eval video: error: cannot read {path}: {exc}', file=sys.stderr)
+            return 2
+    setup = ['Made by `mocap eval video --compare ' + ' '.join(args.compare) + '` from the '
+             'reports of runs over the same rendered clips.']
+    md = comparison_markdown(reports, args.title, setup)
+    out = Path(args.output)
+    if out.suffix != '.md':
+        out.mkdir(parents=True, exist_ok=True)
+        out = out / 'comparison.md'
+    else:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(md)
+    print(md)
+    print(f'report: {out}', file=sys.stderr)
+    return 0
+
+
 def cmd_eval_video(args: argparse.Namespace) -> int:
+    if args.compare:
+        return cmd_compare(args)
     from ..render.batch import DEFAULT_OUT
     from ..render.clip import iter_done
     from ..render.evaluate import aggregate, report_markdown
@@ -242,6 +274,9 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--title', default='Rendered test videos: the pipeline against exact '
                    'ground truth', help='report title')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.add_argument('--compare', nargs='+', metavar='NAME=REPORT.json',
+                   help='run nothing: write one side-by-side table of earlier runs '
+                        '(report.json of each) to -o (a folder, or a .md file)')
     p.set_defaults(func=cmd_eval_video)
 
 

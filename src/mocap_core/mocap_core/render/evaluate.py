@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -458,4 +458,49 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                 f" | {_f(r['world_root_error'], '{:.0f}')} | "
                 f"{_f(r.get('physics_penetration_after_1s_mm'))} / "
                 f"{_f(r.get('world_penetration_after_1s_mm'))} |")
+    return '\n'.join(lines) + '\n'
+
+
+#: Rows of :func:`comparison_markdown`: (label, median key, format).
+COMPARISON_ROWS = (
+    ('lifter PA-MPJPE (mm)', 'pa_mpjpe', '{:.1f}'),
+    ('physics PA-MPJPE change from the lifter, same frames (mm)', 'physics_pa_mpjpe_change',
+     '{:+.1f}'),
+    ('world PA-MPJPE change from the lifter, same frames (mm)', 'world_pa_mpjpe_change',
+     '{:+.1f}'),
+    ("physics jitter / the lifter's", 'physics_jitter_vs_lifter', '{:.2f}'),
+    ("world jitter / the lifter's", 'world_jitter_vs_lifter', '{:.2f}'),
+    ('physics feet: deepest ankle/toe below its floor after 1 s (mm)',
+     'physics_penetration_after_1s_mm', '{:.1f}'),
+    ('world feet: deepest ankle/toe below its floor after 1 s (mm)',
+     'world_penetration_after_1s_mm', '{:.1f}'),
+    ('world frames with a foot joint > 5 mm below the floor (%)', 'world_frames_below_5mm',
+     'pct'),
+    ('physics skating in contact (mm/frame)', 'physics_skating_mm', '{:.1f}'),
+    ('world skating in contact (mm/frame)', 'world_skating_mm', '{:.1f}'),
+    ('physics root trajectory error (mm)', 'physics_root_error', '{:.0f}'),
+    ('world root trajectory error (mm)', 'world_root_error', '{:.0f}'),
+    ('world RTE (%)', 'world_rte', '{:.1f}'),
+    ('physics floor at 1 s: tilt (deg)', 'physics_floor_tilt_1s_deg', '{:.1f}'),
+    ('physics floor at 1 s: height under the person (mm)', 'physics_floor_height_1s_mm',
+     '{:.0f}'),
+)
+
+
+def comparison_markdown(reports: Sequence[Tuple[str, dict]], title: str,
+                        setup: Sequence[str] = ()) -> str:
+    """One table comparing runs of the video benchmark side by side: ``reports`` are
+    ``(name, report.json contents)`` of runs over the same clips; medians over clips."""
+    names = [n for n, _ in reports]
+    lines = [f'# {title}', '', *setup, '',
+             '| measure (median over clips) | ' + ' | '.join(names) + ' |',
+             '|---|' + '---|' * len(names)]
+    lines.append('| clips scored | ' + ' | '.join(str(r['aggregate']['clips'])
+                                                 for _, r in reports) + ' |')
+    for label, key, fmt in COMPARISON_ROWS:
+        cells = []
+        for _, r in reports:
+            v = r['aggregate']['median'].get(key, float('nan'))
+            cells.append(_f(100 * v, '{:.1f}') if fmt == 'pct' else _f(v, fmt))
+        lines.append(f'| {label} | ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines) + '\n'
