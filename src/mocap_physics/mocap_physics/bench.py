@@ -6,7 +6,8 @@ Runs a synthetic standing motion with smooth random joint motion, root sway and 
 (feet on the floor, contact probabilities flickering; the input is in the floor frame) through
 the node's streaming logic (:class:`~mocap_physics.online.OnlinePhysics`) at 30 fps and prints
 the median and 95th percentile of the cycle's time per frame (ms), with the time spent in the
-two QP solvers. Pin it to one core for comparable figures: ``taskset -c 0 python -m ...``.
+two QP solvers, for the whole-body dynamics (OSQP and ProxQP) and the paper's cycle side by
+side (``--configs``). Pin it to one core for comparable figures: ``taskset -c 0 python -m ...``.
 """
 
 from __future__ import annotations
@@ -47,47 +48,71 @@ def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0
         yield t[k], Pose(skeleton, axis_angle_to_quat(aa), root), probs
 
 
+#: The configurations compared side by side (the same frames, interleaved frame by frame).
+CONFIGS = {
+    'whole_body': dict(dynamics='whole_body'),
+    'whole_body_proxqp': dict(dynamics='whole_body', wbid_solver='proxqp'),
+    'paper': dict(dynamics='paper'),
+}
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(prog='mocap bench physics', description=__doc__.split('\n')[0])
     ap.add_argument('--frames', type=int, default=600)
     ap.add_argument('--fps', type=float, default=30.0)
     ap.add_argument('--substeps', type=int, default=6)
     ap.add_argument('--root-residual', type=float, default=1.0)
+    ap.add_argument('--configs', nargs='+', default=list(CONFIGS), choices=list(CONFIGS),
+                    help='configurations, run side by side on the same frames (default all)')
     ap.add_argument('--json', action='store_true', help='print the figures as JSON')
     args = ap.parse_args(argv)
     sk = Skeleton.default()
-    online = OnlinePhysics(PhysicsParams(substeps=args.substeps,
-                                         root_residual=args.root_residual), skeleton=sk)
-    cyc = online.cycle
-    total, grf, pen = [], [], []
+    onlines = {}
+    for name in args.configs:
+        try:
+            onlines[name] = OnlinePhysics(PhysicsParams(substeps=args.substeps,
+                                                        root_residual=args.root_residual,
+                                                        **CONFIGS[name]), skeleton=sk)
+        except Exception as exc:  # noqa: BLE001 - e.g. proxsuite missing: skip that one
+            print(f'{name}: skipped ({exc})', file=sys.stderr)
+    times = {name: ([], [], []) for name in onlines}
     for t, pose, probs in synthetic_motion(sk, args.frames, args.fps):
-        out = online.step(int(round(t * 1e9)), pose, probabilities=probs, time_s=t)
-        if out is None:
-            continue
-        r = out.result
-        total.append(r.time_total)
-        grf.append(r.time_grf_qp)
-        pen.append(r.time_penetration_qp)
-    total, grf, pen = (np.array(x[10:]) * 1e3 for x in (total, grf, pen))  # skip warm-up
-    out = {
-        'frames': int(total.size), 'substeps': args.substeps,
-        'root_residual': args.root_residual,
-        'ms_per_frame_median': float(np.median(total)),
-        'ms_per_frame_p95': float(np.percentile(total, 95)),
-        'ms_per_frame_max': float(total.max()),
-        'grf_qp_ms_median': float(np.median(grf)),
-        'penetration_qp_ms_median': float(np.median(pen)),
-        'fallbacks': cyc.stats.fallbacks, 'grf_failures': cyc.stats.grf_failures,
-        'penetration_solves': cyc.stats.penetration_solves,
-    }
+        for name, online in onlines.items():
+            out = online.step(int(round(t * 1e9)), pose, probabilities=probs, time_s=t)
+            if out is None:
+                continue
+            r = out.result
+            for lst, v in zip(times[name], (r.time_total, r.time_grf_qp,
+                                            r.time_penetration_qp)):
+                lst.append(v)
+    results = {}
+    for name, online in onlines.items():
+        cyc = online.cycle
+        total, grf, pen = (np.array(x[10:]) * 1e3 for x in times[name])  # skip warm-up
+        results[name] = {
+            'frames': int(total.size), 'substeps': args.substeps,
+            'ms_per_frame_median': float(np.median(total)),
+            'ms_per_frame_p95': float(np.percentile(total, 95)),
+            'ms_per_frame_max': float(total.max()),
+            'qp_ms_median': float(np.median(grf)),
+            'penetration_qp_ms_median': float(np.median(pen)),
+            'fallbacks': cyc.stats.fallbacks, 'qp_failures': cyc.stats.grf_failures,
+            'penetration_solves': cyc.stats.penetration_solves,
+        }
+    base = results.get('whole_body')
     if args.json:
-        print(json.dumps(out, indent=2))
-    else:
-        print(f"physics per frame (k={args.substeps}, {out['frames']} frames): median "
-              f"{out['ms_per_frame_median']:.2f} ms, p95 {out['ms_per_frame_p95']:.2f} ms, "
-              f"max {out['ms_per_frame_max']:.2f} ms; GRF QP median {out['grf_qp_ms_median']:.2f}"
-              f" ms, penetration QP median {out['penetration_qp_ms_median']:.2f} ms; "
-              f"fallbacks {out['fallbacks']}, GRF failures {out['grf_failures']}")
+        print(json.dumps(results, indent=2))
+        return 0
+    print(f'physics per frame, k = {args.substeps}, {args.frames} frames, configurations '
+          'interleaved frame by frame:')
+    for name, o in results.items():
+        ratio = (f", {o['ms_per_frame_median'] / base['ms_per_frame_median']:.2f}x whole_body"
+                 if base and name != 'whole_body' else '')
+        print(f"  {name:18s} median {o['ms_per_frame_median']:.2f} ms, p95 "
+              f"{o['ms_per_frame_p95']:.2f} ms, max {o['ms_per_frame_max']:.2f} ms{ratio}; "
+              f"dynamics QP median {o['qp_ms_median']:.2f} ms, penetration QP median "
+              f"{o['penetration_qp_ms_median']:.2f} ms; fallbacks {o['fallbacks']}, QP "
+              f"failures {o['qp_failures']}")
     return 0
 
 

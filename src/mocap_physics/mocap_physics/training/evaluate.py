@@ -512,21 +512,27 @@ _PHYS = [
 
 _READING = '''## How to read this
 
-All metrics are measured in the true world frame (floor z = 0) against the ground truth,
-for the input (the kinematic target fed to the cycle) and for each configuration's output
-(`mocap_physics.training.evaluate` documents each). "physics" is the default node configuration
-(foot stick on, penetration QP metric diag(M), root gains 400/40, joint gains 3600/120).
-"true floor": the cycle is given the true floor; "est. floor": the node's default, the floor
-is estimated online from the input's feet in the camera frame (`FloorTracker`), so the
-penetration against the *true* floor there measures the floor estimate (the output never
-goes below the floor the cycle uses: "penetration vs own floor"); its first two seconds use
-a provisional floor from little data. Goals: no penetration beyond 5 mm, skating at least
-halved, acceleration error and jitter lower than the input's, PA-MPJPE at most 5 mm worse,
-no friction-cone violation. With clean input the input *is* the ground truth, so its
-errors are 0 and the error goals there only show what the physics costs (the PD tracking
-delay); the lifter-noise tables are the ones the goals are meant for. Times are per frame on
-this machine's CPU while other work ran (median, p95), the cycle with k = 6 sub-steps
-(plus the floor fit for "est. floor").'''
+The ablation: the "input" column is no physics (the kinematic target fed to the cycle);
+"physics" is the default node configuration (`dynamics` whole_body: the whole-body
+inverse-dynamics QP with residual weights 3e2 / 3e3, the foot guard points, root gains
+400/40, joint gains 3600/120); "paper (eq. 13)" is the paper's cycle (`dynamics:=paper`, the
+contact forces cancel out of the forward dynamics); the other columns vary one thing of
+either. The same comparison on rendered videos through the real detector and lifter is in
+`docs/benchmarks/physics_video.md` (`mocap eval video`). All metrics are measured in the
+true world frame (floor z = 0) against the ground truth (`mocap_physics.training.evaluate`
+documents each). "true floor": the cycle is given the true floor; "est. floor": the node's
+default, the floor is estimated online from the input's feet in the camera frame
+(`FloorTracker`), so the penetration against the *true* floor there measures the floor
+estimate (the output never goes below the floor the cycle uses: "penetration vs own floor");
+its first two seconds use a provisional floor from little data. The held-out families are
+motions of the strict split that no model of the project trained on. Goals: no penetration
+beyond 5 mm, skating at least halved, acceleration error and jitter lower than the input's,
+PA-MPJPE at most 5 mm worse, no friction-cone violation (these rows are a check of the
+solver, true by construction of the friction pyramid). With clean input the input *is* the
+ground truth, so its errors are 0 and the error goals there only show what the physics
+costs (the PD tracking delay); the lifter-noise tables are the ones the goals are meant for.
+Times are per frame on this machine's CPU while other work ran (median, p95), the cycle with
+k = 6 sub-steps (plus the floor fit for "est. floor").'''
 
 
 def _fmt(fmt: str, v) -> str:
