@@ -38,7 +38,8 @@ wait_for() {  # wait_for FILE TEXT SECONDS
 
 topics=(/mocap/keypoints2d /mocap/camera_info /mocap/skeleton/urdf /diagnostics
         /mocap/lifter/contacts /mocap/physics/grf/left /mocap/physics/grf/right
-        /mocap/physics/com /mocap/physics/floor /mocap/world/odom /mocap/world/path)
+        /mocap/physics/com /mocap/physics/floor /mocap/world/floor /mocap/world/odom
+        /mocap/world/path)
 for stage in lifter physics world; do
   for leaf in motion joints3d joint_states markers; do topics+=("/mocap/$stage/$leaf"); done
 done

@@ -27,7 +27,8 @@ trap stop EXIT INT TERM
 if [[ -n "${RECORD:-}" ]]; then
   topics=(/mocap/keypoints2d /mocap/camera_info /mocap/skeleton/urdf /diagnostics
           /mocap/lifter/contacts /mocap/physics/grf/left /mocap/physics/grf/right
-          /mocap/physics/com /mocap/physics/floor /mocap/world/odom /mocap/world/path)
+          /mocap/physics/com /mocap/physics/floor /mocap/world/floor /mocap/world/odom
+          /mocap/world/path)
   for s in lifter physics world; do
     for l in motion joints3d joint_states markers; do topics+=("/mocap/$s/$l"); done
   done
