@@ -173,6 +173,9 @@ def test_process_ground_truth_bag_every_topic_same_stamps_accurate(gt_run):
         assert pl[stage]['bone_spread_final_mm'] < 1e-3, (stage, pl)
     assert pl['world']['root_path_m'] > 2.0, pl           # a 5.6 s walk goes somewhere
     assert set(run.diagnostics) >= {'lifter: lifter', 'physics: physics', 'gmr: gmr'}
+    # the final status is refreshed although timers do not run offline
+    assert 'DoF' in run.diagnostics['physics: physics']['model'], run.diagnostics
+    assert run.diagnostics['physics: physics']['dynamics'] == 'whole_body', run.diagnostics
     assert 'processed 168 frames' in res.stdout
 
 

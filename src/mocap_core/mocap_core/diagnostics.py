@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from typing import Dict, Iterator, Optional
+from typing import Callable, Dict, Iterator, List, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
@@ -49,6 +49,7 @@ class NodeDiagnostics:
         self._warning: Optional[str] = None
         self._error: Optional[str] = None
         self._watched: Dict[str, object] = {}
+        self._refresh: List[Callable[[], None]] = []
         self._pub = node.create_publisher(DiagnosticArray, topic, DIAGNOSTICS_QOS)
         self._timer = node.create_timer(period_s, self.publish)
 
@@ -79,6 +80,12 @@ class NodeDiagnostics:
             except Exception:  # noqa: BLE001 - destroyed during shutdown
                 continue
         return out
+
+    def on_publish(self, refresh: Callable[[], None]) -> None:
+        """Call ``refresh`` (which sets values) before each status is built and published,
+        by the timer live and by the final ``publish()`` of ``mocap process``, where timers do
+        not run."""
+        self._refresh.append(refresh)
 
     def warn(self, message: Optional[str]) -> None:
         """Set (or clear with None) the current warning."""
@@ -114,6 +121,8 @@ class NodeDiagnostics:
                                 values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
     def publish(self) -> None:
+        for refresh in self._refresh:
+            refresh()
         msg = DiagnosticArray()
         msg.header.stamp = self.node.get_clock().now().to_msg()
         msg.status = [self.status()]

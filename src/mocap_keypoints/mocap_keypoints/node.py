@@ -314,7 +314,7 @@ class KeypointsNode(Node):
         self._limited = KeyedRateLimit()
         self._next_annotated = 0.0
         self.t0_ns = self._now_ns()
-        self.create_timer(1.0, guarded(self, self._refresh_diagnostics, 'diagnostics'))
+        self.diag.on_publish(guarded(self, self._refresh_diagnostics, 'diagnostics'))
         if self.kind == 'topic':
             topic = p['image_topic']
             self.compressed = topic.rstrip('/').endswith('/compressed')

@@ -276,7 +276,7 @@ class PhysicsNode(Node):
             self.diag.watch('contacts', self.contacts_sub)
         self.diag.watch('motion', self.pub_motion)
         self.create_timer(0.01, guarded(self, self.on_timer, 'process'))
-        self.create_timer(1.0, guarded(self, self.refresh_diagnostics, 'diagnostics'))
+        self.diag.on_publish(guarded(self, self.refresh_diagnostics, 'diagnostics'))
         self.get_logger().info(
             f"physics on {p['motion_topic']} (contacts: {contacts_topic or 'none'}); "
             f"k={p['substeps']}, kp={p['kp_joint']:g}, kd={p['kd_joint']:g}, "
