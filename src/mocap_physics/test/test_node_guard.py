@@ -38,8 +38,9 @@ def test_every_callback_is_guarded(wired):
     assert {s.topic_name for s in subs} == {'/mocap/lifter/motion', '/mocap/lifter/contacts'}
     assert all(getattr(s.callback, 'guarded', False) for s in subs)
     own_timers = [t for t in node.timers if t.callback != node.diag.publish]
-    assert len(own_timers) == 2
+    assert len(own_timers) == 1
     assert all(getattr(t.callback, 'guarded', False) for t in own_timers)
+    assert node.diag._refresh and all(getattr(f, 'guarded', False) for f in node.diag._refresh)
 
 
 def test_a_raising_callback_drops_the_frame_and_the_node_goes_on(wired, monkeypatch):
