@@ -82,6 +82,7 @@ def test_mocap_eval_physics_cli(tmp_path):
     res = subprocess.run([sys.executable, '-m', 'mocap_physics.training.cli', 'eval',
                           'physics',
                           '--bags', str(BAGS / 'gt_cmu_walk_12_02'), '--dataset-clips', '0',
+                          '--family-clips', '0',
                           '--noise', 'none', '--quick', '--out', str(out)],
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
