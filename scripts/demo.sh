@@ -36,7 +36,8 @@ wait_for() {  # wait_for FILE TEXT SECONDS
   echo "[demo] timed out waiting for '$2' in $1" >&2; cat "$1" >&2; return 1
 }
 
-topics=(/mocap/keypoints2d /mocap/camera_info /mocap/skeleton/urdf /diagnostics
+topics=(/mocap/keypoints2d /mocap/camera_info /mocap/camera/motion /mocap/skeleton/urdf
+        /diagnostics
         /mocap/lifter/contacts /mocap/physics/grf/left /mocap/physics/grf/right
         /mocap/physics/com /mocap/physics/floor /mocap/world/floor /mocap/world/odom
         /mocap/world/path)

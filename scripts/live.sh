@@ -25,7 +25,8 @@ stop() { for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; done; wai
 trap stop EXIT INT TERM
 
 if [[ -n "${RECORD:-}" ]]; then
-  topics=(/mocap/keypoints2d /mocap/camera_info /mocap/skeleton/urdf /diagnostics
+  topics=(/mocap/keypoints2d /mocap/camera_info /mocap/camera/motion /mocap/skeleton/urdf
+          /diagnostics
           /mocap/lifter/contacts /mocap/physics/grf/left /mocap/physics/grf/right
           /mocap/physics/com /mocap/physics/floor /mocap/world/floor /mocap/world/odom
           /mocap/world/path)

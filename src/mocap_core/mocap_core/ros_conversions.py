@@ -381,6 +381,70 @@ def odometry_to_root(msg: Odometry) -> Tuple[np.ndarray, np.ndarray]:
     return np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])
 
 
+#: Camera motion states (``mocap_keypoints.camera_motion``) and their encoding in Odometry.
+CAMERA_MOTION_STATES = ('static', 'rotating', 'moving', 'unknown')
+_KNOWN_VAR = 1e-6       # covariance of a quantity the background determines
+_UNKNOWN_VAR = 1e6      # covariance of a quantity it does not (ROS practice: large = ignore)
+
+
+def camera_motion_to_odometry(state: str, orientation: np.ndarray,
+                              angular_velocity: np.ndarray, header: Header,
+                              child_frame_id: str) -> Odometry:
+    """A camera-motion estimate -> nav_msgs/Odometry.
+
+    ``header.frame_id`` names the camera frame at the first image (fixed), ``child_frame_id``
+    the camera's optical frame now. pose.orientation (x, y, z, w): the current camera frame in
+    the first one; position 0, unknown (covariance 1e6). twist.angular: rad/s in the current
+    camera frame. The state is in the twist covariance, as what the background determines:
+
+    * ``static``: angular velocity exactly 0; linear and angular covariance 1e-6 (the camera
+      is known not to move);
+    * ``rotating``: linear covariance 1e-6 (known not to translate), angular 1e-6;
+    * ``moving``: linear covariance 1e6 (translation unknown), angular 1e-6;
+    * ``unknown``: every covariance 1e6 (nothing could be tracked; the orientation is the
+      last one).
+    """
+    if state not in CAMERA_MOTION_STATES:
+        raise ValueError(f'unknown camera motion state {state!r}')
+    w = np.zeros(3) if state == 'static' else np.asarray(angular_velocity, dtype=float)
+    msg = root_to_odometry(np.zeros(3), orientation, header, child_frame_id,
+                           np.zeros(3), w)
+    lin = _KNOWN_VAR if state in ('static', 'rotating') else _UNKNOWN_VAR
+    ang = _UNKNOWN_VAR if state == 'unknown' else _KNOWN_VAR
+    cov = np.zeros((6, 6))
+    cov[:3, :3] = np.eye(3) * lin
+    cov[3:, 3:] = np.eye(3) * ang
+    msg.twist.covariance = cov.ravel().tolist()
+    pcov = np.zeros((6, 6))
+    pcov[:3, :3] = np.eye(3) * _UNKNOWN_VAR
+    pcov[3:, 3:] = np.eye(3) * ang
+    msg.pose.covariance = pcov.ravel().tolist()
+    return msg
+
+
+def odometry_to_camera_motion(msg: Odometry) -> Tuple[str, np.ndarray, np.ndarray]:
+    """nav_msgs/Odometry of :func:`camera_motion_to_odometry` -> (state, orientation (4,)
+    x, y, z, w, angular velocity (3,) rad/s). Raises MessageError when the message is not
+    finite."""
+    _, q = odometry_to_root(msg)
+    a = msg.twist.twist.angular
+    w = np.array([a.x, a.y, a.z])
+    cov = np.asarray(msg.twist.covariance, dtype=float).reshape(6, 6)
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(w)) and np.all(np.isfinite(cov))
+            and np.linalg.norm(q) > 0.5):
+        raise MessageError('camera motion: non-finite orientation, angular velocity or '
+                           'covariance')
+    if cov[3, 3] >= 1.0:
+        state = 'unknown'
+    elif cov[0, 0] >= 1.0:
+        state = 'moving'
+    elif not np.any(w):
+        state = 'static'
+    else:
+        state = 'rotating'
+    return state, q / np.linalg.norm(q), w
+
+
 def append_to_path(path: Path, odom: Odometry, max_length: int = 0) -> Path:
     """Append an Odometry's pose to ``path`` (in place; keeps the last ``max_length`` poses
     when > 0) and set its header to the odometry's."""

@@ -15,6 +15,9 @@ IMAGE_CAMERA_INFO = '/camera/camera_info'
 KEYPOINTS = '/mocap/keypoints2d'
 CAMERA_INFO = '/mocap/camera_info'
 ANNOTATED = '/mocap/keypoints2d/annotated'
+#: nav_msgs/Odometry: the camera's rotation and motion state estimated from the image
+#: background (``ros_conversions.camera_motion_to_odometry`` documents the encoding)
+CAMERA_MOTION = '/mocap/camera/motion'
 
 # every node
 DIAGNOSTICS = '/diagnostics'
@@ -76,7 +79,8 @@ WORLD_JOINT_STATES = stage_topic('world', 'joint_states')
 WORLD_MARKERS = stage_topic('world', 'markers')
 
 #: Every output topic of the pipeline (what ``record:=true`` of the launch file records).
-ALL = [KEYPOINTS, CAMERA_INFO, SKELETON_URDF, DIAGNOSTICS, LIFTER_CONTACTS, PHYSICS_GRF_LEFT,
-       PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH, WORLD_FLOOR] + [
+ALL = [KEYPOINTS, CAMERA_INFO, CAMERA_MOTION, SKELETON_URDF, DIAGNOSTICS, LIFTER_CONTACTS,
+       PHYSICS_GRF_LEFT, PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH,
+       WORLD_FLOOR] + [
     stage_topic(stage, leaf) for stage in STAGES
     for leaf in ('motion', 'joints3d', 'joint_states', 'markers')]

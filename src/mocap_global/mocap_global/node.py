@@ -23,9 +23,15 @@ floor z = 0; ``vertical`` 'auto' decides by the input's frame_id), the root's
 height and tilt are the input's and GMR gives the heading and the horizontal path, so the
 world output's feet are never below z = 0 and stand where the physics put them vertically.
 
-``static_camera:=true`` (beyond the paper) fuses the GMR motion with the input's root
-trajectory, which does not drift when the camera does not move
-(:class:`~mocap_global.online.StaticCameraFusion`).
+Camera motion (beyond the paper; ``camera_mode``): the input's root trajectory does not drift
+when the camera does not move, so the GMR motion is fused with it
+(:class:`~mocap_global.online.StaticCameraFusion`). ``auto`` (default) reads the keypoint
+node's estimate from the image background (``camera_motion_topic``, nav_msgs/Odometry,
+matched by stamp): a static camera is fused; a camera that only turns has its rotation taken
+out of the input root first (in the floor frame, with ``floor_topic``, when the input is a
+floor frame); a translating camera, an unknown motion or a missing estimate leaves GMR alone
+for that frame, and the fusion aligns itself again once the camera stops. ``static`` fuses
+every frame, ``moving`` never does. ``/diagnostics`` says which mode each frame took.
 
 Bad input never stops the node: a malformed or NaN message is dropped with a warning, a
 joint set that does not match the model is reported with the joints it needs, a stamp that
@@ -40,10 +46,11 @@ end the start with one line ``gmr: error: ...`` and exit status 2.
 
 from __future__ import annotations
 
+import collections
 import sys
 import time
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -60,9 +67,10 @@ from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
+from mocap_core.rotations import quat_to_matrix
 
 from .model import TTA_MODES, with_tta
-from .online import OnlineGMR, StaticCameraFusion, WorldFrame
+from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame
 from .weights import default_weights, load_weights
 
 PARAMETERS = (
@@ -90,8 +98,20 @@ PARAMETERS = (
     ParamSpec('chunk', 1, 'Frames emitted per network pass: 1 for live use; more (offline, '
               'e.g. mocap process) is faster per frame and adds chunk - 1 frames of delay',
               min_value=1, max_value=64, read_only=True),
-    ParamSpec('static_camera', False, 'The camera does not move: fuse GMR with the input\'s '
-              'root trajectory (removes drift)', read_only=True),
+    ParamSpec('camera_mode', 'auto', "How the camera moves: 'auto' (from the keypoint "
+              "node's camera-motion estimate on camera_motion_topic: a static camera is fused "
+              "with the input root, a turning camera's rotation is taken out of the input root "
+              "first, a translating camera leaves GMR alone), 'static' (fuse every frame), "
+              "'moving' (GMR alone, the paper)", read_only=True,
+              additional_constraints='auto, static or moving'),
+    ParamSpec('static_camera', False, "Same as camera_mode:=static (kept for older launch "
+              "files)", read_only=True),
+    ParamSpec('camera_motion_topic', topics.CAMERA_MOTION, 'The camera-motion estimate '
+              '(nav_msgs/Odometry of the keypoint node) for camera_mode auto; empty = none',
+              read_only=True),
+    ParamSpec('floor_topic', topics.PHYSICS_FLOOR, 'The physics floor (TransformStamped): '
+              'turns the camera rotation into the floor frame when the input is a floor '
+              'frame', read_only=True),
     ParamSpec('input_up', 'auto', "Up direction of the input frame for the fusion: 'auto' "
               "(z up, unless the input frame_id is an optical frame: then estimated), "
               "'estimate', or three numbers 'x y z'", read_only=True),
@@ -118,6 +138,10 @@ PARAMETERS = (
     ParamSpec('threads', 1, 'Torch CPU threads', read_only=True, min_value=1),
     ParamSpec('device', 'cpu', "Torch device ('cpu' or 'cuda')", read_only=True),
 )
+
+
+#: Camera-motion estimates kept for matching by stamp (10 s at 30 fps).
+MAX_CAMERA_FRAMES = 300
 
 
 def parse_up(text: str) -> Optional[np.ndarray]:
@@ -186,23 +210,40 @@ class GMRNode(Node):
             'floor': self.create_publisher(TransformStamped, topics.WORLD_FLOOR, STREAM_QOS),
         }
         self.input_frame = ''
+        if p['camera_mode'] not in ('auto', 'static', 'moving'):
+            raise ValueError(f"camera_mode must be auto, static or moving, got "
+                             f"{p['camera_mode']!r}")
+        self.camera_mode = 'static' if p['static_camera'] else p['camera_mode']
+        self.camera_motion: Dict[int, Tuple[str, np.ndarray]] = {}   # stamp -> state, R0
+        self.camera_stamps: Deque[int] = collections.deque()
+        self.floor: Optional[Tuple[int, np.ndarray, np.ndarray]] = None  # stamp, A, b
+        self.camera_frames: Dict[str, int] = {}
         self.diag = NodeDiagnostics(self, 'gmr', hardware_id=path.name)
         self.diag.set_value('model', f'GMR {cfg.layers}x{cfg.hidden} bi-GRU, '
                             f'{cfg.fps:g} fps, window {window}, '
                             f"test-time augmentation {p['test_time_augmentation']}")
         self.diag.set_value('lookahead_frames', p['lookahead'])
         self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
-        self.diag.set_value('static_camera', p['static_camera'])
+        self.diag.set_value('camera_mode', self.camera_mode)
         self.diag.set_value('nonfinite_outputs', 0)
         self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
             input_qos(STREAM_QOS, p['queue_depth'])))
+        if self.camera_mode == 'auto' and p['camera_motion_topic']:
+            self.diag.watch('camera_motion', self.create_subscription(
+                Odometry, p['camera_motion_topic'],
+                guarded(self, self.on_camera_motion, 'camera motion'),
+                input_qos(STREAM_QOS, p['queue_depth'])))
+            if p['floor_topic']:
+                self.create_subscription(TransformStamped, p['floor_topic'],
+                                         guarded(self, self.on_floor, 'floor'),
+                                         input_qos(STREAM_QOS, p['queue_depth']))
         self.diag.watch('motion', self.pub['motion'])
         self.create_timer(0.1, guarded(self, self.on_idle, 'idle'))
         self.get_logger().info(
             f"gmr ready: {path} ({cfg.layers}x{cfg.hidden} GRU at {cfg.fps:g} fps), input "
             f"{p['motion_topic']}, look-ahead {p['lookahead']} frames "
-            f"({p['lookahead'] / cfg.fps:.2f} s), static camera {p['static_camera']}")
+            f"({p['lookahead'] / cfg.fps:.2f} s), camera mode {self.camera_mode}")
 
     def _make_online(self, frame_id: str) -> OnlineGMR:
         p = self.p
@@ -213,12 +254,14 @@ class GMRNode(Node):
             up = None if 'optical' in frame_id else np.array([0.0, 0.0, 1.0])
         elif p['input_up'] != 'estimate':
             up = parse_up(p['input_up'])
-        if p['static_camera']:
+        if self.camera_mode != 'moving':
             fusion = StaticCameraFusion(
                 self.fps, p['fusion_init_s'], p['fusion_position_time_constant_s'],
                 p['fusion_orientation_time_constant_s'], input_up=up)
             self.get_logger().info(
-                'static camera: fusing with the input root trajectory ('
+                ('static camera: fusing' if self.camera_mode == 'static' else
+                 'camera mode auto: fusing the frames of a static or turning camera')
+                + ' with the input root trajectory ('
                 + ('input frame up = ' + np.array2string(up, precision=3)
                    if up is not None else
                    f"up of '{frame_id}' estimated over {p['fusion_init_s']:g} s") + ')')
@@ -235,6 +278,52 @@ class GMRNode(Node):
                          p['tilt_correction'], fusion, model_up, p['device'],
                          chunk=p['chunk'], floor_input=on_floor,
                          foot_lock=p['foot_lock'], lock_height=p['lock_height'])
+
+    def on_camera_motion(self, msg: Odometry) -> None:
+        """Keep the camera-motion estimate of each stamp (the last ``MAX_CAMERA_FRAMES``)."""
+        try:
+            state, q, _ = rc.odometry_to_camera_motion(msg)
+        except rc.MessageError as exc:
+            self.diag.errors += 1
+            self.get_logger().warn(f'ignoring camera motion: {exc}', throttle_duration_sec=5.0)
+            return
+        stamp = rc.stamp_to_ns(msg.header.stamp)
+        if stamp not in self.camera_motion:
+            self.camera_stamps.append(stamp)
+        self.camera_motion[stamp] = (state, quat_to_matrix(q))
+        while len(self.camera_stamps) > MAX_CAMERA_FRAMES:
+            self.camera_motion.pop(self.camera_stamps.popleft(), None)
+
+    def on_floor(self, msg: TransformStamped) -> None:
+        """The physics floor in the camera frame: ``p_camera = A p_floor + b``."""
+        q, b = rc.transform_stamped_to_arrays(msg)
+        n = float(np.linalg.norm(q))
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(b)) and n > 0.5):
+            self.get_logger().warn('ignoring floor: not a finite transform',
+                                   throttle_duration_sec=5.0)
+            return
+        self.floor = (rc.stamp_to_ns(msg.header.stamp), quat_to_matrix(q / n), b)
+
+    def _anchor(self, stamp: int, on_floor: bool) -> Optional[InputAnchor]:
+        """The camera motion of this frame as an :class:`InputAnchor` (camera_mode auto;
+        None otherwise): fixed for a static or turning camera, with the camera's rotation
+        since the first image (in the floor frame for a floor input), else not fixed."""
+        if self.camera_mode != 'auto':
+            return None
+        cm = self.camera_motion.get(stamp)
+        state = 'no estimate' if cm is None else cm[0]
+        self.camera_frames[state] = self.camera_frames.get(state, 0) + 1
+        self.diag.set_value('camera_motion', state)
+        if cm is None or state not in ('static', 'rotating'):
+            return InputAnchor(False)
+        R0 = cm[1]
+        if not on_floor:
+            return InputAnchor(True, R0, np.zeros(3))
+        if self.floor is None:
+            # no floor yet: the camera's rotation cannot be put into the floor frame
+            return InputAnchor(state == 'static')
+        _, A, b = self.floor
+        return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b - b))
 
     def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
         """One input frame: convert, check the stamp, push to :class:`OnlineGMR`, publish
@@ -273,7 +362,8 @@ class GMRNode(Node):
         self._check_rate(gap)
         try:
             with self.diag.processing():
-                frames, event = self.online.push(stamp, pose)
+                frames, event = self.online.push(
+                    stamp, pose, self._anchor(stamp, self.online.floor_input))
         except ValueError as exc:
             self.diag.errors += 1
             self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
@@ -356,6 +446,10 @@ class GMRNode(Node):
             self.diag.set_value('segments', self.online.segments)
             if fusion is not None:
                 self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
+            if self.camera_mode == 'auto':
+                self.diag.set_value('camera_motion_frames', ', '.join(
+                    f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
+                self.diag.set_value('unfused_frames', self.online.unanchored_frames)
 
     def _report_nonfinite(self, count: int) -> None:
         """Diagnostics and a rate-limited warning for frames whose network output was not

@@ -43,6 +43,14 @@ accumulated pose stays finite and the following frames use the network again.
 Static camera (``fusion``, :class:`StaticCameraFusion`): the input's root trajectory in its
 own frame (the camera frame of the lifter, the floor frame of the physics stage) is fixed to
 the world when the camera does not move, and each accumulated pose is pulled towards it.
+
+Camera motion (:class:`InputAnchor`, given per frame to :meth:`OnlineGMR.push`): when the
+camera only turns, the input root is first turned back into the frame of the camera's first
+image (``p_fixed = rotation p_input + translation``) and then fused as for a static camera;
+when it translates (or nothing is known), the frame is not fused, and the fusion aligns
+itself again (over ``init_s``) once the camera stops translating, since the camera's position
+has changed by an unknown amount. Without anchors, a fusion fuses every frame (a camera
+declared static).
 """
 
 from __future__ import annotations
@@ -87,6 +95,25 @@ class WorldFrame:
     input_translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
+@dataclass(frozen=True)
+class InputAnchor:
+    """Where one frame's input frame sits in a frame fixed to the world (module docstring).
+
+    ``fixed``: the camera has not translated, and ``p_fixed = rotation @ p_input +
+    translation`` (rotation (3, 3), translation (3,) m) maps the input frame into the fixed
+    frame (the camera, or the floor frame, at the first image). ``fixed=False``: the camera
+    translates or its motion is unknown; the input root does not locate the person in the
+    world."""
+
+    fixed: bool
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def apply(self, R_in: np.ndarray, T_in: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """An input root pose (R (3, 3), T (3,)) in the fixed frame."""
+        return self.rotation @ R_in, self.rotation @ T_in + self.translation
+
+
 class StaticCameraFusion:
     """Complementary filter of the GMR world pose with the input's root pose when the camera
     is static (beyond the paper).
@@ -121,12 +148,19 @@ class StaticCameraFusion:
         self.reset()
 
     def reset(self) -> None:
-        self._pairs: List[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        self.W_R: Optional[np.ndarray] = None
-        self.W_t: Optional[np.ndarray] = None
+        """A new segment: with a known input up the fused pose starts at the measurement."""
+        self.realign()
         if self.input_up is not None:
             self.W_R = quat_to_matrix(quat_from_two_vectors(self.input_up, _EZ))
             self.W_t = np.zeros(3)
+
+    def realign(self) -> None:
+        """The input frame moved in the world by an unknown amount (a camera that
+        translated): estimate its heading and origin again from the next ``init_s`` of GMR
+        poses, as at the start with an unknown up."""
+        self._pairs: List[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.W_R: Optional[np.ndarray] = None
+        self.W_t: Optional[np.ndarray] = None
 
     @property
     def ready(self) -> bool:
@@ -155,7 +189,8 @@ class StaticCameraFusion:
         return R, T, True
 
     def _estimate(self) -> None:
-        g = np.mean([R_in @ u for _, _, R_in, _, u in self._pairs], axis=0)
+        g = self.input_up if self.input_up is not None else \
+            np.mean([R_in @ u for _, _, R_in, _, u in self._pairs], axis=0)
         W0 = quat_to_matrix(quat_from_two_vectors(g, _EZ))
         d = np.array([yaw_of(R) - yaw_of(W0 @ R_in) for R, _, R_in, _, _ in self._pairs])
         psi = math.atan2(np.mean(np.sin(d)), np.mean(np.cos(d)))
@@ -219,6 +254,8 @@ class OnlineGMR:
         self.segments = 0
         #: Frames whose network output was not finite and was replaced (module docstring).
         self.nonfinite_outputs = 0
+        #: Frames not fused because their anchor said the camera translates (or is unknown).
+        self.unanchored_frames = 0
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -227,6 +264,7 @@ class OnlineGMR:
         size = self.window
         self._feats: Deque[np.ndarray] = collections.deque(maxlen=size)
         self._poses: Deque[Pose] = collections.deque(maxlen=size)
+        self._anchors_in: Deque[Optional[InputAnchor]] = collections.deque(maxlen=size)
         self._stamps: Deque[int] = collections.deque(maxlen=size)
         self._received = 0          # frames of this segment
         self._emitted = 0           # frames of this segment emitted
@@ -261,10 +299,13 @@ class OnlineGMR:
                 f'joints {list(self.joint_names)} in this order; the motion has '
                 f'{len(pose.joint_names)} (missing {missing}, unknown {extra})')
 
-    def push(self, stamp_ns: int, pose: Pose) -> Tuple[List[WorldFrame], str]:
+    def push(self, stamp_ns: int, pose: Pose, anchor: Optional[InputAnchor] = None
+             ) -> Tuple[List[WorldFrame], str]:
         """Add one frame. Returns (frames, event): the world frames that became ready and ''
         or the reason the accumulation restarted ('backwards', 'gap'); on a restart the frames
-        of the previous segment still waiting for look-ahead come first."""
+        of the previous segment still waiting for look-ahead come first. ``anchor``: the
+        camera's motion for the fusion (:class:`InputAnchor`; None: fused as a static
+        camera when there is a fusion)."""
         self.check_pose(pose)
         if not (np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(pose.root_position))
                 and np.all(np.isfinite(pose.skeleton.offsets))):
@@ -288,6 +329,7 @@ class OnlineGMR:
                                         pose.skeleton.group_lengths(),
                                         None if up is None else up[None])[0])
         self._poses.append(pose)
+        self._anchors_in.append(anchor)
         self._stamps.append(int(stamp_ns))
         self._received += 1
         self._cache = None
@@ -362,6 +404,19 @@ class OnlineGMR:
         R = heading_rotation(yaw_of(R) - yaw_of(R_in)) @ R_in
         return R, np.array([T[0], T[1], float(pose.root_position[2])])
 
+    def _fuse(self, R: np.ndarray, T: np.ndarray, pose: Pose, anchor: Optional[InputAnchor],
+              up: np.ndarray, first: bool) -> Tuple[np.ndarray, np.ndarray, bool]:
+        """The fusion step of one frame (module docstring: static camera, camera motion)."""
+        R_in, T_in = quat_to_matrix(pose.rotations[0]), np.asarray(pose.root_position, float)
+        if anchor is not None:
+            if not anchor.fixed:
+                self.unanchored_frames += 1
+                if self.fusion.ready or self.fusion._pairs:
+                    self.fusion.realign()
+                return R, T, False
+            R_in, T_in = anchor.apply(R_in, T_in)
+        return self.fusion.step(R, T, R_in, T_in, up, first=first)
+
     def _emit(self) -> WorldFrame:
         k = self._emitted                               # segment index of the frame
         first_in_buffer = self._received - len(self._stamps)
@@ -392,13 +447,9 @@ class OnlineGMR:
                 b = R.T @ _EZ
                 corr = matrix_to_axis_angle(quat_to_matrix(quat_from_two_vectors(up, b)))
                 R = R @ axis_angle_to_matrix(self.tilt_correction * corr)
-            if self.fusion is not None:
-                R, T, fused = self.fusion.step(R, T, quat_to_matrix(pose.rotations[0]),
-                                               pose.root_position, up)
             dt = (self._stamps[pos] - self._stamps[pos - 1]) * 1e-9
-        if k == 0 and self.fusion is not None:
-            R, T, fused = self.fusion.step(R, T, quat_to_matrix(pose.rotations[0]),
-                                           pose.root_position, up, first=True)
+        if self.fusion is not None:
+            R, T, fused = self._fuse(R, T, pose, self._anchors_in[pos], up, k == 0)
         if k % 64 == 0:
             R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
         T_gmr = T

@@ -484,3 +484,76 @@ def test_position_input_is_the_root_frame_joints_and_ignores_leaf_twist():
     f2 = F.gmr_features(twisted, gl, pose_input='positions')
     np.testing.assert_allclose(f2, f, atol=1e-6)
     assert not np.allclose(F.gmr_features(twisted, gl), F.gmr_features(m.rotations, gl))
+
+
+def _camera_views(poses, C, c, turn_rate=0.0):
+    """The poses (world frame) as a camera sees them that stands at ``c`` with orientation
+    ``C`` (x_world = C x_cam + c) and turns about its own y axis at ``turn_rate`` rad/frame;
+    returns the camera-frame poses and the camera's rotation since the first frame
+    (current camera -> first camera) per frame."""
+    out, R0s = [], []
+    for i, p in enumerate(poses):
+        R0 = axis_angle_to_matrix(np.array([0.0, turn_rate * i, 0.0]))
+        Ci = C @ R0                                       # world <- current camera
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(Ci.T @ quat_to_matrix(p.rotations[0]))
+        out.append(Pose(p.skeleton, rot, Ci.T @ (p.root_position - c)))
+        R0s.append(R0)
+    return out, R0s
+
+
+def _fused_roots(poses, anchors=None, up=None):
+    online = OnlineGMR(_small_model(), lookahead=3,
+                       fusion=StaticCameraFusion(30.0, init_s=0.3, input_up=up))
+    frames = []
+    for i, p in enumerate(poses):
+        frames += online.push(i * 33_333_333, p, None if anchors is None else anchors[i])[0]
+    frames += online.flush()
+    return online, np.stack([f.pose.root_position for f in frames]), frames
+
+
+def test_a_turning_camera_is_fused_once_its_rotation_is_taken_out():
+    """The network sees only local poses, so the GMR motion is the same whether the camera
+    turns or not; with the camera's rotation as anchors the fused path is the static
+    camera's, and a camera said to translate is not fused at all."""
+    from mocap_global.online import InputAnchor
+
+    poses = _poses(60)
+    C = axis_angle_to_matrix(np.array([-1.7, 0.1, 0.2]))
+    c = np.array([4.0, -1.0, 1.5])
+    static, _ = _camera_views(poses, C, c)
+    turning, R0s = _camera_views(poses, C, c, turn_rate=0.01)
+    _, T_static, _ = _fused_roots(static)
+    _, T_turn, _ = _fused_roots(turning, [InputAnchor(True, R) for R in R0s])
+    np.testing.assert_allclose(T_turn, T_static, atol=1e-6)
+    # without taking the rotation out, the turning camera's path is another one
+    _, T_wrong, _ = _fused_roots(turning)
+    assert np.abs(T_wrong - T_static).max() > 0.05
+    # a translating camera: no frame fused, the path is GMR's own
+    online, T_moving, frames = _fused_roots(turning, [InputAnchor(False)] * 60)
+    assert not any(f.fused for f in frames) and online.unanchored_frames == 60
+    plain = OnlineGMR(_small_model(), lookahead=3)
+    ref = []
+    for i, p in enumerate(turning):
+        ref += plain.push(i * 33_333_333, p)[0]
+    ref += plain.flush()
+    np.testing.assert_allclose(T_moving, np.stack([f.pose.root_position for f in ref]),
+                               atol=1e-9)
+
+
+def test_the_fusion_aligns_again_after_the_camera_translated():
+    """Static, then 20 frames of a translating camera, then static at a new place: the
+    fusion stops, aligns itself again over init_s, and fuses the last frames."""
+    from mocap_global.online import InputAnchor
+
+    poses = _poses(60)
+    C = axis_angle_to_matrix(np.array([-1.7, 0.1, 0.2]))
+    first, _ = _camera_views(poses[:20], C, np.array([4.0, -1.0, 1.5]))
+    later, _ = _camera_views(poses[20:], C, np.array([5.0, -0.5, 1.5]))
+    anchors = [InputAnchor(True)] * 20 + [InputAnchor(False)] * 20 + [InputAnchor(True)] * 20
+    online, T, frames = _fused_roots(first + later, anchors)
+    fused = [f.fused for f in frames]
+    # an unknown input up: 0.3 s (9 frames) of alignment first, then fused
+    assert not any(fused[:9]) and all(fused[9:20]) and not any(fused[20:40])
+    assert not fused[40] and all(fused[50:])            # 0.3 s to align again, then fused
+    assert online.unanchored_frames == 20 and online.fusion.ready

@@ -5,6 +5,10 @@ Publishes for every processed frame, stamped with the image's stamp (docs/design
     (``max_persons``), width = 23 keypoints, float32 ``u, v, confidence``; when nobody is found
     the cloud is still published, with all confidences 0;
   * ``/mocap/camera_info`` (sensor_msgs/CameraInfo): the intrinsics of the keypoints;
+  * ``/mocap/camera/motion`` (nav_msgs/Odometry) with ``camera_motion`` (image sources): the
+    camera's rotation since the first frame, its angular velocity and whether it is static,
+    rotating or moving, from the image background (``mocap_keypoints.camera_motion``; the
+    encoding is ``mocap_core.ros_conversions.camera_motion_to_odometry``'s);
   * ``/mocap/keypoints2d/annotated`` (sensor_msgs/Image, bgr8) with ``publish_annotated``:
     the skeleton drawn over the frame, for debugging (reliable, keep-last 2, published by a
     second node ``<name>_annotated`` with its own DDS participant);
@@ -40,13 +44,14 @@ import re
 import sys
 import threading
 import time
-from typing import Deque, Iterator, List, Optional, Tuple
+from typing import Deque, Dict, Iterator, List, Optional, Tuple
 
 import numpy as np
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
 from mocap_core import topics
@@ -58,6 +63,7 @@ from mocap_core.metrics import LatencyStats, RateMeter
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
 from mocap_core.qos import SENSOR_QOS, STREAM_QOS
 from mocap_core.ros_conversions import (MessageError, bgr_to_image, camera_info_to_intrinsics,
+                                        camera_motion_to_odometry,
                                         compressed_image_to_bgr, image_to_bgr,
                                         intrinsics_to_camera_info, keypoints_to_cloud,
                                         make_header, stamp_to_ns)
@@ -65,6 +71,7 @@ from mocap_core.streams import StampOrder
 
 from .detector import create_detector
 from .intrinsics import IntrinsicsProvider
+from .camera_motion import CameraMotionParams
 from .pipeline import FrameProcessor, FrameResult, select_persons  # noqa: F401 (re-exported)
 from .sources import SOURCE_KINDS, Frame, SourceError, open_source, resolve_kind
 from .worker import LatestWorker, SourceFeeder
@@ -137,6 +144,12 @@ PARAMETERS = (
               'smaller step back or a repeated stamp drops the image as stale', min_value=0.001),
     ParamSpec('frame_id', 'camera_optical_frame', 'frame_id of the keypoints and camera info '
               '(source topic: the image\'s own frame_id when it has one)'),
+    ParamSpec('camera_motion', True, 'Estimate the camera\'s rotation and whether it moves '
+              'from the image background (tracked corners outside the people) and publish it '
+              'on /mocap/camera/motion (nav_msgs/Odometry) for the world stage; image sources '
+              'only', read_only=True),
+    ParamSpec('camera_motion_max_width', 640, 'Frames wider than this are scaled down for the '
+              'camera-motion estimate (speed)', min_value=64, read_only=True),
 )
 
 ANNOTATED_TOPIC = topics.ANNOTATED
@@ -269,13 +282,21 @@ class KeypointsNode(Node):
                 min_tracking_confidence=p['min_tracking_confidence'])
             self.detector_name = detector.name
         self.detector = detector
+        motion = None
+        if p['camera_motion'] and self.kind != 'openpose_json':
+            motion = CameraMotionParams(max_width=p['camera_motion_max_width'])
         self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
                                         undistort=p['undistort'],
                                         annotate=p['publish_annotated'],
                                         fixed_size=fixed_size,
-                                        restart_after_s=p['restart_after_s'])
+                                        restart_after_s=p['restart_after_s'],
+                                        camera_motion=motion)
         self.pub_kp = self.create_publisher(PointCloud2, topics.KEYPOINTS, SENSOR_QOS)
         self.pub_info = self.create_publisher(CameraInfo, topics.CAMERA_INFO, STREAM_QOS)
+        self.pub_motion = (self.create_publisher(Odometry, topics.CAMERA_MOTION, STREAM_QOS)
+                           if motion is not None else None)
+        self.motion_states: Dict[str, int] = {}
+        self.motion_stats = LatencyStats()
         self.pub_annotated = None
         self._annotated_node = None
         if p['publish_annotated']:
@@ -574,6 +595,14 @@ class KeypointsNode(Node):
             self.diag.set_value('intrinsics', fi.detail)
         self.pub_info.publish(intrinsics_to_camera_info(fi.intrinsics, header))
         self.pub_kp.publish(keypoints_to_cloud(res.keypoints, header))
+        cm = res.camera_motion
+        if self.pub_motion is not None and cm is not None:
+            self.pub_motion.publish(camera_motion_to_odometry(
+                cm.state, cm.orientation, cm.angular_velocity,
+                make_header(res.stamp_ns, header.frame_id + '_start'), header.frame_id))
+            self.motion_states[cm.state] = self.motion_states.get(cm.state, 0) + 1
+            self.motion_stats.add(res.camera_motion_s)
+            self.diag.set_value('camera_motion', cm.state)
         if self.pub_annotated is not None and res.annotated is not None:
             now = time.monotonic()
             if now >= self._next_annotated:
@@ -595,6 +624,13 @@ class KeypointsNode(Node):
         for key, v in (('detector_ms_median', s['median']), ('detector_ms_p95', s['p95'])):
             self.diag.set_value(key, 'nan' if np.isnan(v) else f'{v * 1e3:.2f}')
         self.diag.set_value('frames_without_person', self.no_person)
+        if self.pub_motion is not None:
+            m = self.motion_stats.summary()['median']
+            self.diag.set_value('camera_motion_ms_median', 'nan' if np.isnan(m) else
+                                f'{m * 1e3:.2f}')
+            self.diag.set_value('camera_motion_frames', ', '.join(
+                f'{k} {v}' for k, v in sorted(self.motion_states.items())) or 'none yet')
+            self.diag.set_value('camera_motion_failures', self.processor.camera_motion_failures)
         self._count_worker_drops()
         if time.monotonic() - self._last_error_t < 5.0:
             self.diag.warn(self._last_error)

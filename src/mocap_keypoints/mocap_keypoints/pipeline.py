@@ -6,7 +6,8 @@ thread does for every frame.
 detections), keep the ``max_persons`` most confident persons (padding with all-zero persons,
 so a frame without anybody still gives a cloud whose confidences are all 0), pick the
 intrinsics for the image size, undistort the keypoints when the calibration has lens
-distortion, and draw the annotated debug image if asked.
+distortion, estimate the camera's motion from the image background (``camera_motion``,
+:mod:`.camera_motion`) and draw the annotated debug image if asked.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from mocap_core.skeleton import KEYPOINT_EDGES, KEYPOINT_NAMES, NUM_KEYPOINTS
 from mocap_core.streams import StampOrder
 
+from .camera_motion import CameraMotionEstimate, CameraMotionEstimator, CameraMotionParams
 from .detector import Detector
 from .intrinsics import FrameIntrinsics, IntrinsicsProvider, distortion_supported, \
     undistort_keypoints
@@ -90,6 +92,8 @@ class FrameResult:
     image_size: Tuple[int, int] = (0, 0)            # width, height
     detector_s: float = 0.0
     annotated: Optional[np.ndarray] = None
+    camera_motion: Optional[CameraMotionEstimate] = None   # image frames, when enabled
+    camera_motion_s: float = 0.0
     error: Optional[str] = None
     notes: List[str] = field(default_factory=list)  # to log (intrinsics changes, ...)
 
@@ -105,7 +109,8 @@ class FrameProcessor:
     def __init__(self, detector: Optional[Detector], intrinsics: IntrinsicsProvider,
                  max_persons: int = 1, undistort: bool = True, annotate: bool = False,
                  fixed_size: Optional[Tuple[int, int]] = None,
-                 restart_after_s: float = 1.0) -> None:
+                 restart_after_s: float = 1.0,
+                 camera_motion: Optional[CameraMotionParams] = None) -> None:
         self.detector = detector
         # stamps jumping back start a new stream: the detector forgets the person it tracked
         self.order = StampOrder(restart_after_s)
@@ -116,10 +121,36 @@ class FrameProcessor:
         self.fixed_size = fixed_size
         self._warned_models: set = set()
         self._last_size: Optional[Tuple[int, int]] = None
+        self.camera_motion_params = camera_motion
+        self._motion: Optional[CameraMotionEstimator] = None
+        self._motion_K: Optional[np.ndarray] = None
+        #: frames whose camera-motion estimate failed (an exception; the frame is published)
+        self.camera_motion_failures = 0
+
+    def _estimate_camera_motion(self, res: FrameResult, image: np.ndarray,
+                                keypoints: np.ndarray, restart: bool) -> None:
+        """The camera's motion into this frame (module :mod:`.camera_motion`); a new estimator
+        when the intrinsics change or the stream restarts. A failure is noted and counted,
+        and the frame goes on without an estimate."""
+        i = res.intrinsics.intrinsics
+        K = np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
+        if self._motion is None or restart or not np.array_equal(K, self._motion_K):
+            self._motion = CameraMotionEstimator(K, self.camera_motion_params)
+            self._motion_K = K
+        t0 = time.perf_counter()
+        try:
+            res.camera_motion = self._motion.update(image, res.stamp_ns * 1e-9, keypoints)
+        except Exception as exc:  # noqa: BLE001 - an estimate is optional; the frame is not
+            self.camera_motion_failures += 1
+            self._motion = None
+            res.notes.append(f'camera motion estimate failed ({type(exc).__name__}: {exc}); '
+                             'starting it again')
+        res.camera_motion_s = time.perf_counter() - t0
 
     def process(self, frame: Frame) -> FrameResult:
         res = FrameResult(frame.stamp_ns, frame.index, frame.name, frame.frame_id)
-        if self.order.check(frame.stamp_ns) == 'restart' and self.detector is not None:
+        restart = self.order.check(frame.stamp_ns) == 'restart'
+        if restart and self.detector is not None:
             self.detector.reset()
         if frame.error is not None:
             res.error = frame.error
@@ -165,6 +196,8 @@ class FrameProcessor:
                 res.notes.append(f'distortion model {fi.distortion_model!r} is not supported: '
                                  'keypoints are published without undistortion')
         res.keypoints = kp
+        if self.camera_motion_params is not None and image is not None:
+            self._estimate_camera_motion(res, image, raw, restart)
         if self.annotate and image is not None:
             seen = int(np.sum(raw[0, :, 2] > 0.5)) if len(raw) else 0
             res.annotated = draw_keypoints(

@@ -70,9 +70,39 @@ def _index(stamps: np.ndarray, first: int, fps: float) -> np.ndarray:
     return np.round((stamps - first) * fps / 1e9).astype(int)
 
 
+def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path) -> dict:
+    """The clip's bag with the camera-motion estimate from its video added (what the keypoint
+    node publishes when it reads the video), and the estimate's accuracy against the true
+    camera: ``{'rotation_error_deg_s': median error of the frame-to-frame rotation,
+    'drift_deg': orientation error at the end, 'state_<state>': fraction of frames}``
+    (scored as ``camera_<key>``)."""
+    from mocap_keypoints.camera_motion import estimate_video
+
+    from ..render.bag import write_rendered_bag
+    from ..rotations import matrix_to_axis_angle, quat_to_matrix
+
+    fps = float(gt['fps'])
+    est = estimate_video(clip_dir / 'video.mp4', gt['K'], fps, gt['keypoints'])
+    write_rendered_bag(clip_dir, out, overwrite=True, camera_motion=[
+        (e.state, e.orientation, e.angular_velocity) for e in est])
+    R = gt['camera_R']                   # world -> camera
+    n = min(len(est), len(R))
+    errs = [np.linalg.norm(matrix_to_axis_angle(est[i].rotation.T @ (R[i - 1] @ R[i].T)))
+            for i in range(1, n) if est[i].frame_state != 'unknown']
+    acc = {'rotation_error_deg_s': float(np.degrees(np.median(errs)) * fps)
+           if errs else float('nan'),
+           'drift_deg': float(np.degrees(np.linalg.norm(matrix_to_axis_angle(
+               quat_to_matrix(est[n - 1].orientation).T @ (R[0] @ R[n - 1].T)))))}
+    for state in ('static', 'rotating', 'moving', 'unknown'):
+        acc[f'state_{state}'] = float(np.mean([e.state == state for e in est[:n]]))
+    return acc
+
+
 def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
-             params: Dict[str, Dict], progress: bool = False):
-    """Process one rendered clip (reusing a finished output) and score it."""
+             params: Dict[str, Dict], progress: bool = False, camera_motion: bool = True):
+    """Process one rendered clip (reusing a finished output) and score it. With
+    ``camera_motion`` and start ``keypoints``, the input bag carries the camera-motion
+    estimate from the clip's video (start ``video``: the keypoint node makes it)."""
     from .. import topics as T
     from ..camera import CameraCalibration, CameraIntrinsics, write_camera_info_yaml
     from ..render.clip import load_clip
@@ -102,6 +132,10 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             if intrinsics != 'true':
                 raise EvalError('--start keypoints uses the bag\'s true camera_info; '
                                 'use --start video for --intrinsics approx')
+            if camera_motion:
+                src = out / 'input_bag'
+                (out / 'camera_motion.json').write_text(json.dumps(
+                    _camera_motion_bag(clip_dir, gt, src), indent=1))
         summary = process(src, bag, params=p, overwrite=True, progress=progress,
                           log=lambda *a: None, log_level='error', **kw)
         (out / 'summary.json').write_text(json.dumps(summary, indent=1, default=str))
@@ -125,6 +159,9 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             roots[stage] = (j, _index(s, first, fps))   # all joints: the feet are scored
     score = score_clip(meta['clip'], meta, gt, lj if len(lj) else None,
                        _index(ls, first, fps), roots)
+    cm = out / 'camera_motion.json'
+    if cm.exists():
+        score.root.setdefault('camera', {}).update(json.loads(cm.read_text()))
     fs, fv = data[T.PHYSICS_FLOOR]
     if len(fv) and 'camera_R' in gt and 'physics' in score.root:
         from ..render.evaluate import floor_errors
@@ -208,6 +245,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
         clips = clips[:args.limit]
     out = Path(args.output)
     tag = args.tag or ('_'.join(f'{k}' for k in sorted(args.param)) or 'default')
+    if args.no_camera_motion:
+        tag += '_nocm'
     tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
     work_root = Path(args.work) if args.work else Path.home() / '.cache' / 'mocap' / 'eval_video'
     work = work_root / f'{tag}_{args.start}_{args.intrinsics}'
@@ -220,7 +259,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     scores, failed, no_output = [], [], []
     for d in tqdm(clips, desc='mocap eval video', unit='clip', disable=args.quiet):
         try:
-            scores.append(run_clip(d, work, args.start, args.intrinsics, params))
+            scores.append(run_clip(d, work, args.start, args.intrinsics, params,
+                                   camera_motion=not args.no_camera_motion))
         except NoOutput as exc:
             no_output.append(str(exc))
         except (EvalError, ProcessError, ValueError, OSError) as exc:
@@ -268,6 +308,9 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--start', choices=('video', 'keypoints'), default='video',
                    help='video: run the detector on the video; keypoints: reuse the '
                    "render's detections (same detector, faster)")
+    p.add_argument('--no-camera-motion', action='store_true',
+                   help='--start keypoints: leave the camera-motion estimate from the video '
+                   'out of the input (the world stage then runs without it)')
     p.add_argument('--tag', help='name of this run (output bags reused by the same tag)')
     p.add_argument('--work', help='where the output bags are kept (default '
                    '~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>)')

@@ -44,7 +44,7 @@ VIDEO_SUFFIXES = {'.mp4', '.avi', '.mov', '.mkv', '.webm', '.m4v', '.mpg', '.mpe
 IMAGE_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'}
 #: Topics each stage's node produces (an input bag's copy of them is not kept).
 PRODUCED = {
-    'keypoints': (T.KEYPOINTS, T.CAMERA_INFO),
+    'keypoints': (T.KEYPOINTS, T.CAMERA_INFO, T.CAMERA_MOTION),
     'lifter': (T.stage_prefix('lifter'), T.SKELETON_URDF),
     'physics': (T.stage_prefix('physics'),),
     'gmr': (T.stage_prefix('world'),),
@@ -124,6 +124,8 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
         'lifter': [T.LIFTER_MOTION] + [t for t in (T.LIFTER_CONTACTS,) if t in topics],
         'physics': [T.PHYSICS_MOTION],
     }[start]
+    if start != 'images' and T.CAMERA_MOTION in topics:    # for the world stage
+        feed.append(T.CAMERA_MOTION)
     produced = [p for n in nodes for p in PRODUCED[n]]
     dropped = [t for t in sorted(topics) if t not in feed and any(
         t == p or (p.endswith('/') and t.startswith(p)) for p in produced)]

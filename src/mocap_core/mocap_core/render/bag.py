@@ -16,7 +16,7 @@ their forward kinematics differs from the exact joints on the trunk by a few cen
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Union
+from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -24,18 +24,26 @@ from ..rotations import matrix_to_quat, quat_multiply
 
 
 def write_rendered_bag(clip_dir: Union[str, Path], out: Union[str, Path],
-                       overwrite: bool = True) -> Path:
-    """Write the bag of the rendered clip in ``clip_dir`` (its ``data.npz``) to ``out``."""
+                       overwrite: bool = True,
+                       camera_motion: Optional[Sequence[Tuple[str, np.ndarray, np.ndarray]]]
+                       = None) -> Path:
+    """Write the bag of the rendered clip in ``clip_dir`` (its ``data.npz``) to ``out``.
+
+    ``camera_motion``: per frame (state, orientation x y z w, angular velocity rad/s), the
+    camera-motion estimate from the video, written as ``/mocap/camera/motion`` like the
+    keypoint node publishes it."""
     from geometry_msgs.msg import Point, Pose as PoseMsg, PoseStamped, Quaternion
 
     from ..bag_io import BagWriter
     from ..camera import CameraIntrinsics
     from ..data.gt_bag import DEFAULT_START_NS, GT_TOPICS, OPTICAL_FRAME, WORLD_FRAME, _qos
     from ..pose import Pose
-    from ..ros_conversions import (contacts_to_msg, intrinsics_to_camera_info,
+    from ..ros_conversions import (camera_motion_to_odometry, contacts_to_msg,
+                                   intrinsics_to_camera_info,
                                    keypoints_to_cloud, make_header, pose_to_motion,
                                    positions_to_cloud)
     from ..skeleton import Skeleton
+    from ..topics import CAMERA_MOTION
 
     with np.load(Path(clip_dir) / 'data.npz') as z:
         d = {k: z[k] for k in z.files}
@@ -66,6 +74,11 @@ def write_rendered_bag(clip_dir: Union[str, Path], out: Union[str, Path],
                           qos=stream_qos)
             bag.write_msg(T['keypoints'], stamp, keypoints_to_cloud(d['keypoints'][i], hc),
                           qos=sensor_qos)
+            if camera_motion is not None and i < len(camera_motion):
+                state, q_cm, w_cm = camera_motion[i]
+                bag.write_msg(CAMERA_MOTION, stamp, camera_motion_to_odometry(
+                    state, q_cm, w_cm, make_header(stamp, OPTICAL_FRAME + '_start'),
+                    OPTICAL_FRAME), qos=stream_qos)
             rot_w = d['rotations'][i]
             root_w = d['root_positions'][i]
             rot_c = rot_w.copy()

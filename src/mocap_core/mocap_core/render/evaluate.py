@@ -389,7 +389,11 @@ def aggregate(scores: List[ClipScore]) -> dict:
                                                         'physics_penetration_after_1s_mm',
                                                         'world_penetration_after_1s_mm',
                                                         'physics_skating_mm',
-                                                        'world_skating_mm')}}
+                                                        'world_skating_mm', 'world_rte',
+                                                        'camera_rotation_error_deg_s',
+                                                        'camera_state_static',
+                                                        'camera_state_rotating',
+                                                        'camera_state_moving')}}
                      for g, ps in sorted(groups.items())}
     return out
 
@@ -458,6 +462,23 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                 f" | {_f(r['world_root_error'], '{:.0f}')} | "
                 f"{_f(r.get('physics_penetration_after_1s_mm'))} / "
                 f"{_f(r.get('world_penetration_after_1s_mm'))} |")
+    cams = agg.get('by_camera', {})
+    if any(np.isfinite(r.get('camera_state_static', float('nan'))) for r in cams.values()):
+        lines += ['', '## World frame and camera motion by camera kind (median over clips)',
+                  '', 'RTE: root error after rigid alignment of the whole clip over the '
+                  'distance travelled (clips that travel at least '
+                  f'{RTE_MIN_TRAVEL_M:g} m). Camera motion: the estimate from the video '
+                  'background (`mocap_keypoints.camera_motion`), the share of frames in each '
+                  'state and the median error of its frame-to-frame rotation.', '',
+                  '| camera | clips | world RTE | world root error (mm) | static | rotating '
+                  '| moving | rotation error (deg/s) |', '|---|---|---|---|---|---|---|---|']
+        for g, r in cams.items():
+            lines.append(
+                f"| {g} | {r['clips']} | {_f(r.get('world_rte'))} % | "
+                f"{_f(r.get('world_root_error'), '{:.0f}')} | "
+                + ' | '.join(f"{_f(100 * r.get(f'camera_state_{k}', float('nan')), '{:.0f}')} %"
+                             for k in ('static', 'rotating', 'moving'))
+                + f" | {_f(r.get('camera_rotation_error_deg_s'), '{:.2f}')} |")
     return '\n'.join(lines) + '\n'
 
 

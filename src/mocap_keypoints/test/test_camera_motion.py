@@ -1,0 +1,126 @@
+"""Camera motion from the background: synthetic images with a known camera motion."""
+
+import cv2
+import numpy as np
+import pytest
+
+from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
+from mocap_keypoints.camera_motion import (CameraMotionEstimator, CameraMotionParams,
+                                           fit_rotation, person_mask)
+
+W, H = 640, 480
+K = np.array([[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]])
+
+
+def _texture(seed=0, size=(1400, 1800)):
+    """A large random scene of rectangles and blobs (plenty of corners)."""
+    rng = np.random.default_rng(seed)
+    img = np.full((*size, 3), 90, np.uint8)
+    for _ in range(900):
+        x, y = rng.integers(0, size[1]), rng.integers(0, size[0])
+        w, h = rng.integers(5, 60, 2)
+        c = tuple(int(v) for v in rng.integers(0, 255, 3))
+        cv2.rectangle(img, (int(x), int(y)), (int(x + w), int(y + h)), c, -1)
+    return cv2.GaussianBlur(img, (3, 3), 0)
+
+
+SCENE = _texture()
+# the scene seen by the camera at the first frame: a plane at infinity, pixels of the scene
+# image centred on the optical axis
+_S = np.array([[1.0, 0.0, SCENE.shape[1] / 2 - 319.5], [0.0, 1.0, SCENE.shape[0] / 2 - 239.5],
+               [0.0, 0.0, 1.0]])
+
+
+def _view(R0t):
+    """The frame seen by a camera turned by ``R0t`` (current camera -> first camera) about
+    its centre: pixel x_t = K R0t^T K^-1 x_0."""
+    Hm = K @ R0t.T @ np.linalg.inv(K) @ np.linalg.inv(_S)
+    return cv2.warpPerspective(SCENE, Hm, (W, H), flags=cv2.INTER_LINEAR)
+
+
+def _person():
+    """Keypoints of a 'person' box in the middle of the image (masked out)."""
+    kp = np.zeros((23, 3))
+    kp[:, 0] = np.linspace(280, 360, 23)
+    kp[:, 1] = np.linspace(150, 400, 23)
+    kp[:, 2] = 0.9
+    return kp
+
+
+def test_fit_rotation_recovers_a_rotation():
+    rng = np.random.default_rng(1)
+    b = rng.normal(size=(50, 3))
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    R = axis_angle_to_matrix(np.array([0.1, -0.2, 0.05]))
+    np.testing.assert_allclose(fit_rotation(b @ R.T, b), R, atol=1e-9)
+
+
+def test_person_mask_removes_the_person_and_the_border():
+    m = person_mask((H, W), _person(), 0.15, 4)
+    assert m[300, 320] == 0 and m[2, 100] == 0 and m[300, 100] == 255 and m[300, 600] == 255
+    # a person with too few confident points is not masked
+    kp = _person()
+    kp[:, 2] = 0.0
+    assert person_mask((H, W), kp, 0.15, 4)[300, 320] == 255
+
+
+def test_a_static_camera_is_static_without_drift():
+    est = CameraMotionEstimator(K)
+    img = _view(np.eye(3))
+    for i in range(20):
+        e = est.update(img, i / 30, _person())
+    assert e.state == 'static' and e.frame_state == 'static'
+    np.testing.assert_allclose(e.orientation, [0, 0, 0, 1], atol=1e-12)
+    assert not np.any(e.angular_velocity)
+
+
+@pytest.mark.parametrize('axis', [np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.2, 0.1])])
+def test_a_turning_camera_gives_its_rotation(axis):
+    """A pan of 15 deg/s (about the camera's y axis) or a turn about a tilted axis."""
+    w = np.radians(15.0) * axis / np.linalg.norm(axis)       # rad/s, camera frame
+    est = CameraMotionEstimator(K)
+    fps = 30.0
+    R = np.eye(3)
+    states = []
+    for i in range(40):
+        if i:
+            R = R @ axis_angle_to_matrix(w / fps)
+        e = est.update(_view(R), i / fps, _person())
+        states.append(e.frame_state)
+    assert e.state == 'rotating', states
+    drift = np.degrees(np.linalg.norm(matrix_to_axis_angle(
+        quat_to_matrix(e.orientation).T @ R)))
+    assert drift < 0.3, drift                                 # of 19.5 degrees turned
+    np.testing.assert_allclose(e.angular_velocity, w, atol=np.radians(1.0))
+
+
+def test_a_translating_camera_is_moving():
+    """Two depths: the lower half of the image (near ground) moves 4 px per frame, the upper
+    half (far) 1 px; no rotation explains that."""
+    est = CameraMotionEstimator(K)
+    top, bottom = SCENE[:H // 2 + 200], SCENE[600:600 + H // 2 + 200]
+    states = []
+    for i in range(30):
+        img = np.concatenate([top[:H // 2, 100 + i:100 + i + W],
+                              bottom[:H // 2, 100 + 4 * i:100 + 4 * i + W]])
+        states.append(est.update(img, i / 30, None).frame_state)
+    assert est.update(np.concatenate([top[:H // 2, 130:130 + W],
+                                      bottom[:H // 2, 220:220 + W]]), 1.0, None).state \
+        == 'moving', states
+
+
+def test_a_blank_scene_is_unknown_and_a_time_jump_restarts():
+    est = CameraMotionEstimator(K)
+    grey = np.full((H, W, 3), 128, np.uint8)
+    for i in range(12):
+        e = est.update(grey, i / 30, None)
+    assert e.state == 'unknown' and est.unknown_frames == 11
+    e = est.update(_view(np.eye(3)), 0.1, None)          # stamps went back: a new stream
+    assert e.first and e.state == 'static'
+
+
+def test_bad_parameters_are_named():
+    with pytest.raises(ValueError, match='parallax_px'):
+        CameraMotionParams(parallax_px=0.0).validate()
+    with pytest.raises(ValueError, match='min_features > max_features'):
+        CameraMotionEstimator(K, CameraMotionParams(min_features=500))
