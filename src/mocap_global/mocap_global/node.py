@@ -27,11 +27,12 @@ Camera motion (beyond the paper; ``camera_mode``): the input's root trajectory d
 when the camera does not move, so the GMR motion is fused with it
 (:class:`~mocap_global.online.StaticCameraFusion`). ``auto`` (default) reads the keypoint
 node's estimate from the image background (``camera_motion_topic``, nav_msgs/Odometry,
-matched by stamp): a static camera is fused; a camera that only turns has its rotation taken
-out of the input root first (in the floor frame, with ``floor_topic``, when the input is a
-floor frame); a translating camera, an unknown motion or a missing estimate leaves GMR alone
-for that frame, and the fusion aligns itself again once the camera stops. ``static`` fuses
-every frame, ``moving`` never does. ``/diagnostics`` says which mode each frame took.
+matched by stamp): a static camera is fused; with ``fuse_rotating``, a camera that only turns
+has its rotation taken out of the input root first (in the floor frame, with ``floor_topic``,
+when the input is a floor frame) and is fused too; a translating (or, by default, turning)
+camera, an unknown motion or a missing estimate leaves GMR alone for that frame, and the
+fusion aligns itself again once the camera stops. ``static`` fuses every frame, ``moving``
+never does. ``/diagnostics`` says which mode each frame took.
 
 Bad input never stops the node: a malformed or NaN message is dropped with a warning, a
 joint set that does not match the model is reported with the joints it needs, a stamp that
@@ -104,6 +105,10 @@ PARAMETERS = (
               "first, a translating camera leaves GMR alone), 'static' (fuse every frame), "
               "'moving' (GMR alone, the paper)", read_only=True,
               additional_constraints='auto, static or moving'),
+    ParamSpec('fuse_rotating', False, "camera_mode auto: also fuse the frames of a camera "
+              "that only turns, with its rotation taken out (off by default: on the rendered "
+              "test a camera that orbits is often taken for one that turns, docs/global.md)",
+              read_only=True),
     ParamSpec('static_camera', False, "Same as camera_mode:=static (kept for older launch "
               "files)", read_only=True),
     ParamSpec('camera_motion_topic', topics.CAMERA_MOTION, 'The camera-motion estimate '
@@ -117,7 +122,7 @@ PARAMETERS = (
               "'estimate', or three numbers 'x y z'", read_only=True),
     ParamSpec('fusion_init_s', 1.0, 'Static camera with an estimated up: seconds of GMR '
               'alone while the input frame\'s tilt and heading are estimated', min_value=0.0),
-    ParamSpec('fusion_position_time_constant_s', 0.5, 'Time constant of the position '
+    ParamSpec('fusion_position_time_constant_s', 0.15, 'Time constant of the position '
               'correction towards the input root', min_value=0.0),
     ParamSpec('fusion_orientation_time_constant_s', 1.0, 'Time constant of the orientation '
               'correction towards the input root', min_value=0.0),
@@ -314,7 +319,8 @@ class GMRNode(Node):
         state = 'no estimate' if cm is None else cm[0]
         self.camera_frames[state] = self.camera_frames.get(state, 0) + 1
         self.diag.set_value('camera_motion', state)
-        if cm is None or state not in ('static', 'rotating'):
+        fusable = ('static', 'rotating') if self.p['fuse_rotating'] else ('static',)
+        if cm is None or state not in fusable:
             return InputAnchor(False)
         R0 = cm[1]
         if not on_floor:

@@ -26,7 +26,9 @@ above the floor stands; the world root is placed so that the standing points sta
 touched down (the mean over them of ``anchor - (R p_local)_xy``), and GMR's step moves the
 root only while no point stands. The body then moves in the world by its own legs, as the
 physics put its feet, and its feet do not skate in the world output; GMR still gives the
-heading.
+heading. A fused frame (a static or turning camera) is not locked: its root follows the
+fused position, which follows the input root, whose feet are the physics' own; the lock
+would keep GMR's drift instead (measured in docs/global.md).
 
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
@@ -137,7 +139,7 @@ class StaticCameraFusion:
     orientation (geodesically) by ``1 - exp(-dt / orientation_time_constant_s)``.
     """
 
-    def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.5,
+    def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.15,
                  orientation_time_constant_s: float = 1.0,
                  input_up: Optional[np.ndarray] = None) -> None:
         self.init_frames = max(1, int(round(init_s * fps)))
@@ -456,7 +458,12 @@ class OnlineGMR:
         self._R, self._T = R, T                         # the accumulation stays GMR's
         if self.floor_input:
             R, T = self._on_floor(R, T, pose)
-            if self.foot_lock:
+            if self.foot_lock and fused:
+                # the fused root follows the input's, whose feet are the physics' own: no
+                # lock (it would keep GMR's drift); it starts afresh when the fusion stops
+                self._anchors = {}
+                self._T_gmr_prev = T_gmr.copy()
+            elif self.foot_lock:
                 T = self._lock_feet(k, R, T, T_gmr, pose)
         if k > 0 and dt > 0:
             lin = R.T @ (T - self._T_out) / dt

@@ -557,3 +557,23 @@ def test_the_fusion_aligns_again_after_the_camera_translated():
     assert not any(fused[:9]) and all(fused[9:20]) and not any(fused[20:40])
     assert not fused[40] and all(fused[50:])            # 0.3 s to align again, then fused
     assert online.unanchored_frames == 20 and online.fusion.ready
+
+
+def test_fused_floor_frames_follow_the_input_root_not_the_foot_lock():
+    """A static camera with a floor input: with an instant position gain the fused world root
+    is the input root (turned into the world), the foot lock does not hold GMR's drift."""
+    from mocap_global.online import InputAnchor
+
+    poses = _poses(50)
+    fusion = StaticCameraFusion(30.0, position_time_constant_s=1e-9,
+                                input_up=np.array([0.0, 0.0, 1.0]))
+    online = OnlineGMR(_small_model(), lookahead=3, fusion=fusion, floor_input=True,
+                       foot_lock=True)
+    frames = []
+    for i, p in enumerate(poses):
+        frames += online.push(i * 33_333_333, p, InputAnchor(True))[0]
+    frames += online.flush()
+    assert all(f.fused for f in frames)
+    T = np.stack([f.pose.root_position for f in frames])
+    T_in = np.stack([p.root_position for p in poses])
+    np.testing.assert_allclose(T, T_in @ fusion.W_R.T + fusion.W_t, atol=1e-6)

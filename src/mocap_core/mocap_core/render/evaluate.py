@@ -463,7 +463,8 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                 f"{_f(r.get('physics_penetration_after_1s_mm'))} / "
                 f"{_f(r.get('world_penetration_after_1s_mm'))} |")
     cams = agg.get('by_camera', {})
-    if any(np.isfinite(r.get('camera_state_static', float('nan'))) for r in cams.values()):
+    if any(np.isfinite(r.get(k, float('nan'))) for r in cams.values()
+           for k in ('camera_state_static', 'world_root_error')):
         lines += ['', '## World frame and camera motion by camera kind (median over clips)',
                   '', 'RTE: root error after rigid alignment of the whole clip over the '
                   'distance travelled (clips that travel at least '
