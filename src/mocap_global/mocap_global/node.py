@@ -55,7 +55,7 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import PoseStamped, TransformStamped
 from nav_msgs.msg import Odometry, Path as PathMsg
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, PointCloud2
@@ -68,7 +68,7 @@ from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
-from mocap_core.rotations import quat_to_matrix
+from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
 
 from .model import TTA_MODES, with_tta
 from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame
@@ -109,6 +109,19 @@ PARAMETERS = (
               "that only turns, with its rotation taken out (off by default: on the rendered "
               "test a camera that orbits is often taken for one that turns, docs/global.md)",
               read_only=True),
+    ParamSpec('camera_pose_topic', '', 'The camera\'s pose in a world frame (a robot\'s odom '
+              'or map): the world pose is that pose composed with the input pose, GMR fills '
+              'gaps and smooths, and the outputs are in the pose\'s frame. Empty = unknown',
+              read_only=True),
+    ParamSpec('camera_pose_type', 'odometry', "Message type on camera_pose_topic: 'odometry' "
+              "(nav_msgs/Odometry) or 'pose' (geometry_msgs/PoseStamped)", read_only=True,
+              additional_constraints='odometry or pose'),
+    ParamSpec('camera_pose_convention', 'optical', "Which frame the camera pose is of: "
+              "'optical' (x right, y down, z forward) or 'body' (REP-103 camera link: x "
+              "forward, y left, z up)", read_only=True,
+              additional_constraints='optical or body'),
+    ParamSpec('camera_pose_max_age_s', 0.1, 'A camera pose further than this from a frame\'s '
+              'stamp does not serve it (GMR fills the frame)', min_value=0.0),
     ParamSpec('static_camera', False, "Same as camera_mode:=static (kept for older launch "
               "files)", read_only=True),
     ParamSpec('camera_motion_topic', topics.CAMERA_MOTION, 'The camera-motion estimate '
@@ -145,8 +158,11 @@ PARAMETERS = (
 )
 
 
-#: Camera-motion estimates kept for matching by stamp (10 s at 30 fps).
+#: Camera-motion estimates and camera poses kept for matching by stamp (10 s at 30 fps).
 MAX_CAMERA_FRAMES = 300
+#: A camera body frame (REP-103: x forward, y left, z up) -> its optical frame (x right,
+#: y down, z forward): ``R_world_optical = R_world_body @ BODY_TO_OPTICAL``.
+BODY_TO_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 def parse_up(text: str) -> Optional[np.ndarray]:
@@ -219,6 +235,18 @@ class GMRNode(Node):
             raise ValueError(f"camera_mode must be auto, static or moving, got "
                              f"{p['camera_mode']!r}")
         self.camera_mode = 'static' if p['static_camera'] else p['camera_mode']
+        self.output_frame = p['frame_id']
+        self.camera_poses: Deque[Tuple[int, np.ndarray, np.ndarray]] = collections.deque(
+            maxlen=MAX_CAMERA_FRAMES)
+        self.camera_pose_missing = 0
+        if p['camera_pose_topic']:
+            if p['camera_pose_type'] not in ('odometry', 'pose'):
+                raise ValueError(f"camera_pose_type must be odometry or pose, got "
+                                 f"{p['camera_pose_type']!r}")
+            if p['camera_pose_convention'] not in ('optical', 'body'):
+                raise ValueError(f"camera_pose_convention must be optical or body, got "
+                                 f"{p['camera_pose_convention']!r}")
+            self.camera_mode = 'known'
         self.camera_motion: Dict[int, Tuple[str, np.ndarray]] = {}   # stamp -> state, R0
         self.camera_stamps: Deque[int] = collections.deque()
         self.floor: Optional[Tuple[int, np.ndarray, np.ndarray]] = None  # stamp, A, b
@@ -234,15 +262,21 @@ class GMRNode(Node):
         self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
             input_qos(STREAM_QOS, p['queue_depth'])))
+        if self.camera_mode == 'known':
+            msg_type = Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped
+            self.diag.watch('camera_pose', self.create_subscription(
+                msg_type, p['camera_pose_topic'],
+                guarded(self, self.on_camera_pose, 'camera pose'),
+                input_qos(STREAM_QOS, p['queue_depth'])))
+        if self.camera_mode in ('auto', 'known') and p['floor_topic']:
+            self.create_subscription(TransformStamped, p['floor_topic'],
+                                     guarded(self, self.on_floor, 'floor'),
+                                     input_qos(STREAM_QOS, p['queue_depth']))
         if self.camera_mode == 'auto' and p['camera_motion_topic']:
             self.diag.watch('camera_motion', self.create_subscription(
                 Odometry, p['camera_motion_topic'],
                 guarded(self, self.on_camera_motion, 'camera motion'),
                 input_qos(STREAM_QOS, p['queue_depth'])))
-            if p['floor_topic']:
-                self.create_subscription(TransformStamped, p['floor_topic'],
-                                         guarded(self, self.on_floor, 'floor'),
-                                         input_qos(STREAM_QOS, p['queue_depth']))
         self.diag.watch('motion', self.pub['motion'])
         self.create_timer(0.1, guarded(self, self.on_idle, 'idle'))
         self.get_logger().info(
@@ -262,7 +296,8 @@ class GMRNode(Node):
         if self.camera_mode != 'moving':
             fusion = StaticCameraFusion(
                 self.fps, p['fusion_init_s'], p['fusion_position_time_constant_s'],
-                p['fusion_orientation_time_constant_s'], input_up=up)
+                p['fusion_orientation_time_constant_s'], input_up=up,
+                known_world=self.camera_mode == 'known')
             self.get_logger().info(
                 ('static camera: fusing' if self.camera_mode == 'static' else
                  'camera mode auto: fusing the frames of a static or turning camera')
@@ -299,6 +334,67 @@ class GMRNode(Node):
         while len(self.camera_stamps) > MAX_CAMERA_FRAMES:
             self.camera_motion.pop(self.camera_stamps.popleft(), None)
 
+    def on_camera_pose(self, msg) -> None:
+        """Keep the camera's optical-frame pose in the world (``camera_pose_topic``)."""
+        if isinstance(msg, Odometry):
+            t, q = rc.odometry_to_root(msg)
+        else:
+            p, o = msg.pose.position, msg.pose.orientation
+            t, q = np.array([p.x, p.y, p.z]), np.array([o.x, o.y, o.z, o.w])
+        n = float(np.linalg.norm(q))
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q)) and n > 0.5):
+            self.diag.errors += 1
+            self.get_logger().warn('ignoring camera pose: not finite', throttle_duration_sec=5.0)
+            return
+        stamp = rc.stamp_to_ns(msg.header.stamp)
+        if self.camera_poses and stamp <= self.camera_poses[-1][0]:
+            if self.camera_poses[0][0] - stamp > 0 or stamp < self.camera_poses[-1][0] - 10**9:
+                self.camera_poses.clear()          # the poses start again (a bag restarted)
+            else:
+                return                             # an old or repeated pose: ignored
+        R = quat_to_matrix(q / n)
+        if self.p['camera_pose_convention'] == 'body':
+            R = R @ BODY_TO_OPTICAL
+        if msg.header.frame_id and self.output_frame != msg.header.frame_id:
+            self.output_frame = msg.header.frame_id
+            self.get_logger().info(f"known camera pose: outputs in '{self.output_frame}'")
+        self.camera_poses.append((stamp, R, t))
+
+    def camera_pose_at(self, stamp: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+        """The camera's optical frame in the world at ``stamp`` (rotation, position),
+        interpolated between the poses around it, or the nearest pose within
+        ``camera_pose_max_age_s``; None when there is none."""
+        poses = self.camera_poses
+        if not poses:
+            return None
+        max_age = self.p['camera_pose_max_age_s'] * 1e9
+        after = next((i for i, (s, _, _) in enumerate(poses) if s >= stamp), None)
+        if after is not None and after > 0:
+            (s0, R0, t0), (s1, R1, t1) = poses[after - 1], poses[after]
+            if s1 - s0 <= 2 * max_age:
+                a = (stamp - s0) / max(s1 - s0, 1)
+                return (R0 @ axis_angle_to_matrix(a * matrix_to_axis_angle(R0.T @ R1)),
+                        t0 + a * (t1 - t0))
+        near = min(poses, key=lambda e: abs(e[0] - stamp))
+        if abs(near[0] - stamp) <= max_age:
+            return near[1], near[2]
+        return None
+
+    def _known_anchor(self, stamp: int, on_floor: bool) -> InputAnchor:
+        """The input frame in the world from the known camera pose (and the physics floor
+        for a floor input); not fixed (GMR fills) without a pose near ``stamp``."""
+        pose = self.camera_pose_at(stamp)
+        if pose is None or (on_floor and self.floor is None):
+            self.camera_pose_missing += 1
+            self.diag.set_value('camera_pose', 'missing for this frame: GMR fills')
+            return InputAnchor(False)
+        self.diag.set_value('camera_pose', 'ok')
+        R_wc, t_wc = pose
+        if not on_floor:
+            return InputAnchor(True, R_wc, t_wc)
+        _, A, b = self.floor
+        return InputAnchor(True, R_wc @ A, R_wc @ b + t_wc)
+
     def on_floor(self, msg: TransformStamped) -> None:
         """The physics floor in the camera frame: ``p_camera = A p_floor + b``."""
         q, b = rc.transform_stamped_to_arrays(msg)
@@ -313,6 +409,8 @@ class GMRNode(Node):
         """The camera motion of this frame as an :class:`InputAnchor` (camera_mode auto;
         None otherwise): fixed for a static or turning camera, with the camera's rotation
         since the first image (in the floor frame for a floor input), else not fixed."""
+        if self.camera_mode == 'known':
+            return self._known_anchor(stamp, on_floor)
         if self.camera_mode != 'auto':
             return None
         cm = self.camera_motion.get(stamp)
@@ -430,7 +528,7 @@ class GMRNode(Node):
                 self.get_logger().error('world pose not finite; frame dropped',
                                         throttle_duration_sec=2.0)
                 continue
-            header = rc.make_header(f.stamp_ns, self.p['frame_id'])
+            header = rc.make_header(f.stamp_ns, self.output_frame)
             self.pub['motion'].publish(rc.pose_to_motion(pose, header))
             self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(), header))
             self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
@@ -452,6 +550,8 @@ class GMRNode(Node):
             self.diag.set_value('segments', self.online.segments)
             if fusion is not None:
                 self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
+            if self.camera_mode == 'known':
+                self.diag.set_value('camera_pose_missing_frames', self.camera_pose_missing)
             if self.camera_mode == 'auto':
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))

@@ -134,6 +134,10 @@ class StaticCameraFusion:
       the heading and origin are then chosen to match the GMR poses of that period (circular
       mean of the heading differences, mean position offset), and held.
 
+    * ``known_world``: the input poses come already in the world frame (a known camera pose
+      composed with the camera-frame pose, :class:`InputAnchor`): ``W`` is the identity, the
+      fusion starts at the first frame and never needs to align itself again.
+
     Each new GMR pose ``G = G_prev dG`` is then pulled towards the measurement ``W (R_in,
     T_in)``: the position by ``1 - exp(-dt / position_time_constant_s)`` per frame, the
     orientation (geodesically) by ``1 - exp(-dt / orientation_time_constant_s)``.
@@ -141,7 +145,8 @@ class StaticCameraFusion:
 
     def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.15,
                  orientation_time_constant_s: float = 1.0,
-                 input_up: Optional[np.ndarray] = None) -> None:
+                 input_up: Optional[np.ndarray] = None, known_world: bool = False) -> None:
+        self.known_world = bool(known_world)
         self.init_frames = max(1, int(round(init_s * fps)))
         self.alpha_p = 1.0 - math.exp(-1.0 / (fps * max(position_time_constant_s, 1e-6)))
         self.alpha_r = 1.0 - math.exp(-1.0 / (fps * max(orientation_time_constant_s, 1e-6)))
@@ -151,15 +156,20 @@ class StaticCameraFusion:
 
     def reset(self) -> None:
         """A new segment: with a known input up the fused pose starts at the measurement."""
-        self.realign()
-        if self.input_up is not None:
+        self._pairs = []
+        self.W_R, self.W_t = None, None
+        if self.known_world:
+            self.W_R, self.W_t = np.eye(3), np.zeros(3)
+        elif self.input_up is not None:
             self.W_R = quat_to_matrix(quat_from_two_vectors(self.input_up, _EZ))
             self.W_t = np.zeros(3)
 
     def realign(self) -> None:
         """The input frame moved in the world by an unknown amount (a camera that
         translated): estimate its heading and origin again from the next ``init_s`` of GMR
-        poses, as at the start with an unknown up."""
+        poses, as at the start with an unknown up. A no-op for a ``known_world``."""
+        if self.known_world:
+            return
         self._pairs: List[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self.W_R: Optional[np.ndarray] = None
         self.W_t: Optional[np.ndarray] = None

@@ -25,6 +25,9 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 
+T_GT_CAMERA_POSE = '/mocap/groundtruth/camera_pose'
+
+
 class EvalError(Exception):
     pass
 
@@ -235,6 +238,10 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     from ..render.evaluate import aggregate, report_markdown
     from .process import ProcessError, parse_params
 
+    if args.known_camera_pose and args.start != 'keypoints':
+        print('mocap eval video: error: --known-camera-pose needs --start keypoints (the '
+              "camera's pose is in the rendered clip's bag)", file=sys.stderr)
+        return 2
     renders = Path(args.renders) if args.renders else DEFAULT_OUT
     clips = list(iter_done(renders, args.split))
     if not clips:
@@ -247,6 +254,10 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     tag = args.tag or ('_'.join(f'{k}' for k in sorted(args.param)) or 'default')
     if args.no_camera_motion:
         tag += '_nocm'
+    if args.known_camera_pose:
+        tag += '_pose'
+        args.param = list(args.param) + [
+            f'gmr.camera_pose_topic={T_GT_CAMERA_POSE}', 'gmr.camera_pose_type=pose']
     tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
     work_root = Path(args.work) if args.work else Path.home() / '.cache' / 'mocap' / 'eval_video'
     work = work_root / f'{tag}_{args.start}_{args.intrinsics}'
@@ -308,6 +319,10 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--start', choices=('video', 'keypoints'), default='video',
                    help='video: run the detector on the video; keypoints: reuse the '
                    "render's detections (same detector, faster)")
+    p.add_argument('--known-camera-pose', action='store_true',
+                   help="give the world stage the render camera's true pose "
+                   '(/mocap/groundtruth/camera_pose; --start keypoints): its output is then '
+                   'in the true world frame, scored without alignment')
     p.add_argument('--no-camera-motion', action='store_true',
                    help='--start keypoints: leave the camera-motion estimate from the video '
                    'out of the input (the world stage then runs without it)')

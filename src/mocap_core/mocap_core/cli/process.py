@@ -122,7 +122,7 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
         'images': images[:1] + [t for t in (T.IMAGE_CAMERA_INFO,) if t in topics],
         'keypoints': [T.KEYPOINTS] + [t for t in (T.CAMERA_INFO,) if t in topics],
         'lifter': [T.LIFTER_MOTION] + [t for t in (T.LIFTER_CONTACTS,) if t in topics],
-        'physics': [T.PHYSICS_MOTION],
+        'physics': [T.PHYSICS_MOTION] + [t for t in (T.PHYSICS_FLOOR,) if t in topics],
     }[start]
     if start != 'images' and T.CAMERA_MOTION in topics:    # for the world stage
         feed.append(T.CAMERA_MOTION)
@@ -210,6 +210,9 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
         problems.append(warning)
         log(f'  warning: {warning}')
     plan = plan_for(topics, start, image_topic, video)
+    pose_topic = str(params.get('gmr', {}).get('camera_pose_topic', '') or '')
+    if pose_topic and pose_topic in topics and pose_topic not in plan.feed_topics:
+        plan.feed_topics.append(pose_topic)     # a known camera pose for the world stage
     log(f'mocap process: {input_path} -> {output}; start: {plan.start}; nodes: '
         f"{', '.join(plan.nodes)}" + (f"; feeding {', '.join(plan.feed_topics)}"
                                      if plan.feed_topics else ''))

@@ -318,6 +318,10 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
         est, true = pel[ok], travel_path[sidx[ok]]
         err = float(1000 * np.linalg.norm(_rigid_align(est, true) - true, axis=-1).mean())
         root[stage] = {'root_error': err,
+                       # no alignment: meaningful when the stage's frame is the true world
+                       # (a known camera pose)
+                       'root_error_unaligned': float(1000 * np.linalg.norm(
+                           est - true, axis=-1).mean()),
                        'rte': 100 * err / 1000 / travel if travel >= RTE_MIN_TRAVEL_M
                        else float('nan')}
         if full is not None:
@@ -424,6 +428,8 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"(RTE {_f(m.get('physics_rte'))} %) |",
              f"| world root trajectory error | {_f(m.get('world_root_error'))} mm "
              f"(RTE {_f(m.get('world_rte'))} %) |",
+             "| world root error against the true world, no alignment (meaningful with a "
+             f"known camera pose) | {_f(m.get('world_root_error_unaligned'))} mm |",
              "| physics floor estimate against the true floor: tilt / height under the person, "
              f"at 1 s | {_f(m.get('physics_floor_tilt_1s_deg'))} deg / "
              f"{_f(m.get('physics_floor_height_1s_mm'))} mm |",

@@ -1,0 +1,158 @@
+"""The world node with camera inputs (in-process, as ``mocap process`` wires it): a known
+camera pose puts the output in the robot's frame; the camera-motion estimate switches the
+static-camera fusion on and off; bad or missing camera messages are counted, never fatal."""
+
+import numpy as np
+import pytest
+
+from mocap_core.pose import Pose
+from mocap_core.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
+from mocap_core.skeleton import NUM_JOINTS, Skeleton
+
+DT_NS = 33_333_333
+
+
+def _poses(n, seed=0):
+    """A person walking along world x (z up) with random limb poses."""
+    rng = np.random.default_rng(seed)
+    rot = np.zeros((n, NUM_JOINTS, 4))
+    rot[..., 3] = 1.0
+    rot[:, 1:] = matrix_to_quat(axis_angle_to_matrix(0.2 * rng.standard_normal(
+        (n, NUM_JOINTS - 1, 3))))
+    sk = Skeleton.default()
+    return [Pose(sk, rot[i], np.array([0.04 * i, 0.5, 0.95])) for i in range(n)]
+
+
+@pytest.fixture
+def graph_node():
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from mocap_core.inprocess import InProcessGraph
+    from mocap_global.node import GMRNode
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    made = []
+
+    def make(**params):
+        out = []
+        graph = InProcessGraph(record=lambda t, m, q: out.append((t, m)))
+        node = graph.add(GMRNode(context=context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in {'motion_topic': '/in/motion', 'lookahead': 3,
+                                                **params}.items()]))
+        made.append(node)
+        return graph, node, out
+
+    yield make
+    for n in made:
+        n.destroy_node()
+    context.try_shutdown()
+
+
+def _in_camera(poses, R_wc, t_wc):
+    """World poses -> the camera-frame poses a camera at (R_wc, t_wc) sees."""
+    out = []
+    for p in poses:
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(R_wc.T @ quat_to_matrix(p.rotations[0]))
+        out.append(Pose(p.skeleton, rot, R_wc.T @ (p.root_position - t_wc)))
+    return out
+
+
+def _values(node):
+    return {kv.key: kv.value for kv in node.diag.status().values}
+
+
+def test_a_known_camera_pose_gives_the_pose_in_the_robot_frame(graph_node):
+    from geometry_msgs.msg import Point, Pose as PoseMsg, PoseStamped, Quaternion
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera_pose',
+                                  camera_pose_type='pose',
+                                  fusion_position_time_constant_s=1e-6,
+                                  fusion_orientation_time_constant_s=1e-6)
+    world = _poses(40)
+    # a camera that moves (a robot driving) and turns, optical frame in 'odom'
+    cams = [(axis_angle_to_matrix(np.array([-1.6, 0.0, 0.02 * i])),
+             np.array([0.05 * i, -3.0, 1.2])) for i in range(40)]
+    seen = [_in_camera([p], R, t)[0] for p, (R, t) in zip(world, cams)]
+    for i, (p, (R, t)) in enumerate(zip(seen, cams)):
+        if i == 20:
+            # a malformed pose is counted and ignored; frame 20 then has its neighbours'
+            q = np.full(4, np.nan)
+        else:
+            q = matrix_to_quat(R)
+        header = rc.make_header(i * DT_NS, 'odom')
+        graph.publish('/robot/camera_pose', PoseStamped(header=header, pose=PoseMsg(
+            position=Point(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+            orientation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]),
+                                   w=float(q[3])))))
+        graph.publish('/in/motion', rc.pose_to_motion(
+            p, rc.make_header(i * DT_NS, 'camera_optical_frame')))
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == 40 and all(m.header.frame_id == 'odom' for m in odom)
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
+    T_true = np.stack([p.root_position for p in world])
+    # the world root is the camera pose composed with the camera-frame root (frame 20:
+    # interpolated between its neighbours' poses)
+    np.testing.assert_allclose(T, T_true, atol=0.02)
+    v = _values(node)
+    assert v['camera_mode'] == 'known' and v['errors'] == '1'
+    assert v['camera_pose_missing_frames'] == '0'
+
+
+def test_without_a_camera_pose_gmr_fills_and_the_frames_are_counted(graph_node):
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera_pose')
+    for i, p in enumerate(_poses(20)):
+        graph.publish('/in/motion', rc.pose_to_motion(
+            p, rc.make_header(i * DT_NS, 'camera_optical_frame')))
+    graph.flush()
+    assert len([m for t, m in out if t == topics.WORLD_ODOM]) == 20
+    assert _values(node)['camera_pose_missing_frames'] == '20'
+
+
+def test_camera_motion_switches_the_fusion(graph_node):
+    """camera_mode auto: frames the estimate calls static are fused, moving ones are not;
+    an estimate with NaN is counted and the frame goes unfused."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node()
+    world = _poses(60)
+    R_wc = axis_angle_to_matrix(np.array([-1.6, 0.0, 0.3]))
+    seen = _in_camera(world, R_wc, np.array([0.0, -4.0, 1.0]))
+    for i, p in enumerate(seen):
+        state = 'static' if i < 30 else 'moving'
+        w = np.full(3, np.nan) if i == 10 else np.zeros(3)
+        msg = rc.camera_motion_to_odometry(state, np.array([0, 0, 0, 1.0]), np.zeros(3),
+                                           rc.make_header(i * DT_NS, 'cam_start'), 'cam')
+        msg.twist.twist.angular.x = float(w[0])
+        graph.publish(topics.CAMERA_MOTION, msg)
+        graph.publish('/in/motion', rc.pose_to_motion(
+            p, rc.make_header(i * DT_NS, 'camera_optical_frame')))
+    graph.flush()
+    v = _values(node)
+    assert v['camera_mode'] == 'auto' and v['errors'] == '1'
+    assert v['camera_motion_frames'] == 'moving 30, no estimate 1, static 29'
+    assert v['unfused_frames'] == '31'
+
+
+def test_camera_motion_round_trip():
+    from mocap_core import ros_conversions as rc
+
+    for state in ('static', 'rotating', 'moving', 'unknown'):
+        q = matrix_to_quat(axis_angle_to_matrix(np.array([0.1, 0.2, 0.3])))
+        msg = rc.camera_motion_to_odometry(state, q, np.array([0.1, 0.0, -0.2]),
+                                           rc.make_header(5, 'a'), 'b')
+        s, q2, w = rc.odometry_to_camera_motion(msg)
+        assert s == state
+        np.testing.assert_allclose(q2, q, atol=1e-12)
+        np.testing.assert_allclose(w, np.zeros(3) if state == 'static' else [0.1, 0, -0.2])
+    with pytest.raises(ValueError, match='unknown camera motion state'):
+        rc.camera_motion_to_odometry('flying', q, np.zeros(3), rc.make_header(5, 'a'), 'b')
