@@ -245,3 +245,25 @@ def test_video_runs_compared_side_by_side(tmp_path):
     missing = parser.parse_args(['video', '--compare', f'x={tmp_path / "none.json"}',
                                  '-o', str(out)])
     assert missing.func(missing) == 2
+
+
+def test_world_segment_errors_align_pieces_whole_or_by_their_start():
+    from mocap_core.render.evaluate import world_segment_errors
+    from mocap_core.rotations import axis_angle_to_matrix
+
+    rng = np.random.default_rng(0)
+    F = 250
+    gt = rng.normal(size=(F, 18, 3)) * 0.3 + np.linspace(0, 5, F)[:, None, None] * [1, 0, 0]
+    # the same motion in another frame: both errors vanish
+    R = axis_angle_to_matrix(np.array([0.0, 0.0, 0.7]))
+    moved = gt @ R.T + [3.0, -1.0, 0.2]
+    e = world_segment_errors(moved, np.arange(F), gt)
+    assert e['wa_mpjpe100'] < 1e-6 and e['w_mpjpe100'] < 1e-6
+    # a drift of 1 mm per frame along y: the whole-piece alignment removes most of it, the
+    # alignment by the first two frames keeps it (mean over a 100-frame piece ~ 50 mm)
+    drift = gt + np.arange(F)[:, None, None] * [0.0, 0.001, 0.0]
+    e = world_segment_errors(drift, np.arange(F), gt)
+    assert 40 < e['w_mpjpe100'] < 60 and e['wa_mpjpe100'] < 0.6 * e['w_mpjpe100']
+    # the 50-frame tail counts; a 30-frame clip is one piece; no frames: nothing
+    assert world_segment_errors(gt[:30], np.arange(30), gt[:30])['wa_mpjpe100'] < 1e-6
+    assert world_segment_errors(gt[:1], np.arange(1), gt[:30]) == {}

@@ -56,6 +56,8 @@ DETECTOR_SWAP_MIN_SEPARATION = 0.08
 DETECTOR_SWAP_MIN_CONFIDENCE = 0.3
 #: Clips whose pelvis travels less than this (m) get no RTE percentage.
 RTE_MIN_TRAVEL_M = 1.0
+#: Frames per piece of the world-frame joint errors (WHAM's and GVHMR's 100).
+WORLD_SEGMENT = 100
 
 _LEGS = {side: [JOINT_INDEX[f'{side}_{n}'] for n in ('hip', 'knee', 'ankle', 'toe')]
          for side in ('left', 'right')}
@@ -196,6 +198,43 @@ def _rigid_align(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     return (pred - mp) @ r + mg
 
 
+def _rigid_fit(pred: np.ndarray, gt: np.ndarray):
+    """(R, t) with ``gt ~ pred @ R + t`` for (N, 3) points (rotation and translation)."""
+    mp, mg = pred.mean(axis=0), gt.mean(axis=0)
+    u, _, vt = np.linalg.svd((pred - mp).T @ (gt - mg))
+    d = np.sign(np.linalg.det(u @ vt))
+    r = u @ np.diag([1.0, 1.0, d]) @ vt
+    return r, mg - mp @ r
+
+
+def world_segment_errors(joints: np.ndarray, index: np.ndarray, gt_world: np.ndarray,
+                         segment: int = WORLD_SEGMENT) -> Dict[str, float]:
+    """WA-MPJPE and W-MPJPE over ``segment``-frame pieces (mm), as WHAM and GVHMR define them:
+    each piece of the world output is aligned to the true world joints rigidly, over the
+    whole piece (WA) or by its first two frames only (W, so the drift within the piece
+    counts). ``joints`` (N, 18, 3) world output at rendered frames ``index`` (N,);
+    ``gt_world`` (F, 18, 3). Pieces shorter than half a segment (a clip's tail) are left out
+    unless the clip has no full piece."""
+    index = np.asarray(index, dtype=int)
+    F = len(gt_world)
+    ok = (index >= 0) & (index < F)
+    joints, index = np.asarray(joints)[ok], index[ok]
+    starts = list(range(0, max(F, 1), segment))
+    wa, w = [], []
+    for s0 in starts:
+        m = (index >= s0) & (index < s0 + segment)
+        if m.sum() < 2 or (m.sum() < segment // 2 and len(starts) > 1):
+            continue
+        P, G = joints[m], gt_world[index[m]]
+        r, t = _rigid_fit(P.reshape(-1, 3), G.reshape(-1, 3))
+        wa.append(np.linalg.norm(P @ r + t - G, axis=-1).mean())
+        r, t = _rigid_fit(P[:2].reshape(-1, 3), G[:2].reshape(-1, 3))
+        w.append(np.linalg.norm(P @ r + t - G, axis=-1).mean())
+    if not wa:
+        return {}
+    return {'wa_mpjpe100': float(1000 * np.mean(wa)), 'w_mpjpe100': float(1000 * np.mean(w))}
+
+
 def acceleration(p: np.ndarray, fps: float) -> float:
     """Mean joint acceleration magnitude (m/s^2) of (F, J, 3) positions."""
     if len(p) < 3:
@@ -331,6 +370,9 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
             root[stage].update(_paired_with_lifter(full[ok], sidx[ok], P, idx, G, fps))
             if 'contacts' in gt:
                 root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
+            if stage == 'world':
+                root[stage].update(world_segment_errors(full[ok], sidx[ok],
+                                                        gt['joints_world']))
     height = height_class(float(meta.get('body_height_m', 1.7)))
     return ClipScore(clip, motion_group(clip), height, meta['camera']['kind'], F, len(idx),
                      float(meta.get('detected_fraction', float('nan'))), mpjpe, pa, mrpe,
@@ -394,6 +436,8 @@ def aggregate(scores: List[ClipScore]) -> dict:
                                                         'world_penetration_after_1s_mm',
                                                         'physics_skating_mm',
                                                         'world_skating_mm', 'world_rte',
+                                                        'world_wa_mpjpe100',
+                                                        'world_w_mpjpe100',
                                                         'camera_rotation_error_deg_s',
                                                         'camera_state_static',
                                                         'camera_state_rotating',
@@ -428,6 +472,9 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"(RTE {_f(m.get('physics_rte'))} %) |",
              f"| world root trajectory error | {_f(m.get('world_root_error'))} mm "
              f"(RTE {_f(m.get('world_rte'))} %) |",
+             "| world joints, 100-frame pieces aligned whole / by their first two frames "
+             f"(WA-MPJPE100 / W-MPJPE100) | {_f(m.get('world_wa_mpjpe100'))} / "
+             f"{_f(m.get('world_w_mpjpe100'))} mm |",
              "| world root error against the true world, no alignment (meaningful with a "
              f"known camera pose) | {_f(m.get('world_root_error_unaligned'))} mm |",
              "| physics floor estimate against the true floor: tilt / height under the person, "
@@ -477,12 +524,15 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                   f'{RTE_MIN_TRAVEL_M:g} m). Camera motion: the estimate from the video '
                   'background (`mocap_keypoints.camera_motion`), the share of frames in each '
                   'state and the median error of its frame-to-frame rotation.', '',
-                  '| camera | clips | world RTE | world root error (mm) | static | rotating '
-                  '| moving | rotation error (deg/s) |', '|---|---|---|---|---|---|---|---|']
+                  '| camera | clips | world RTE | world root error (mm) | WA-MPJPE100 / '
+                  'W-MPJPE100 (mm) | static | rotating | moving | rotation error (deg/s) |',
+                  '|---|---|---|---|---|---|---|---|---|']
         for g, r in cams.items():
             lines.append(
                 f"| {g} | {r['clips']} | {_f(r.get('world_rte'))} % | "
                 f"{_f(r.get('world_root_error'), '{:.0f}')} | "
+                f"{_f(r.get('world_wa_mpjpe100'), '{:.0f}')} / "
+                f"{_f(r.get('world_w_mpjpe100'), '{:.0f}')} | "
                 + ' | '.join(f"{_f(100 * r.get(f'camera_state_{k}', float('nan')), '{:.0f}')} %"
                              for k in ('static', 'rotating', 'moving'))
                 + f" | {_f(r.get('camera_rotation_error_deg_s'), '{:.2f}')} |")
