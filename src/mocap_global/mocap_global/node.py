@@ -408,7 +408,9 @@ class GMRNode(Node):
     def _anchor(self, stamp: int, on_floor: bool) -> Optional[InputAnchor]:
         """The camera motion of this frame as an :class:`InputAnchor` (camera_mode auto;
         None otherwise): fixed for a static or turning camera, with the camera's rotation
-        since the first image (in the floor frame for a floor input), else not fixed."""
+        since the first image (in the floor frame for a floor input: ``on_floor``, an input
+        frame that is not an optical frame, as the physics floor), else not fixed; with a
+        known camera pose, the input frame in the world."""
         if self.camera_mode == 'known':
             return self._known_anchor(stamp, on_floor)
         if self.camera_mode != 'auto':
@@ -467,7 +469,7 @@ class GMRNode(Node):
         try:
             with self.diag.processing():
                 frames, event = self.online.push(
-                    stamp, pose, self._anchor(stamp, self.online.floor_input))
+                    stamp, pose, self._anchor(stamp, 'optical' not in self.input_frame))
         except ValueError as exc:
             self.diag.errors += 1
             self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
