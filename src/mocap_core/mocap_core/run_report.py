@@ -209,6 +209,10 @@ def plausibility(run: PipelineRun, contact_threshold: float = 0.5) -> Dict[str, 
         if name == 'world':
             f['root_path_m'] = float(np.linalg.norm(np.diff(s.root[:, :2], axis=0),
                                                     axis=-1).sum())
+            # end-to-end distance over path length: 1 for a straight walk, ~0 on the spot
+            end = float(np.linalg.norm(s.root[-1, :2] - s.root[0, :2]))
+            f['root_straightness'] = end / f['root_path_m'] if f['root_path_m'] > 0 \
+                else float('nan')
         out[name] = f
     return out
 

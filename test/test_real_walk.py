@@ -1,0 +1,59 @@
+"""The real moving-camera walk (``glamr/pexels-walking-dynamic-5738706.mp4`` of the shared
+data: a woman walks away from a following camera for 7.4 s, about 8-10 m): the regression test
+of the world stage on real footage (docs/global.md). Skipped where the shared data is absent.
+
+What holds today is asserted; the path goals of the world-frame issue (6-12 m, straightness
+>= 0.8) are not met yet (3.0 m, 0.11: GMR fed this back view predicts walking on the spot)
+and are kept as a strict expected failure, which turns into a failure the day they are met
+so that the mark is removed."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from mocap_core.data.splits import shared_data_dir
+
+VIDEO = shared_data_dir() / 'videos' / 'glamr' / 'pexels-walking-dynamic-5738706.mp4'
+
+pytestmark = pytest.mark.skipif(not VIDEO.exists(), reason=f'{VIDEO} not present')
+
+
+@pytest.fixture(scope='module')
+def walk(tmp_path_factory):
+    from mocap_core.bag_io import BagReader, deserialize
+    from mocap_core.ros_conversions import odometry_to_camera_motion
+    from mocap_core.run_report import load_run, plausibility
+
+    out = tmp_path_factory.mktemp('walk') / 'bag'
+    res = subprocess.run([sys.executable, '-m', 'mocap_core.cli.mocap', 'process', str(VIDEO),
+                          '-o', str(out), '--no-progress'],
+                         capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    states = []
+    with BagReader(out) as reader:
+        for m in reader.messages(topics=['/mocap/camera/motion']):
+            states.append(odometry_to_camera_motion(deserialize(m.data, m.msgtype))[0])
+    run = load_run(out)
+    return run, plausibility(run)['world'], states
+
+
+def test_the_following_camera_is_seen_to_move_and_nothing_is_fused(walk):
+    run, world, states = walk
+    assert len(states) >= 170                         # one estimate per frame (178 frames)
+    assert states.count('moving') > 0.5 * len(states), states
+    assert states.count('static') < 0.2 * len(states), states
+    diag = run.diagnostics['gmr: gmr']
+    assert diag['camera_mode'] == 'auto'
+    # every world frame whose camera moved is GMR's alone
+    assert int(diag['unfused_frames']) >= states.count('moving') - 30, diag
+
+
+@pytest.mark.xfail(strict=True, reason='the world path of a person walking away from a '
+                   'following camera: 3.0 m, straightness 0.11 (goals 6-12 m, 0.8); GMR is '
+                   'not trained on lifter output yet (docs/global.md)')
+def test_the_world_path_is_the_walk(walk):
+    _, world, _ = walk
+    assert 6.0 <= world['root_path_m'] <= 12.0 and world['root_straightness'] >= 0.8, world
