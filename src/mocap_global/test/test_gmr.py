@@ -577,3 +577,32 @@ def test_fused_floor_frames_follow_the_input_root_not_the_foot_lock():
     T = np.stack([f.pose.root_position for f in frames])
     T_in = np.stack([p.root_position for p in poses])
     np.testing.assert_allclose(T, T_in @ fusion.W_R.T + fusion.W_t, atol=1e-6)
+
+
+def test_sampler_lifted_inputs_follow_the_window_through_mirror_and_reversal():
+    """With the 'lifted' poses equal to the truth, a lifted window's input is its target pose
+    exactly, whatever mirror, reversal and scale did to the window; with other lifted poses
+    the input is those poses of the same frames."""
+    from mocap_global.training.lifted import LiftedClip
+
+    R, T = circle_walk(90)
+    clips = [_motion(R, T, seed=s) for s in range(3)]
+    same = [LiftedClip(m.rotations[None].astype(np.float32),
+                       m.skeleton.group_lengths()[None].astype(np.float32)) for m in clips]
+    aug = Augmentation(lifted_prob=1.0, noise_prob=1.0)
+    sampler = WindowSampler(clips, 24, 30.0, seed=3, aug=aug, pose_input='positions',
+                            lifted=same)
+    for _ in range(20):
+        s = sampler.sample()
+        np.testing.assert_allclose(s['rot_in'], s['rot'], atol=1e-6)
+        np.testing.assert_allclose(s['lengths_in'], sampler.group_lengths[0] *
+                                   s['lengths_in'][0] / sampler.group_lengths[0][0], rtol=1e-5)
+    other = [LiftedClip(np.tile([0, 0, 0, 1.0], (1, m.num_frames, NUM_JOINTS, 1)),
+                        np.ones((1, 10))) for m in clips]
+    sampler = WindowSampler(clips, 24, 30.0, seed=3, aug=Augmentation(lifted_prob=1.0),
+                            lifted=other)
+    s = sampler.sample()
+    np.testing.assert_allclose(s['rot_in'][..., 3], 1.0)
+    with pytest.raises(ValueError, match='frame-aligned'):
+        WindowSampler(clips, 24, 30.0, lifted=[LiftedClip(c.rotations[:, :5], c.lengths)
+                                               for c in other])

@@ -2,7 +2,7 @@
 
     mocap train gmr [--config cfg.json] [--fps 30|10] [--size cpu|paper] [--steps N]
                     [--minutes M] [--run-dir runs/gmr_30fps] [--device cpu|cuda]
-                    [--threads N] [--no-resume] [--install]
+                    [--threads N] [--no-resume] [--init WEIGHTS] [--install]
     mocap eval gmr [--weights FILE] [--noise none|lifter|both] [--lookahead N]
                    [--tta none|mirror|reverse|both] [--out DIR] [--device cpu|cuda]
                    [--no-bags]
@@ -52,6 +52,7 @@ def add_train_parser(sub) -> None:
     p.add_argument('--threads', type=int, help='torch CPU threads (default 2)')
     p.add_argument('--no-resume', action='store_true', help='start over even if a checkpoint '
                    'exists')
+    p.add_argument('--init', help='start from these weights (fine-tuning; same architecture)')
     p.add_argument('--install', action='store_true', help='copy the final weights, loss curve '
                    'and training record to the package (weights/gmr.pt for 30 fps)')
     p.set_defaults(func=cmd_train)
@@ -101,7 +102,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     print(f'{len(train_motions)} training clips, {len(val_motions)} validation clips '
           f'({time.time() - t0:.0f} s)', flush=True)
     weights = train(train_motions, val_motions, run_dir, cfg, device=args.device,
-                    resume=not args.no_resume, minutes=args.minutes)
+                    resume=not args.no_resume, minutes=args.minutes,
+                    init=Path(args.init) if args.init else None)
     print(f'weights: {weights}')
     if args.install:
         dest = install(run_dir, cfg, ' '.join(['mocap', 'train', 'gmr'] + sys.argv[3:]))

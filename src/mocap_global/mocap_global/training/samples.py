@@ -22,7 +22,7 @@ in the root frame (for the joint-motion loss).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, List, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -45,10 +45,13 @@ class Augmentation:
     noise_level: float = 1.0      # maximum, in units of the lifter-like noise defaults
     short_prob: float = 0.15
     min_length: int = 8
+    #: share of windows whose input is the shipped lifter's output of the clip (given to the
+    #: sampler as ``lifted``, :mod:`mocap_global.training.lifted`) instead of the ground truth
+    lifted_prob: float = 0.0
 
     @classmethod
     def none(cls) -> 'Augmentation':
-        return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, lifted_prob=0.0)
 
 
 def frame_step(source_fps: float, fps: float) -> int:
@@ -65,7 +68,9 @@ class WindowSampler:
     def __init__(self, motions: Sequence[Motion], window: int, fps: float = 30.0,
                  seed: int = 0, aug: Augmentation = Augmentation(),
                  root_input: str = 'none', skeleton_input: bool = True,
-                 pose_input: str = 'quat') -> None:
+                 pose_input: str = 'quat', lifted: Optional[Sequence] = None) -> None:
+        """``lifted``: per clip of ``motions`` a :class:`~.lifted.LiftedClip` (the lifter's
+        local poses, frame-aligned), used for ``aug.lifted_prob`` of the windows."""
         if not motions:
             raise ValueError('no clips to sample from')
         self.window = int(window)
@@ -76,9 +81,19 @@ class WindowSampler:
         self.skeleton_input = skeleton_input
         self.pose_input = pose_input
         self.rng = np.random.default_rng(seed)
-        keep = [m for m in motions if (m.num_frames - 1) // self.step + 1 >= 3]
+        ok = [(m.num_frames - 1) // self.step + 1 >= 3 for m in motions]
+        keep = [m for m, k in zip(motions, ok) if k]
         if not keep:
             raise ValueError('every clip is too short')
+        self.lifted_rot: Optional[np.ndarray] = None
+        if lifted is not None:
+            if len(lifted) != len(motions):
+                raise ValueError('lifted: one entry per clip')
+            lk = [c for c, k in zip(lifted, ok) if k]
+            if any(c.rotations.shape[1] != m.num_frames for c, m in zip(lk, keep)):
+                raise ValueError('lifted poses are not frame-aligned with their clips')
+            self.lifted_rot = np.concatenate([c.rotations for c in lk], axis=1)  # (C, N, J, 4)
+            self.lifted_lengths = np.stack([c.lengths for c in lk])              # (clips, C, G)
         self.lengths = np.array([m.num_frames for m in keep])
         self.offsets = np.concatenate([[0], np.cumsum(self.lengths)])
         self.rotations = np.concatenate([m.rotations for m in keep]).astype(np.float32)
@@ -102,15 +117,31 @@ class WindowSampler:
         root = self.roots[idx].astype(np.float64)
         gl = self.group_lengths[c].copy()
         off = self.bone_offsets[c].copy()
+        lifted = None
+        if self.lifted_rot is not None and aug.lifted_prob > 0 and \
+                rng.random() < aug.lifted_prob:
+            cam = int(rng.integers(self.lifted_rot.shape[0]))
+            lifted = (self.lifted_rot[cam, idx].astype(np.float64),
+                      self.lifted_lengths[c, cam].astype(np.float64))
+        sc = 1.0
         if aug.scale_range > 0:
             sc = 1.0 + aug.scale_range * (2.0 * rng.random() - 1.0)
             gl, off, root = gl * sc, off * sc, root * sc
-        if rng.random() < aug.mirror_prob:
+        mirror = rng.random() < aug.mirror_prob
+        if mirror:
             rot, root = F.mirror_rotations(rot), F.mirror_vectors(root)
-        if rng.random() < aug.reverse_prob:
+        reverse = rng.random() < aug.reverse_prob
+        if reverse:
             rot, root = rot[::-1].copy(), root[::-1].copy()
         rot_in, gl_in = rot, gl
-        if aug.noise_prob > 0 and rng.random() < aug.noise_prob:
+        if lifted is not None:
+            # the lifter's view of the same frames, through the same mirror and time reversal
+            rot_in, gl_in = lifted[0], lifted[1] * sc
+            if mirror:
+                rot_in = F.mirror_rotations(rot_in)
+            if reverse:
+                rot_in = rot_in[::-1].copy()
+        elif aug.noise_prob > 0 and rng.random() < aug.noise_prob:
             level = aug.noise_level * rng.random()
             rot_in = F.noisy_local_pose(rot, rng, self.fps, F.NOISE_SMOOTH_DEG * level,
                                         F.NOISE_JITTER_DEG * level,

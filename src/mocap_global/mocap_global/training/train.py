@@ -66,6 +66,9 @@ class TrainConfig:
     checkpoint_every: int = 200
     validation_windows: int = 512
     threads: int = 2
+    #: cameras per clip for the lifter's view of the training clips (``augmentation.
+    #: lifted_prob`` > 0; :mod:`mocap_global.training.lifted`)
+    lifted_cameras: int = 2
     augmentation: Augmentation = field(default_factory=Augmentation)
     model: GMRConfig = field(default_factory=GMRConfig)
 
@@ -159,9 +162,11 @@ LOG_FIELDS = ['step', 'split', 'loss', 'ori', 'trans', 'joint', 'smooth', 'up', 
 
 def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_dir: Path,
           cfg: TrainConfig, device: str = 'cpu', resume: bool = True, progress: bool = True,
-          minutes: Optional[float] = None) -> Path:
+          minutes: Optional[float] = None, init: Optional[Path] = None) -> Path:
     """Train, checkpointing to ``run_dir``; returns the path of the final weights
-    (``run_dir/gmr.pt``). ``minutes``: fit the run to this time budget (module docstring)."""
+    (``run_dir/gmr.pt``). ``minutes``: fit the run to this time budget (module docstring).
+    ``init``: start from these weights (same architecture; fine-tuning) instead of a fresh
+    network, unless a checkpoint of the run is resumed."""
     from tqdm import tqdm
 
     torch.set_num_threads(cfg.threads)
@@ -169,8 +174,12 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     mc = cfg.model
+    lifted = None
+    if cfg.augmentation.lifted_prob > 0:
+        from .lifted import lift_clips
+        lifted = lift_clips(train_motions, cfg.lifted_cameras, cfg.seed, progress=progress)
     sampler = WindowSampler(train_motions, mc.window, mc.fps, cfg.seed, cfg.augmentation,
-                            mc.root_input, mc.skeleton_input, mc.pose_input)
+                            mc.root_input, mc.skeleton_input, mc.pose_input, lifted=lifted)
     val_sampler = WindowSampler(val_motions, mc.window, mc.fps, 12345, Augmentation.none(),
                                 mc.root_input, mc.skeleton_input, mc.pose_input)
     val_batches = [val_sampler.batch(128) for _ in range(max(1, cfg.validation_windows // 128))]
@@ -195,6 +204,13 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
         if 'rng' in state:
             sampler.rng.bit_generator.state = state['rng']
         print(f'resuming from {ckpt} at step {step}/{total}', flush=True)
+    elif init is not None:
+        from ..weights import load_weights
+        start = load_weights(init, device)
+        if asdict(start.cfg) != asdict(mc):
+            raise ValueError(f'--init {init}: its configuration differs from the run\'s')
+        model.load_state_dict(start.state_dict())      # with its normalisation
+        print(f'starting from {init}', flush=True)
     else:
         fm, fs, om, os_ = statistics(sampler)
         model.set_normalisation(fm, fs, om, os_)
