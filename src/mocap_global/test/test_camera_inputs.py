@@ -156,3 +156,44 @@ def test_camera_motion_round_trip():
         np.testing.assert_allclose(w, np.zeros(3) if state == 'static' else [0.1, 0, -0.2])
     with pytest.raises(ValueError, match='unknown camera motion state'):
         rc.camera_motion_to_odometry('flying', q, np.zeros(3), rc.make_header(5, 'a'), 'b')
+
+
+def test_a_known_camera_pose_with_the_physics_floor_input(graph_node):
+    """A floor-frame input (the physics output) goes through the floor transform and then
+    the camera pose: with a true floor the world output is the true world pose."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+    from mocap_core.data.synth2d import look_at
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
+                                  fusion_position_time_constant_s=1e-6,
+                                  fusion_orientation_time_constant_s=1e-6)
+    world = _poses(40)
+    t_wc = np.array([-2.0, 3.0, 1.4])
+    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T          # optical -> world
+    # the floor frame of this camera: z up, origin on the floor below the camera, x along
+    # the optical axis projected on the floor (p_camera = A p_floor + b)
+    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
+    x = f / np.linalg.norm(f)
+    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
+    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
+    A, b = R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
+    for i, p in enumerate(world):
+        header = rc.make_header(i * DT_NS, 'odom')
+        graph.publish('/robot/camera', rc.root_to_odometry(t_wc, matrix_to_quat(R_wc), header,
+                                                           'camera_optical_frame'))
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(R_wf.T @ quat_to_matrix(p.rotations[0]))
+        in_floor = Pose(p.skeleton, rot, R_wf.T @ (p.root_position - t_wf))
+        graph.publish('/in/motion', rc.pose_to_motion(in_floor, rc.make_header(i * DT_NS,
+                                                                               'floor')))
+        graph.publish('/floor', rc.transform_stamped(
+            rc.make_header(i * DT_NS, 'camera_optical_frame'), 'floor', A, b))
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == 40 and odom[-1].header.frame_id == 'odom'
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
+    # the first frame comes before any floor message: GMR's own start
+    np.testing.assert_allclose(T[1:], np.stack([p.root_position for p in world])[1:],
+                               atol=0.02)
+    assert _values(node)['camera_pose_missing_frames'] == '1'
