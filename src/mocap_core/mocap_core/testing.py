@@ -74,3 +74,22 @@ def groundtruth_motion(bag: PathLike):
     rot[:, 0] = quat_multiply(np.broadcast_to(q, rot[:, 0].shape), rot[:, 0])
     root = np.stack([p.root_position for p in poses]) @ np.asarray(quat_to_matrix(q)).T + t
     return Motion(Path(bag).name, 30.0, poses[0].skeleton, rot, root, np.stack(contacts))
+
+
+def random_walk_poses(n: int, seed: int = 0, start=(0.0, 0.0, 0.95), step=(0.04, 0.0, 0.0)):
+    """``n`` poses of the default skeleton with random limb rotations (0.2 rad per axis)
+    and a root moving from ``start`` by ``step`` (m) per frame: test input for the stages."""
+    import numpy as np
+
+    from .pose import Pose
+    from .rotations import axis_angle_to_matrix, matrix_to_quat
+    from .skeleton import NUM_JOINTS, Skeleton
+
+    rng = np.random.default_rng(seed)
+    rot = np.zeros((n, NUM_JOINTS, 4))
+    rot[..., 3] = 1.0
+    rot[:, 1:] = matrix_to_quat(axis_angle_to_matrix(0.2 * rng.standard_normal(
+        (n, NUM_JOINTS - 1, 3))))
+    sk = Skeleton.default()
+    return [Pose(sk, rot[i], np.asarray(start, float) + i * np.asarray(step, float))
+            for i in range(n)]

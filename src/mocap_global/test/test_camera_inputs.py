@@ -7,20 +7,14 @@ import pytest
 
 from mocap_core.pose import Pose
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
-from mocap_core.skeleton import NUM_JOINTS, Skeleton
+from mocap_core.testing import random_walk_poses
 
 DT_NS = 33_333_333
 
 
 def _poses(n, seed=0):
     """A person walking along world x (z up) with random limb poses."""
-    rng = np.random.default_rng(seed)
-    rot = np.zeros((n, NUM_JOINTS, 4))
-    rot[..., 3] = 1.0
-    rot[:, 1:] = matrix_to_quat(axis_angle_to_matrix(0.2 * rng.standard_normal(
-        (n, NUM_JOINTS - 1, 3))))
-    sk = Skeleton.default()
-    return [Pose(sk, rot[i], np.array([0.04 * i, 0.5, 0.95])) for i in range(n)]
+    return random_walk_poses(n, seed, start=(0.0, 0.5, 0.95), step=(0.04, 0.0, 0.0))
 
 
 @pytest.fixture

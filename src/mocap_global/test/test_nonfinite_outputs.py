@@ -12,8 +12,8 @@ import torch
 from torch import nn
 
 from mocap_core.pose import Pose
-from mocap_core.rotations import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
-from mocap_core.skeleton import NUM_JOINTS, Skeleton
+from mocap_core.testing import random_walk_poses
+from mocap_core.rotations import quat_to_matrix
 
 from mocap_global.model import GMR, GMRConfig
 from mocap_global.online import OnlineGMR, StaticCameraFusion, WorldFrame
@@ -52,13 +52,7 @@ def _model() -> GMR:
 
 
 def _poses(n: int, seed: int = 0) -> List[Pose]:
-    rng = np.random.default_rng(seed)
-    rot = np.zeros((n, NUM_JOINTS, 4))
-    rot[..., 3] = 1.0
-    rot[:, 1:] = matrix_to_quat(axis_angle_to_matrix(0.2 * rng.standard_normal(
-        (n, NUM_JOINTS - 1, 3))))
-    sk = Skeleton.default()
-    return [Pose(sk, rot[i], np.array([0.05 * i, 0.0, 3.0])) for i in range(n)]
+    return random_walk_poses(n, seed, start=(0.0, 0.0, 3.0), step=(0.05, 0.0, 0.0))
 
 
 def _run(model: nn.Module, poses: Sequence[Pose], **kwargs) -> tuple:
