@@ -61,8 +61,11 @@ def add_train_parser(sub) -> None:
 def add_eval_parser(sub) -> None:
     p = sub.add_parser('gmr', help='evaluate GMR on the validation split')
     p.add_argument('--weights', help='weights file (default: the shipped weights/gmr.pt)')
-    p.add_argument('--noise', choices=('none', 'lifter', 'both'), default='both',
-                   help='input local poses: ground truth, lifter-like noisy, or both')
+    p.add_argument('--noise', choices=('none', 'lifter', 'lifted', 'both', 'all'),
+                   default='both',
+                   help='input local poses: ground truth, lifter-like noisy (an assumed '
+                   "noise model), the shipped lifter's output from a random camera, 'both' "
+                   "(ground truth and lifter-like) or 'all' three")
     p.add_argument('--lookahead', type=int, default=15, help='look-ahead frames of the '
                    'online (node) evaluation (default 15)')
     p.add_argument('--window', type=int, default=48, help='frames per GRU pass of the online '
@@ -157,7 +160,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     val = load_dataset('validation')
     if args.max_clips:
         val = val[:args.max_clips]
-    noises = ('none', 'lifter') if args.noise == 'both' else (args.noise,)
+    noises = {'both': ('none', 'lifter'), 'all': ('none', 'lifter', 'lifted')}.get(
+        args.noise, (args.noise,))
     t0 = time.time()
     bags = None if args.no_bags else sorted(BAGS_DIR.glob('gt_*'))
     report = evaluate_all(model, val, noises, args.lookahead, args.device, bags=bags,

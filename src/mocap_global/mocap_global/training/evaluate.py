@@ -10,8 +10,10 @@ Every validation clip is run at the model's frame rate in three ways:
 
 Inputs: ``none`` = ground-truth local poses and bone lengths; ``lifter`` = lifter-like noisy
 ones (:func:`mocap_global.features.noisy_local_pose`, an assumed noise model, seeded per
-clip). Metrics (:mod:`.metrics`): OME, TME and joint motion error per step at the model rate
-and, for a 30 fps model, at 10 fps (three 30 fps motions composed, the paper's rate, Table 4);
+clip); ``lifted`` = the shipped lifter's own output for each clip seen from one random camera
+(detector placement and corruption; :mod:`.lifted`, seeded apart from training).
+Metrics (:mod:`.metrics`): OME, TME and joint motion error per step at the model rate and,
+for a 30 fps model, at 10 fps (three 30 fps motions composed, the paper's rate, Table 4);
 tilt error of the estimated up direction; drift after 1, 5 and 10 s, RTE and ATE of the
 accumulated trajectory. Baselines on the same clips: zero motion, and a constant velocity
 equal to each clip's mean ground-truth motion (an oracle: it knows the true average speed and
@@ -107,6 +109,21 @@ def predict_clip(model: GMR, feats: np.ndarray, lookahead: Optional[int],
     return {'axis_angle': aa, 'translation': tr, 'up': up}
 
 
+#: clip name -> :class:`~.lifted.LiftedClip` of the validation clips (:func:`lift_validation`)
+LIFTED: Dict = {}
+#: seed of the validation cameras (the training run's lifted clips use the run's seed, 0)
+LIFTED_SEED = 1001
+
+
+def lift_validation(motions: Sequence[Motion], progress: bool = False) -> None:
+    """Lift every clip once (one random camera; cached) for the ``lifted`` input."""
+    from .lifted import lift_clips
+    todo = [m for m in motions if m.name not in LIFTED]
+    if todo:
+        for m, c in zip(todo, lift_clips(todo, 1, LIFTED_SEED, progress=progress)):
+            LIFTED[m.name] = c
+
+
 def clip_arrays(m: Motion, fps: float, noise: str, root_input: str = 'none',
                 skeleton_input: bool = True, pose_input: str = 'quat') -> Dict:
     """Ground truth and (possibly noisy) input of one clip at the model rate."""
@@ -120,8 +137,14 @@ def clip_arrays(m: Motion, fps: float, noise: str, root_input: str = 'none',
         rng = np.random.default_rng(clip_seed(m.name))
         rot_in = noisy_local_pose(rot, rng, fps)
         gl_in = noisy_lengths(gl, rng)
+    elif noise == 'lifted':
+        if m.name not in LIFTED:
+            raise ValueError(f'{m.name}: no lifted poses (lift_validation first)')
+        c = LIFTED[m.name]
+        rot_in = np.asarray(c.rotations[0][::step], dtype=np.float64)
+        gl_in = np.asarray(c.lengths[0], dtype=np.float64)
     elif noise != 'none':
-        raise ValueError(f"noise must be 'none' or 'lifter', got {noise!r}")
+        raise ValueError(f"noise must be 'none', 'lifter' or 'lifted', got {noise!r}")
     up = up_in_body(R)
     feats = gmr_features(rot_in, gl_in, up if root_input == 'up' else None, root_input,
                          skeleton_input, pose_input)
@@ -460,6 +483,9 @@ def evaluate_all(model: GMR, motions: Sequence[Motion], noises: Sequence[str] = 
 
     results = []
     cache: Dict = {}
+    if 'lifted' in noises:
+        say('lifting the validation clips ...')
+        lift_validation(motions, progress)
     for noise in noises:
         for mode, la in (('offline', None), ('online', lookahead), ('causal', 0)):
             say(f'evaluating {mode} (look-ahead {la}), input {noise} ...')
