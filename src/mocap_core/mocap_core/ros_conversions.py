@@ -381,7 +381,7 @@ def odometry_to_root(msg: Odometry) -> Tuple[np.ndarray, np.ndarray]:
     return np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])
 
 
-#: Camera motion states (``mocap_keypoints.camera_motion``) and their encoding in Odometry.
+#: Camera motion states (``mocap_core.camera_motion``) and their encoding in Odometry.
 CAMERA_MOTION_STATES = ('static', 'rotating', 'moving', 'unknown')
 _KNOWN_VAR = 1e-6       # covariance of a quantity the background determines
 _UNKNOWN_VAR = 1e6      # covariance of a quantity it does not (ROS practice: large = ignore)

@@ -7,7 +7,7 @@ Publishes for every processed frame, stamped with the image's stamp (docs/design
   * ``/mocap/camera_info`` (sensor_msgs/CameraInfo): the intrinsics of the keypoints;
   * ``/mocap/camera/motion`` (nav_msgs/Odometry) with ``camera_motion`` (image sources): the
     camera's rotation since the first frame, its angular velocity and whether it is static,
-    rotating or moving, from the image background (``mocap_keypoints.camera_motion``; the
+    rotating or moving, from the image background (``mocap_core.camera_motion``; the
     encoding is ``mocap_core.ros_conversions.camera_motion_to_odometry``'s);
   * ``/mocap/keypoints2d/annotated`` (sensor_msgs/Image, bgr8) with ``publish_annotated``:
     the skeleton drawn over the frame, for debugging (reliable, keep-last 2, published by a
@@ -56,6 +56,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
 from mocap_core import topics
 from mocap_core.camera import CameraCalibration, read_camera_info_yaml
+from mocap_core.camera_motion import CameraMotionParams
 from mocap_core.data.openpose import infer_image_size
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded, record_failure
@@ -71,7 +72,6 @@ from mocap_core.streams import StampOrder
 
 from .detector import create_detector
 from .intrinsics import IntrinsicsProvider
-from .camera_motion import CameraMotionParams
 from .pipeline import FrameProcessor, FrameResult, select_persons  # noqa: F401 (re-exported)
 from .sources import SOURCE_KINDS, Frame, SourceError, open_source, resolve_kind
 from .worker import LatestWorker, SourceFeeder

@@ -7,7 +7,7 @@ detections), keep the ``max_persons`` most confident persons (padding with all-z
 so a frame without anybody still gives a cloud whose confidences are all 0), pick the
 intrinsics for the image size, undistort the keypoints when the calibration has lens
 distortion, estimate the camera's motion from the image background (``camera_motion``,
-:mod:`.camera_motion`) and draw the annotated debug image if asked.
+:mod:`mocap_core.camera_motion`) and draw the annotated debug image if asked.
 """
 
 from __future__ import annotations
@@ -19,9 +19,10 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from mocap_core.skeleton import KEYPOINT_EDGES, KEYPOINT_NAMES, NUM_KEYPOINTS
+from mocap_core.camera_motion import (CameraMotionEstimate, CameraMotionEstimator,
+                                      CameraMotionParams)
 from mocap_core.streams import StampOrder
 
-from .camera_motion import CameraMotionEstimate, CameraMotionEstimator, CameraMotionParams
 from .detector import Detector
 from .intrinsics import FrameIntrinsics, IntrinsicsProvider, distortion_supported, \
     undistort_keypoints
@@ -129,9 +130,9 @@ class FrameProcessor:
 
     def _estimate_camera_motion(self, res: FrameResult, image: np.ndarray,
                                 keypoints: np.ndarray, restart: bool) -> None:
-        """The camera's motion into this frame (module :mod:`.camera_motion`); a new estimator
-        when the intrinsics change or the stream restarts. A failure is noted and counted,
-        and the frame goes on without an estimate."""
+        """The camera's motion into this frame (:mod:`mocap_core.camera_motion`); a new
+        estimator when the intrinsics change or the stream restarts. A failure is noted and
+        counted, and the frame goes on without an estimate."""
         i = res.intrinsics.intrinsics
         K = np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
         if self._motion is None or restart or not np.array_equal(K, self._motion_K):

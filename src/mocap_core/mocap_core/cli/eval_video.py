@@ -79,7 +79,7 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path) -> 
     camera: ``{'rotation_error_deg_s': median error of the frame-to-frame rotation,
     'drift_deg': orientation error at the end, 'state_<state>': fraction of frames}``
     (scored as ``camera_<key>``)."""
-    from mocap_keypoints.camera_motion import estimate_video
+    from mocap_core.camera_motion import estimate_video
 
     from ..render.bag import write_rendered_bag
     from ..rotations import matrix_to_axis_angle, quat_to_matrix

@@ -522,7 +522,7 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                   '', 'RTE: root error after rigid alignment of the whole clip over the '
                   'distance travelled (clips that travel at least '
                   f'{RTE_MIN_TRAVEL_M:g} m). Camera motion: the estimate from the video '
-                  'background (`mocap_keypoints.camera_motion`), the share of frames in each '
+                  'background (`mocap_core.camera_motion`), the share of frames in each '
                   'state and the median error of its frame-to-frame rotation.', '',
                   '| camera | clips | world RTE | world root error (mm) | WA-MPJPE100 / '
                   'W-MPJPE100 (mm) | static | rotating | moving | rotation error (deg/s) |',

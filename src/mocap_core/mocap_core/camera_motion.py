@@ -45,7 +45,7 @@ from typing import Deque, List, Optional, Tuple
 import cv2
 import numpy as np
 
-from mocap_core.rotations import matrix_to_axis_angle, matrix_to_quat
+from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
 

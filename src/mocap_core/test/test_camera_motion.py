@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
-from mocap_keypoints.camera_motion import (CameraMotionEstimator, CameraMotionParams,
+from mocap_core.camera_motion import (CameraMotionEstimator, CameraMotionParams,
                                            fit_rotation, person_mask)
 
 W, H = 640, 480
