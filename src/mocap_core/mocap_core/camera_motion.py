@@ -29,6 +29,24 @@ Per frame the evidence gives a state:
 :attr:`CameraMotionEstimate.state` is the state of the majority of the last
 ``state_window`` frames (ties go to the more-moving state), :attr:`frame_state` the frame's own.
 
+Translation over the floor (beyond rotation). A single camera cannot tell how far it moved,
+but the floor can: given the floor plane in the camera frame (its unit up normal ``n`` and the
+camera's height ``h`` above it, e.g. from the physics stage's floor, :meth:`set_floor`), a
+background point of the previous frame whose ray points down hits the floor at
+``X = -h / (n . b) b``. With the rotation ``R_rel`` already known, the camera's displacement
+``t`` (previous camera frame, m) is linear in the current bearings ``c = R_rel b_cur``:
+``[c]_x t = [c]_x X``. Two points determine it; RANSAC over pairs (angular residual below the
+homography threshold) rejects the points that are not on the floor (trees, walls, people's
+shadows off the mask). The rotation and the step are then refined together on those points by
+OpenCV's perspective-n-point solver (``cv2.solvePnP``), started there (:func:`fit_floor_motion`):
+a scene of mostly floor misleads the background rotation, since a plane seen by a translating
+camera maps by a homography too. The camera's
+position (:attr:`CameraMotionEstimate.position`, in the first camera frame) is the sum of
+the steps ``R_0,prev t``; a static frame adds nothing. A frame whose translation cannot be
+found (no floor yet, fewer than ``floor_min_points`` floor inliers, an unknown frame) leaves
+``translation_known`` False for that frame; the position then resumes from where it was, and
+a consumer should treat the jump as unknown (the world stage re-aligns).
+
 Conventions: optical frame of REP-103 (x right, y down, z forward). ``orientation`` (x, y, z,
 w) is the current camera frame in the camera frame of the first image (``R_0t``: a vector in
 the current frame, turned into the first frame), the product of the ``R_rel`` so far.
@@ -40,7 +58,7 @@ from __future__ import annotations
 
 import collections
 from dataclasses import dataclass, field
-from typing import Deque, List, Optional, Tuple
+from typing import Deque, List, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -71,11 +89,17 @@ class CameraMotionParams:
     fb_error_px: float = 1.0         # forward-backward tracking error bound
     state_window: int = 9            # frames in the majority vote of ``state``
     reference_width: int = 640
+    floor_min_points: int = 15       # floor inliers needed for a translation
+    floor_max_distance: float = 25.0  # floor points further than this many camera heights
+    floor_iterations: int = 64       # RANSAC pairs tried per frame
+    floor_max_speed: float = 5.0     # m/s: a faster step is rejected as a failure
 
     def validate(self) -> None:
         """Raise ValueError naming every parameter that is out of range."""
         bad = [n for n in ('max_features', 'min_features', 'state_window', 'max_width',
-                           'reference_width') if getattr(self, n) < 1]
+                           'reference_width', 'floor_min_points', 'floor_iterations')
+               if getattr(self, n) < 1]
+        bad += [n for n in ('floor_max_distance', 'floor_max_speed') if not getattr(self, n) > 0]
         bad += [n for n in ('static_flow_px', 'parallax_px', 'parallax_rate_px', 'ransac_px',
                             'fb_error_px', 'parallax_min_age', 'parallax_max_age',
                             'min_distance_px', 'feature_quality') if not getattr(self, n) > 0]
@@ -104,7 +128,151 @@ class CameraMotionEstimate:
     #: over the track's span) / span: reference pixels per frame
     parallax_rate_px: float = float('nan')
     first: bool = False               # the first frame (no motion yet)
+    #: (3,) m: the camera's position in the first camera frame (module docstring,
+    #: translation over the floor); meaningful where ``translation_known``
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    #: (3,) m/s: the camera's velocity in the current camera frame (zero when not known)
+    linear_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    translation_known: bool = False   # this frame's step was measured (or static)
+    floor_points: int = 0             # background points whose ray meets the floor
+    floor_inliers: int = 0            # of them, consistent with the fitted step
     extra: dict = field(default_factory=dict)
+
+
+def floor_points(bearings: np.ndarray, normal: np.ndarray, height: float,
+                 max_distance: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Where rays meet the floor.
+
+    Args:
+        bearings: (N, 3) ray directions in the camera frame (any length).
+        normal: (3,) the floor's unit up normal in the camera frame.
+        height: the camera's height above the floor, m (> 0).
+        max_distance: rays meeting the floor further than ``max_distance * height`` from the
+            camera (near the horizon: unreliable) do not count.
+    Returns:
+        (points (N, 3) m in the camera frame, NaN where a ray does not meet the floor;
+        mask (N,) of the rays that do).
+    """
+    b = np.asarray(bearings, dtype=np.float64)
+    b = b / np.linalg.norm(b, axis=1, keepdims=True)
+    den = b @ np.asarray(normal, dtype=np.float64)
+    ok = den < -1.0 / max_distance          # distance = h / -den <= max_distance * h
+    s = np.where(ok, -height / np.where(ok, den, -1.0), np.nan)
+    return s[:, None] * b, ok
+
+
+def _cross_rows(c: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (N, 3, 3) cross-product matrices ``[c]_x``."""
+    z = np.zeros(len(c))
+    return np.stack([np.stack([z, -c[:, 2], c[:, 1]], 1), np.stack([c[:, 2], z, -c[:, 0]], 1),
+                     np.stack([-c[:, 1], c[:, 0], z], 1)], 1)
+
+
+def fit_floor_translation(points: np.ndarray, bearings: np.ndarray, threshold_rad: float,
+                          iterations: int = 64, min_inliers: int = 15,
+                          rng: Optional[np.random.Generator] = None
+                          ) -> Tuple[Optional[np.ndarray], np.ndarray]:
+    """The camera's displacement for a known rotation (module docstring): RANSAC over pairs
+    of floor points, then least squares over the inliers.
+
+    Args:
+        points: (N, 3) m, floor points in the previous camera frame.
+        bearings: (N, 3) their directions from the current camera, turned into the previous
+            camera frame (``R_rel b_cur``).
+        threshold_rad: largest angle between a bearing and ``point - t`` of an inlier.
+        iterations: pairs tried.
+        min_inliers: fewer inliers: no answer.
+        rng: random generator (default: seeded, deterministic).
+    Returns:
+        (t (3,) m: the current camera centre in the previous camera frame, or None;
+        inlier mask (N,)).
+    """
+    X = np.asarray(points, dtype=np.float64)
+    c = np.asarray(bearings, dtype=np.float64)
+    n = len(X)
+    if n < max(2, min_inliers):
+        return None, np.zeros(n, bool)
+    c = c / np.linalg.norm(c, axis=1, keepdims=True)
+    A = _cross_rows(c)                                  # [c]_x t = [c]_x X
+    rhs = np.einsum('nij,nj->ni', A, X)
+    rng = rng if rng is not None else np.random.default_rng(0)
+    cos_thr = np.cos(threshold_rad)
+
+    def solve(idx: np.ndarray) -> np.ndarray:
+        return np.linalg.lstsq(A[idx].reshape(-1, 3), rhs[idx].reshape(-1), rcond=None)[0]
+
+    def inliers(t: np.ndarray) -> np.ndarray:
+        d = X - t
+        return np.einsum('ni,ni->n', d, c) >= cos_thr * np.linalg.norm(d, axis=1)
+
+    best = np.zeros(n, bool)
+    for _ in range(iterations):
+        t = solve(rng.choice(n, 2, replace=False))
+        inl = inliers(t)
+        if inl.sum() > best.sum():
+            best = inl
+    if best.sum() < min_inliers:
+        return None, best
+    t = solve(np.nonzero(best)[0])
+    inl = inliers(t)
+    if inl.sum() < min_inliers:
+        return None, inl
+    return t, inl
+
+
+def fit_floor_motion(points: np.ndarray, pixels: np.ndarray, K: np.ndarray,
+                     R_guess: np.ndarray, threshold_px: float, iterations: int = 64,
+                     min_inliers: int = 15, rng: Optional[np.random.Generator] = None
+                     ) -> Tuple[Optional[Tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """The camera's rotation and displacement from floor points of the previous frame and
+    where they are seen now (module docstring): the floor points are selected by
+    :func:`fit_floor_translation` at the guessed rotation (with a threshold three times
+    wider, since the guess is not exact), then rotation and step are refined together by
+    OpenCV's iterative perspective-n-point solver (``cv2.solvePnP``) on them, and the
+    inliers are chosen again by reprojection error.
+
+    Args:
+        points: (N, 3) m, floor points in the previous camera frame.
+        pixels: (N, 2) where they are in the current image (the pixels ``K`` belongs to).
+        K: (3, 3) intrinsics.
+        R_guess: (3, 3) the rotation from the current camera frame to the previous one.
+        threshold_px: reprojection error of an inlier, pixels.
+        iterations: RANSAC pairs tried.
+        min_inliers: fewer inliers: no answer.
+    Returns:
+        ((R_rel (3, 3): current camera frame -> previous one, t (3,) m: the current camera
+        centre in the previous camera frame) or None; inlier mask (N,)).
+    """
+    X = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    u = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 2)
+    K = np.asarray(K, dtype=np.float64)
+    n = len(X)
+    if n < max(6, min_inliers):
+        return None, np.zeros(n, bool)
+    R_guess = np.asarray(R_guess, dtype=np.float64)
+    b = np.concatenate([u, np.ones((n, 1))], axis=1) @ np.linalg.inv(K).T
+    t0, inl = fit_floor_translation(X, b @ R_guess.T, 3.0 * threshold_px / K[0, 0],
+                                    iterations, min_inliers, rng)
+    if t0 is None:
+        return None, inl
+    rvec, _ = cv2.Rodrigues(R_guess.T)               # previous camera frame -> current
+    tvec = -R_guess.T @ t0
+    for _ in range(2):
+        try:
+            ok, rvec, tvec = cv2.solvePnP(X[inl].reshape(-1, 1, 3), u[inl].reshape(-1, 1, 2),
+                                          K, None, rvec, tvec.reshape(3, 1),
+                                          useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+        except cv2.error:
+            return None, np.zeros(n, bool)
+        if not ok or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
+            return None, np.zeros(n, bool)
+        proj, _ = cv2.projectPoints(X.reshape(-1, 1, 3), rvec, tvec, K, None)
+        err = np.linalg.norm(proj.reshape(-1, 2) - u, axis=1)
+        inl = np.isfinite(err) & (err < threshold_px)
+        if inl.sum() < min_inliers:
+            return None, inl
+    R_cp, _ = cv2.Rodrigues(rvec)
+    return (R_cp.T, -R_cp.T @ np.asarray(tvec).ravel()), inl
 
 
 def person_mask(shape: Tuple[int, int], keypoints: Optional[np.ndarray], margin: float,
@@ -171,16 +339,57 @@ class CameraMotionEstimator:
         self._stamp: Optional[float] = None
         self._omega = np.zeros(3)
         self._states: Deque[str] = collections.deque(maxlen=params.state_window)
+        self._C = np.zeros(3)                        # camera position, first camera frame
+        self._v = np.zeros(3)                        # camera velocity, current frame
+        self._floor: Optional[Tuple[np.ndarray, float]] = None   # (n in first frame, h)
+        self._history: Deque[Tuple[float, np.ndarray]] = collections.deque(maxlen=600)
+        self._rng = np.random.default_rng(0)
         self.frames = 0
         self.unknown_frames = 0
+        self.translation_frames = 0                 # moving frames with a measured step
 
     def reset(self) -> None:
-        """Forget the tracks and the orientation (a new video, a time jump)."""
+        """Forget the tracks, the orientation and the position (a new video, a time jump);
+        a floor already given is kept (in the camera frame of the next image)."""
+        if self._floor is not None:
+            self._floor = (self._R0.T @ self._floor[0], self._floor[1])
         self._prev, self._stamp = None, None
         self._empty_tracks()
         self._R0 = np.eye(3)
         self._omega = np.zeros(3)
+        self._C = np.zeros(3)
+        self._v = np.zeros(3)
+        self._history.clear()
         self._states.clear()
+
+    def set_floor(self, normal: np.ndarray, height: float,
+                  stamp_s: Optional[float] = None) -> bool:
+        """Give the floor plane (module docstring, translation over the floor).
+
+        Args:
+            normal: (3,) the floor's up normal in the camera frame of the image stamped
+                ``stamp_s`` (or of the latest image when None or not among the recent ones).
+            height: the camera's height above the floor then, m.
+        Returns:
+            False (and the floor is ignored) when it is not finite or not plausible (height
+            outside 0.05-100 m).
+        """
+        n = np.asarray(normal, dtype=np.float64)
+        norm = float(np.linalg.norm(n)) if np.all(np.isfinite(n)) else 0.0
+        if norm < 0.5 or not (np.isfinite(height) and 0.05 <= height <= 100.0):
+            return False
+        R0 = self._R0
+        if stamp_s is not None and self._history:
+            t, R = min(self._history, key=lambda e: abs(e[0] - stamp_s))
+            if abs(t - stamp_s) < 0.1:
+                R0 = R
+        self._floor = (R0 @ (n / norm), float(height))
+        return True
+
+    @property
+    def has_floor(self) -> bool:
+        """A floor has been given (translations can be measured)."""
+        return self._floor is not None
 
     # -- helpers ------------------------------------------------------------------------------
     def _working(self, image: np.ndarray) -> np.ndarray:
@@ -223,12 +432,21 @@ class CameraMotionEstimator:
         return h / np.linalg.norm(h, axis=1, keepdims=True)
 
     def _result(self, frame_state: str, R0_new: np.ndarray, dt: float, first: bool = False,
-                **info) -> CameraMotionEstimate:
+                step: Optional[np.ndarray] = None, **info) -> CameraMotionEstimate:
         """Record the frame: the new orientation ``R0_new`` (projected onto SO(3)), the
-        motion into it and the voted state."""
+        motion into it (``step``: the camera's displacement in the previous camera frame, m,
+        None when not measured) and the voted state."""
         self._states.append(frame_state)
         R0_new = fit_rotation(np.eye(3), R0_new)      # the nearest rotation: no numeric drift
         R_rel = self._R0.T @ R0_new
+        known = first or step is not None
+        if step is not None:
+            self._C = self._C + self._R0 @ step
+            self._v = (R_rel.T @ step / dt) if dt > 0 else np.zeros(3)
+        else:
+            self._v = np.zeros(3)
+        if self._stamp is not None:
+            self._history.append((self._stamp, R0_new))
         if frame_state != 'unknown':
             self._omega = (matrix_to_axis_angle(R_rel) / dt) if dt > 0 else np.zeros(3)
         else:
@@ -240,7 +458,28 @@ class CameraMotionEstimator:
         state = min(counts, key=lambda s: (-counts[s], order[s]))
         return CameraMotionEstimate(
             state=state, frame_state=frame_state, orientation=matrix_to_quat(self._R0),
-            angular_velocity=self._omega.copy(), rotation=R_rel, first=first, **info)
+            angular_velocity=self._omega.copy(), rotation=R_rel, first=first,
+            position=self._C.copy(), linear_velocity=self._v.copy(), translation_known=known,
+            **info)
+
+    def _floor_step(self, prv: np.ndarray, cur: np.ndarray, R_ff: np.ndarray, dt: float,
+                    ref: float) -> Tuple[Optional[Tuple[np.ndarray, np.ndarray]], int, int]:
+        """The camera's motion into this frame over the floor (module docstring): ((R_rel
+        current -> previous camera frame, step (3,) m in the previous camera frame) or None,
+        floor points, inliers)."""
+        p = self.params
+        if self._floor is None or len(prv) < p.floor_min_points:
+            return None, 0, 0
+        n0, h = self._floor
+        X, on = floor_points(self._bearings(prv), self._R0.T @ n0, h, p.floor_max_distance)
+        if on.sum() < p.floor_min_points:
+            return None, int(on.sum()), 0
+        motion, inl = fit_floor_motion(X[on], cur[on], self._Kw, R_ff, p.ransac_px * ref,
+                                       p.floor_iterations, p.floor_min_points, self._rng)
+        if motion is not None and dt > 0 and \
+                np.linalg.norm(motion[1]) > p.floor_max_speed * dt:
+            motion = None
+        return motion, int(on.sum()), int(inl.sum())
 
     # -- the update ---------------------------------------------------------------------------
     def _add_corners(self, grey: np.ndarray, mask: np.ndarray) -> None:
@@ -355,6 +594,19 @@ class CameraMotionEstimator:
             state = 'rotating' if parallax < p.parallax_px else 'moving'
         if self._kf_age >= p.parallax_min_age and rate > p.parallax_rate_px:
             state = 'moving'
+        step: Optional[np.ndarray] = None
+        n_floor = n_inl = 0
+        if state == 'static':
+            step = np.zeros(3)
+        else:
+            motion, n_floor, n_inl = self._floor_step(
+                prv, cur, fit_rotation(np.eye(3), self._R0.T @ R0_cur), dt, ref)
+            if motion is not None:
+                # the floor fixes the rotation too: far background alone confuses a turn
+                # with a sideways step less, but a scene of floor only misleads the
+                # homography (a translating plane is a homography as well)
+                R0_cur, step = self._R0 @ motion[0], motion[1]
+                self.translation_frames += 1
         # keep the inliers, top up, renew the keyframe when it is old or thinly tracked
         self._pts, self._origin = self._pts[inl], self._origin[inl]
         if len(self._pts) < p.redetect_below:
@@ -362,13 +614,15 @@ class CameraMotionEstimator:
         if self._kf_age >= p.parallax_max_age or \
                 np.isfinite(self._origin[:, 0]).sum() < max(p.min_features, len(self._pts) // 3):
             self._new_keyframe(R0_cur)
-        return self._result(state, R0_cur, dt, tracked=tracked, inliers=int(inl.sum()),
-                            flow_px=flow, parallax_px=parallax, parallax_rate_px=rate)
+        return self._result(state, R0_cur, dt, step=step, tracked=tracked,
+                            inliers=int(inl.sum()), flow_px=flow, parallax_px=parallax,
+                            parallax_rate_px=rate, floor_points=n_floor, floor_inliers=n_inl)
 
 
 def estimate_video(video: str, K: np.ndarray, fps: float,
                    keypoints: Optional[np.ndarray] = None,
-                   params: CameraMotionParams = CameraMotionParams()
+                   params: CameraMotionParams = CameraMotionParams(),
+                   floors: Optional[Sequence[Optional[Tuple[np.ndarray, float, float]]]] = None
                    ) -> List[CameraMotionEstimate]:
     """The camera motion of every frame of a video file (offline evaluation: the keypoint
     node does the same frame by frame).
@@ -378,6 +632,9 @@ def estimate_video(video: str, K: np.ndarray, fps: float,
         K: (3, 3) its intrinsics (pixels).
         fps: its frame rate; frame i is stamped i / fps.
         keypoints: (F, 23, 3) or (F, P, 23, 3) the people's keypoints per frame, or None.
+        floors: per frame, the floor known when it arrives, or None: (normal (3,) in the
+            camera frame of the image stamped ``stamp_s``, camera height m, ``stamp_s``)
+            (:meth:`CameraMotionEstimator.set_floor`).
 
     Raises:
         OSError: the video cannot be opened.
@@ -394,6 +651,9 @@ def estimate_video(video: str, K: np.ndarray, fps: float,
                 break
             i = len(out)
             kp = None if keypoints is None or i >= len(keypoints) else keypoints[i]
+            if floors is not None and i < len(floors) and floors[i] is not None:
+                n, h, t = floors[i]
+                est.set_floor(n, h, t)
             out.append(est.update(image, i / fps, kp))
     finally:
         cap.release()

@@ -387,36 +387,53 @@ _KNOWN_VAR = 1e-6       # covariance of a quantity the background determines
 _UNKNOWN_VAR = 1e6      # covariance of a quantity it does not (ROS practice: large = ignore)
 
 
+_MEASURED_VAR = 1e-2     # covariance of a translation measured over the floor (m^2, m^2/s^2)
+
+
 def camera_motion_to_odometry(state: str, orientation: np.ndarray,
                               angular_velocity: np.ndarray, header: Header,
-                              child_frame_id: str) -> Odometry:
+                              child_frame_id: str, position: Optional[np.ndarray] = None,
+                              linear_velocity: Optional[np.ndarray] = None) -> Odometry:
     """A camera-motion estimate -> nav_msgs/Odometry.
 
     ``header.frame_id`` names the camera frame at the first image (fixed), ``child_frame_id``
     the camera's optical frame now. pose.orientation (x, y, z, w): the current camera frame in
-    the first one; position 0, unknown (covariance 1e6). twist.angular: rad/s in the current
-    camera frame. The state is in the twist covariance, as what the background determines:
+    the first one. twist.angular: rad/s in the current camera frame. The state is in the twist
+    covariance, as what the background determines:
 
     * ``static``: angular velocity exactly 0; linear and angular covariance 1e-6 (the camera
       is known not to move);
     * ``rotating``: linear covariance 1e-6 (known not to translate), angular 1e-6;
-    * ``moving``: linear covariance 1e6 (translation unknown), angular 1e-6;
+    * ``moving``: linear covariance 1e6 (translation unknown), or 1e-2 when the translation
+      was measured over the floor (``position`` given); angular 1e-6;
     * ``unknown``: every covariance 1e6 (nothing could be tracked; the orientation is the
       last one).
+
+    ``position`` (3,) m: the camera's position in the first camera frame, measured over the
+    floor (``mocap_core.camera_motion``), with ``linear_velocity`` (3,) m/s in the current
+    camera frame; pose position covariance 1e-2. None: position 0 with covariance 1e6
+    (unknown).
     """
     if state not in CAMERA_MOTION_STATES:
         raise ValueError(f'unknown camera motion state {state!r}')
     w = np.zeros(3) if state == 'static' else np.asarray(angular_velocity, dtype=float)
-    msg = root_to_odometry(np.zeros(3), orientation, header, child_frame_id,
-                           np.zeros(3), w)
-    lin = _KNOWN_VAR if state in ('static', 'rotating') else _UNKNOWN_VAR
+    known = position is not None and state != 'unknown'
+    v = np.zeros(3)
+    if known and state == 'moving' and linear_velocity is not None:
+        v = np.asarray(linear_velocity, dtype=float)
+    msg = root_to_odometry(np.asarray(position, dtype=float) if known else np.zeros(3),
+                           orientation, header, child_frame_id, v, w)
+    if state in ('static', 'rotating'):
+        lin = _KNOWN_VAR
+    else:
+        lin = _MEASURED_VAR if known else _UNKNOWN_VAR
     ang = _UNKNOWN_VAR if state == 'unknown' else _KNOWN_VAR
     cov = np.zeros((6, 6))
     cov[:3, :3] = np.eye(3) * lin
     cov[3:, 3:] = np.eye(3) * ang
     msg.twist.covariance = cov.ravel().tolist()
     pcov = np.zeros((6, 6))
-    pcov[:3, :3] = np.eye(3) * _UNKNOWN_VAR
+    pcov[:3, :3] = np.eye(3) * (_MEASURED_VAR if known else _UNKNOWN_VAR)
     pcov[3:, 3:] = np.eye(3) * ang
     msg.pose.covariance = pcov.ravel().tolist()
     return msg
@@ -436,13 +453,25 @@ def odometry_to_camera_motion(msg: Odometry) -> Tuple[str, np.ndarray, np.ndarra
                            'covariance')
     if cov[3, 3] >= 1.0:
         state = 'unknown'
-    elif cov[0, 0] >= 1.0:
+    elif cov[0, 0] > 1e-4:
         state = 'moving'
     elif not np.any(w):
         state = 'static'
     else:
         state = 'rotating'
     return state, q / np.linalg.norm(q), w
+
+
+def odometry_to_camera_position(msg: Odometry) -> Optional[np.ndarray]:
+    """The camera's position (3,) m in the first camera frame from a message of
+    :func:`camera_motion_to_odometry`, or None where it was not measured (pose position
+    covariance >= 1, or not finite)."""
+    p = msg.pose.pose.position
+    pos = np.array([p.x, p.y, p.z], dtype=float)
+    var = float(msg.pose.covariance[0])
+    if not (np.isfinite(var) and var < 1.0 and np.all(np.isfinite(pos))):
+        return None
+    return pos
 
 
 def append_to_path(path: Path, odom: Odometry, max_length: int = 0) -> Path:

@@ -93,3 +93,42 @@ def random_walk_poses(n: int, seed: int = 0, start=(0.0, 0.0, 0.95), step=(0.04,
     sk = Skeleton.default()
     return [Pose(sk, rot[i], np.asarray(start, float) + i * np.asarray(step, float))
             for i in range(n)]
+
+
+def textured_floor_view(R_wc, C, K, size=(640, 480), seed: int = 3):
+    """A synthetic camera image of a textured floor (the plane z = 0 of a z-up world, a 20 x
+    20 m texture of random rectangles centred on the origin; the sky a uniform grey) seen
+    from ``C`` (3,) m with the optical frame's orientation ``R_wc`` (3, 3, optical ->
+    world) through intrinsics ``K`` (3, 3): the camera-motion tests' scene with a known
+    metric camera path. ``size``: (width, height) pixels. Returns a BGR uint8 image."""
+    import cv2
+    import numpy as np
+
+    key = (seed,)
+    tex = _FLOOR_TEXTURES.get(key)
+    if tex is None:
+        rng = np.random.default_rng(seed)
+        tex = np.full((2000, 2000, 3), 90, np.uint8)
+        for _ in range(2500):
+            x, y = rng.integers(0, 2000, 2)
+            w, h = rng.integers(5, 60, 2)
+            c = tuple(int(v) for v in rng.integers(0, 255, 3))
+            cv2.rectangle(tex, (int(x), int(y)), (int(x + w), int(y + h)), c, -1)
+        tex = cv2.GaussianBlur(tex, (3, 3), 0)
+        _FLOOR_TEXTURES[key] = tex
+    R_cw = np.asarray(R_wc, dtype=np.float64).T
+    t = -R_cw @ np.asarray(C, dtype=np.float64)
+    S = np.array([[0.01, 0.0, -10.0], [0.0, 0.01, -10.0], [0.0, 0.0, 1.0]])  # pixel -> m
+    K = np.asarray(K, dtype=np.float64)
+    Hm = K @ np.column_stack([R_cw[:, 0], R_cw[:, 1], t]) @ S
+    W, H = size
+    img = cv2.warpPerspective(tex, Hm, (W, H), flags=cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=(200, 200, 200))
+    # the floor behind the camera maps into the image too: paint the sky above the horizon
+    u, v = np.meshgrid(np.arange(W), np.arange(H))
+    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K).T @ R_cw
+    img[rays[..., 2] >= -0.02] = 200
+    return img
+
+
+_FLOOR_TEXTURES: Dict[tuple, Any] = {}

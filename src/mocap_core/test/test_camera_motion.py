@@ -124,3 +124,86 @@ def test_bad_parameters_are_named():
         CameraMotionParams(parallax_px=0.0).validate()
     with pytest.raises(ValueError, match='min_features > max_features'):
         CameraMotionEstimator(K, CameraMotionParams(min_features=500))
+
+
+# --- translation over the floor -------------------------------------------------------------
+def _floor_view(R_wc, C):
+    from mocap_core.testing import textured_floor_view
+    return textured_floor_view(R_wc, C, K, (W, H))
+
+
+def _looking(yaw_deg, pitch_deg):
+    """Optical frame -> world for a camera facing the heading ``yaw`` (about z), tilted
+    ``pitch`` down."""
+    base = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # z fwd = +x
+    yaw = axis_angle_to_matrix(np.array([0.0, 0.0, np.radians(yaw_deg)]))
+    pitch = axis_angle_to_matrix(np.array([0.0, np.radians(pitch_deg), 0.0]))
+    return yaw @ pitch @ base
+
+
+@pytest.mark.parametrize('turn_deg_s', [0.0, 10.0])
+def test_a_camera_walking_over_a_textured_floor_gives_its_metric_path(turn_deg_s):
+    """A camera 1.5 m above the floor, tilted 25 deg down, walks 1.2 m/s for 1 s (turning
+    or not); given the floor, its position (first camera frame) is found within 5 %."""
+    fps, h = 30.0, 1.5
+    est = CameraMotionEstimator(K)
+    n_world = np.array([0.0, 0.0, 1.0])
+    C0, R0 = np.array([0.0, 0.0, h]), _looking(0.0, 25.0)
+    C, e = C0, None
+    for i in range(31):
+        yaw = turn_deg_s * i / fps
+        R = _looking(yaw, 25.0)
+        C = C0 + 1.2 * i / fps * np.array([np.cos(np.radians(yaw)), np.sin(np.radians(yaw)),
+                                           0.0])
+        if i == 0:
+            assert est.set_floor(R.T @ n_world, h, 0.0)
+        e = est.update(_floor_view(R, C), i / fps, _person())
+        assert e.translation_known, (i, e.frame_state, e.floor_points, e.floor_inliers)
+    truth = R0.T @ (C - C0)                      # in the first camera frame
+    assert np.linalg.norm(truth) > 1.15
+    assert np.linalg.norm(e.position - truth) < 0.05 * np.linalg.norm(truth), (e.position,
+                                                                                truth)
+    assert e.floor_inliers >= 30
+    speed = np.linalg.norm(e.linear_velocity)
+    assert 1.1 < speed < 1.3, e.linear_velocity
+
+
+def test_without_a_floor_a_moving_camera_has_no_translation():
+    est = CameraMotionEstimator(K)
+    assert not est.has_floor
+    assert not est.set_floor(np.array([0.0, -1.0, 0.0]), float('nan'))
+    assert not est.set_floor(np.array([0.0, 0.0, 0.0]), 1.5)
+    assert not est.set_floor(np.array([0.0, -1.0, 0.0]), 1000.0)
+    C0 = np.array([0.0, 0.0, 1.5])
+    states = []
+    for i in range(15):
+        e = est.update(_floor_view(_looking(0.0, 25.0), C0 + [0.05 * i, 0.0, 0.0]), i / 30,
+                       _person())
+        states.append((e.frame_state, e.translation_known))
+    assert all(not k for s, k in states[1:] if s != 'static'), states
+    assert any(s == 'moving' for s, _ in states), states
+
+
+def test_floor_motion_rejects_points_off_the_floor():
+    from mocap_core.camera_motion import fit_floor_motion, floor_points
+    rng = np.random.default_rng(4)
+    n, h = np.array([0.0, -1.0, 0.0]), 1.6            # optical frame: up is -y
+    rays = np.column_stack([rng.uniform(-0.6, 0.6, 200), rng.uniform(0.1, 0.5, 200),
+                            np.ones(200)])
+    X, ok = floor_points(rays, n, h, 25.0)
+    assert ok.all() and np.allclose(X[:, 1], h)       # on the plane y = +h (below)
+    # a ray above the horizon, or grazing it, does not meet the floor
+    assert not floor_points(np.array([[0.0, -0.1, 1.0], [0.0, 0.01, 1.0]]), n, h, 25.0)[1].any()
+    R_true = axis_angle_to_matrix(np.array([0.0, 0.02, 0.0]))    # current -> previous
+    t_true = np.array([0.03, 0.0, 0.08])
+    cur = (X - t_true) @ R_true                        # R^T (X - t), row-wise
+    px = cur @ K.T
+    px = px[:, :2] / px[:, 2:]
+    px[:60] = rng.uniform(0, 640, (60, 2))             # 30 % of the points are not floor
+    motion, inl = fit_floor_motion(X, px, K, np.eye(3), 1.0)   # the guess: no turn
+    assert motion is not None
+    np.testing.assert_allclose(motion[0], R_true, atol=1e-5)
+    np.testing.assert_allclose(motion[1], t_true, atol=1e-4)
+    assert inl[60:].all() and inl[:60].sum() <= 2
+    # too few points: no answer
+    assert fit_floor_motion(X[:5], px[:5], K, np.eye(3), 1.0)[0] is None

@@ -27,11 +27,13 @@ Camera motion (beyond the paper; ``camera_mode``): the input's root trajectory d
 when the camera does not move, so the GMR motion is fused with it
 (:class:`~mocap_global.online.StaticCameraFusion`). ``auto`` (default) reads the keypoint
 node's estimate from the image background (``camera_motion_topic``, nav_msgs/Odometry,
-matched by stamp): a static camera is fused; with ``fuse_rotating``, a camera that only turns
-has its rotation taken out of the input root first (in the floor frame, with ``floor_topic``,
-when the input is a floor frame) and is fused too; a translating (or, by default, turning)
-camera, an unknown motion or a missing estimate leaves GMR alone for that frame, and the
-fusion aligns itself again once the camera stops. ``static`` fuses every frame, ``moving``
+matched by stamp): a static camera is fused; a camera whose translation the keypoint node
+measured over the floor (``fuse_translating``, default on) has its rotation and position taken
+out of the input root first (in the floor frame, with ``floor_topic``, when the input is a
+floor frame) and is fused too; so, with ``fuse_rotating``, is a camera that only turns; a
+translating camera without a measurement (or, by default, a turning one), an unknown motion or
+a missing estimate leaves GMR alone for that frame, and the fusion aligns itself again once
+the camera's pose is known again. ``static`` fuses every frame, ``moving``
 never does. ``/diagnostics`` says which mode each frame took.
 
 Bad input never stops the node: a malformed or NaN message is dropped with a warning, a
@@ -108,6 +110,11 @@ PARAMETERS = (
     ParamSpec('fuse_rotating', False, "camera_mode auto: also fuse the frames of a camera "
               "that only turns, with its rotation taken out (off by default: on the rendered "
               "test a camera that orbits is often taken for one that turns, docs/global.md)",
+              read_only=True),
+    ParamSpec('fuse_translating', True, "camera_mode auto: fuse the frames whose camera "
+              "translation the keypoint node measured over the floor (its floor_topic), with "
+              "the camera's rotation and position taken out of the input root first: a "
+              "moving camera then fixes the person in the world as a static one does",
               read_only=True),
     ParamSpec('camera_pose_topic', '', 'The camera\'s pose in a world frame (a robot\'s odom '
               'or map): the world pose is that pose composed with the input pose, GMR fills '
@@ -247,7 +254,9 @@ class GMRNode(Node):
                 raise ValueError(f"camera_pose_convention must be optical or body, got "
                                  f"{p['camera_pose_convention']!r}")
             self.camera_mode = 'known'
-        self.camera_motion: Dict[int, Tuple[str, np.ndarray]] = {}   # stamp -> state, R0
+        #: stamp -> (state, R0 (3, 3), camera position (3,) m in the first camera frame or
+        #: None where not measured)
+        self.camera_motion: Dict[int, Tuple[str, np.ndarray, Optional[np.ndarray]]] = {}
         self.camera_stamps: Deque[int] = collections.deque()
         self.floor: Optional[Tuple[int, np.ndarray, np.ndarray]] = None  # stamp, A, b
         self.camera_frames: Dict[str, int] = {}
@@ -330,7 +339,8 @@ class GMRNode(Node):
         stamp = rc.stamp_to_ns(msg.header.stamp)
         if stamp not in self.camera_motion:
             self.camera_stamps.append(stamp)
-        self.camera_motion[stamp] = (state, quat_to_matrix(q))
+        self.camera_motion[stamp] = (state, quat_to_matrix(q),
+                                     rc.odometry_to_camera_position(msg))
         while len(self.camera_stamps) > MAX_CAMERA_FRAMES:
             self.camera_motion.pop(self.camera_stamps.popleft(), None)
 
@@ -417,19 +427,27 @@ class GMRNode(Node):
             return None
         cm = self.camera_motion.get(stamp)
         state = 'no estimate' if cm is None else cm[0]
+        position = None
+        if cm is not None and cm[2] is not None and self.p['fuse_translating']:
+            position = cm[2]                # a static camera may have moved before it stood
+            if state != 'static':
+                state += ' (translation measured)'
         self.camera_frames[state] = self.camera_frames.get(state, 0) + 1
         self.diag.set_value('camera_motion', state)
         fusable = ('static', 'rotating') if self.p['fuse_rotating'] else ('static',)
-        if cm is None or state not in fusable:
+        if cm is None or (state not in fusable and position is None):
             return InputAnchor(False)
         R0 = cm[1]
+        C = np.zeros(3) if position is None else position
         if not on_floor:
-            return InputAnchor(True, R0, np.zeros(3))
+            return InputAnchor(True, R0, C)
         if self.floor is None:
-            # no floor yet: the camera's rotation cannot be put into the floor frame
+            # no floor yet: the camera's motion cannot be put into the floor frame
             return InputAnchor(state == 'static')
+        # p_first_camera = R0 p_camera + C and p_camera = A p_floor + b, for the floor frame
+        # of the first image as for this one
         _, A, b = self.floor
-        return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b - b))
+        return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b))
 
     def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
         """One input frame: convert, check the stamp, push to :class:`OnlineGMR`, publish

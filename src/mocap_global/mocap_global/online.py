@@ -158,6 +158,7 @@ class StaticCameraFusion:
         """A new segment: with a known input up the fused pose starts at the measurement."""
         self._pairs = []
         self.W_R, self.W_t = None, None
+        self._realigning = False
         if self.known_world:
             self.W_R, self.W_t = np.eye(3), np.zeros(3)
         elif self.input_up is not None:
@@ -166,13 +167,16 @@ class StaticCameraFusion:
 
     def realign(self) -> None:
         """The input frame moved in the world by an unknown amount (a camera that
-        translated): estimate its heading and origin again from the next ``init_s`` of GMR
-        poses, as at the start with an unknown up. A no-op for a ``known_world``."""
+        translated): estimate its heading and origin again from GMR poses, as at the start
+        with an unknown up: over the next ``init_s``, or, with a known input up (a floor
+        frame), from the next frame alone, so that the output goes on from where GMR took it
+        without a second of GMR alone. A no-op for a ``known_world``."""
         if self.known_world:
             return
         self._pairs: List[Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self.W_R: Optional[np.ndarray] = None
         self.W_t: Optional[np.ndarray] = None
+        self._realigning = True
 
     @property
     def ready(self) -> bool:
@@ -189,7 +193,8 @@ class StaticCameraFusion:
         segment (with a known input up, the fused pose starts at the measurement)."""
         if self.W_R is None:
             self._pairs.append((R, T, R_in, T_in, up_body))
-            if len(self._pairs) >= self.init_frames:
+            need = 1 if self._realigning and self.input_up is not None else self.init_frames
+            if len(self._pairs) >= need:
                 self._estimate()
             return R, T, False
         Rm, Tm = self.measurement(R_in, T_in)

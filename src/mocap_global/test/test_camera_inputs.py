@@ -150,6 +150,66 @@ def test_camera_motion_round_trip():
         np.testing.assert_allclose(w, np.zeros(3) if state == 'static' else [0.1, 0, -0.2])
     with pytest.raises(ValueError, match='unknown camera motion state'):
         rc.camera_motion_to_odometry('flying', q, np.zeros(3), rc.make_header(5, 'a'), 'b')
+    # a translation measured over the floor: the position comes back, the state stays
+    for state in ('static', 'rotating', 'moving'):
+        msg = rc.camera_motion_to_odometry(state, q, np.array([0.0, 0.1, 0.0]),
+                                           rc.make_header(5, 'a'), 'b',
+                                           position=np.array([0.5, -0.1, 2.0]),
+                                           linear_velocity=np.array([0.0, 0.0, 1.2]))
+        assert rc.odometry_to_camera_motion(msg)[0] == state
+        np.testing.assert_allclose(rc.odometry_to_camera_position(msg), [0.5, -0.1, 2.0])
+        assert msg.twist.twist.linear.z == (1.2 if state == 'moving' else 0.0)
+    for state in ('moving', 'unknown'):
+        msg = rc.camera_motion_to_odometry(state, q, np.zeros(3), rc.make_header(5, 'a'), 'b')
+        assert rc.odometry_to_camera_position(msg) is None
+    msg = rc.camera_motion_to_odometry('unknown', q, np.zeros(3), rc.make_header(5, 'a'), 'b',
+                                       position=np.ones(3))
+    assert rc.odometry_to_camera_position(msg) is None       # nothing tracked: not known
+
+
+@pytest.mark.parametrize('measured', [True, False])
+def test_a_walking_camera_with_a_measured_translation_is_fused(graph_node, measured):
+    """A camera that walks beside the person and turns (state moving): with its position
+    measured over the floor the world path is the true one (up to the heading and origin the
+    fusion chooses); without it, no frame is fused."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node(fusion_position_time_constant_s=1e-6,
+                                  fusion_orientation_time_constant_s=1e-6)
+    n = 70
+    world = _poses(n)
+    cams = [(axis_angle_to_matrix(np.array([0.0, 0.0, 0.01 * i])) @
+             axis_angle_to_matrix(np.array([-1.6, 0.0, 0.0])),
+             np.array([0.035 * i, -3.0, 1.2])) for i in range(n)]
+    seen = [_in_camera([p], R, t)[0] for p, (R, t) in zip(world, cams)]
+    R_0, t_0 = cams[0]
+    for i, (p, (R, t)) in enumerate(zip(seen, cams)):
+        msg = rc.camera_motion_to_odometry(
+            'moving', matrix_to_quat(R_0.T @ R), np.zeros(3),
+            rc.make_header(i * DT_NS, 'cam_start'), 'cam',
+            position=R_0.T @ (t - t_0) if measured else None)
+        graph.publish(topics.CAMERA_MOTION, msg)
+        graph.publish('/in/motion', rc.pose_to_motion(
+            p, rc.make_header(i * DT_NS, 'camera_optical_frame')))
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == n
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
+    T_true = np.stack([p.root_position for p in world])
+    v = _values(node)
+    if not measured:
+        assert v['unfused_frames'] == str(n)
+        return
+    assert v['camera_motion_frames'] == f'moving (translation measured) {n}'
+    assert v['unfused_frames'] == '0'
+    # after the fusion's first second (an optical-frame input of unknown tilt aligns itself
+    # over init_s), distances along the path are the true ones
+    k0 = 35
+    d = np.linalg.norm(T[k0:] - T[k0], axis=1)
+    d_true = np.linalg.norm(T_true[k0:] - T_true[k0], axis=1)
+    assert d_true[-1] > 1.3
+    np.testing.assert_allclose(d, d_true, atol=0.03)
 
 
 def test_a_known_camera_pose_with_the_physics_floor_input(graph_node):

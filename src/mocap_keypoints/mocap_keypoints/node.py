@@ -8,7 +8,9 @@ Publishes for every processed frame, stamped with the image's stamp (docs/design
   * ``/mocap/camera/motion`` (nav_msgs/Odometry) with ``camera_motion`` (image sources): the
     camera's rotation since the first frame, its angular velocity and whether it is static,
     rotating or moving, from the image background (``mocap_core.camera_motion``; the
-    encoding is ``mocap_core.ros_conversions.camera_motion_to_odometry``'s);
+    encoding is ``mocap_core.ros_conversions.camera_motion_to_odometry``'s); once a floor
+    arrives on ``floor_topic`` (the physics stage's), also the camera's position and
+    velocity, measured over the floor;
   * ``/mocap/keypoints2d/annotated`` (sensor_msgs/Image, bgr8) with ``publish_annotated``:
     the skeleton drawn over the frame, for debugging (reliable, keep-last 2, published by a
     second node ``<name>_annotated`` with its own DDS participant);
@@ -51,6 +53,7 @@ import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
@@ -62,12 +65,14 @@ from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded, record_failure
 from mocap_core.metrics import LatencyStats, RateMeter
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
-from mocap_core.qos import SENSOR_QOS, STREAM_QOS
+from mocap_core.qos import SENSOR_QOS, STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, bgr_to_image, camera_info_to_intrinsics,
                                         camera_motion_to_odometry,
                                         compressed_image_to_bgr, image_to_bgr,
                                         intrinsics_to_camera_info, keypoints_to_cloud,
-                                        make_header, stamp_to_ns)
+                                        make_header, stamp_to_ns,
+                                        transform_stamped_to_arrays)
+from mocap_core.rotations import quat_to_matrix
 from mocap_core.streams import StampOrder
 
 from .detector import create_detector
@@ -148,6 +153,11 @@ PARAMETERS = (
               'from the image background (tracked corners outside the people) and publish it '
               'on /mocap/camera/motion (nav_msgs/Odometry) for the world stage; image sources '
               'only', read_only=True),
+    ParamSpec('floor_topic', topics.PHYSICS_FLOOR, 'The floor in the camera frame '
+              '(geometry_msgs/TransformStamped p_camera = R p_floor + t, as the physics stage '
+              'publishes it): with it the camera\'s translation is measured over the floor and '
+              'published with the camera motion, so that a moving camera still fixes the '
+              'person in the world; empty: rotation only', read_only=True),
     ParamSpec('camera_motion_max_width', 640, 'Frames wider than this are scaled down for the '
               'camera-motion estimate (speed)', min_value=64, read_only=True),
 )
@@ -295,6 +305,12 @@ class KeypointsNode(Node):
         self.pub_info = self.create_publisher(CameraInfo, topics.CAMERA_INFO, STREAM_QOS)
         self.pub_motion = (self.create_publisher(Odometry, topics.CAMERA_MOTION, STREAM_QOS)
                            if motion is not None else None)
+        self.floors_received = 0
+        self.translation_frames = 0
+        if motion is not None and p['floor_topic']:
+            self.create_subscription(TransformStamped, p['floor_topic'],
+                                     guarded(self, self.on_floor, 'floor'),
+                                     input_qos(STREAM_QOS, 10))
         self.motion_states: Dict[str, int] = {}
         self.motion_stats = LatencyStats()
         self.pub_annotated = None
@@ -599,7 +615,10 @@ class KeypointsNode(Node):
         if self.pub_motion is not None and cm is not None:
             self.pub_motion.publish(camera_motion_to_odometry(
                 cm.state, cm.orientation, cm.angular_velocity,
-                make_header(res.stamp_ns, header.frame_id + '_start'), header.frame_id))
+                make_header(res.stamp_ns, header.frame_id + '_start'), header.frame_id,
+                position=cm.position if cm.translation_known else None,
+                linear_velocity=cm.linear_velocity))
+            self.translation_frames += int(cm.translation_known and cm.state == 'moving')
             self.motion_states[cm.state] = self.motion_states.get(cm.state, 0) + 1
             self.motion_stats.add(res.camera_motion_s)
             self.diag.set_value('camera_motion', cm.state)
@@ -619,6 +638,19 @@ class KeypointsNode(Node):
             log.info(f'no person found ({res.name}); publishing all confidences 0',
                      throttle_duration_sec=2.0)
 
+    def on_floor(self, msg: TransformStamped) -> None:
+        """The physics floor in the camera frame (``floor_topic``): ``p_camera = A p_floor +
+        b``, so the floor's up normal is A's third column and the camera's height ``-n . b``;
+        handed to the camera-motion estimate, which measures translation over it."""
+        q, b = transform_stamped_to_arrays(msg)
+        nq = float(np.linalg.norm(q)) if np.all(np.isfinite(q)) else 0.0
+        if nq < 0.5 or not np.all(np.isfinite(b)):
+            self._problem('floor', 'ignoring floor: not a finite transform')
+            return
+        n = quat_to_matrix(q / nq)[:, 2]
+        self.floors_received += 1
+        self.processor.set_floor(n, float(-n @ b), stamp_to_ns(msg.header.stamp) * 1e-9)
+
     def _refresh_diagnostics(self) -> None:
         s = self.detector_stats.summary()
         for key, v in (('detector_ms_median', s['median']), ('detector_ms_p95', s['p95'])):
@@ -631,6 +663,11 @@ class KeypointsNode(Node):
             self.diag.set_value('camera_motion_frames', ', '.join(
                 f'{k} {v}' for k, v in sorted(self.motion_states.items())) or 'none yet')
             self.diag.set_value('camera_motion_failures', self.processor.camera_motion_failures)
+            self.diag.set_value('camera_translation', (
+                f'measured over the floor in {self.translation_frames} moving frames'
+                if self.floors_received else
+                'rotation only (no floor received yet)' if self.p['floor_topic'] else
+                'rotation only (floor_topic empty)'))
         self._count_worker_drops()
         if time.monotonic() - self._last_error_t < 5.0:
             self.diag.warn(self._last_error)

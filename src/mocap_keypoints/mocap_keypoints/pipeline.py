@@ -127,6 +127,16 @@ class FrameProcessor:
         self._motion_K: Optional[np.ndarray] = None
         #: frames whose camera-motion estimate failed (an exception; the frame is published)
         self.camera_motion_failures = 0
+        self._floor: Optional[Tuple[np.ndarray, float, float]] = None
+        self._floor_pending = False
+
+    def set_floor(self, normal: np.ndarray, height: float, stamp_s: float) -> None:
+        """The floor in the camera frame of the image stamped ``stamp_s`` (its up normal
+        (3,) and the camera's height above it, m), e.g. from the physics stage: the camera's
+        translation is then measured over it (:meth:`CameraMotionEstimator.set_floor`).
+        Safe to call from another thread: it is applied before the next frame."""
+        self._floor = (np.array(normal, dtype=np.float64), float(height), float(stamp_s))
+        self._floor_pending = True
 
     def _estimate_camera_motion(self, res: FrameResult, image: np.ndarray,
                                 keypoints: np.ndarray, restart: bool) -> None:
@@ -135,9 +145,16 @@ class FrameProcessor:
         counted, and the frame goes on without an estimate."""
         i = res.intrinsics.intrinsics
         K = np.array([[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
-        if self._motion is None or restart or not np.array_equal(K, self._motion_K):
+        new = self._motion is None or restart or not np.array_equal(K, self._motion_K)
+        if new:
             self._motion = CameraMotionEstimator(K, self.camera_motion_params)
             self._motion_K = K
+        floor = self._floor
+        if floor is not None and (new or self._floor_pending):
+            self._floor_pending = False
+            if not self._motion.set_floor(*floor):
+                res.notes.append(f'ignoring a floor that is not plausible (camera height '
+                                 f'{floor[1]:.2f} m)')
         t0 = time.perf_counter()
         try:
             res.camera_motion = self._motion.update(image, res.stamp_ns * 1e-9, keypoints)

@@ -173,3 +173,33 @@ def test_draw_keypoints_draws_bones_and_points():
     out = draw_keypoints(img, kp, threshold=0.5, text='hi')
     assert out[100, 150].any()                      # the bone between shoulder and elbow
     assert not out[50, 50].any() and not img.any()
+
+
+def test_processor_measures_the_camera_translation_over_a_floor_it_is_given():
+    """The floor handed over (as the node does from the physics floor topic) reaches the
+    camera-motion estimate: a camera walking over a textured floor gets its path in metres;
+    an implausible floor is noted and ignored."""
+    from mocap_core.camera_motion import CameraMotionParams
+    from mocap_core.rotations import axis_angle_to_matrix
+    from mocap_core.testing import textured_floor_view
+
+    intr = CameraIntrinsics(640, 480, 500.0, 500.0, 319.5, 239.5)
+    prov = IntrinsicsProvider(_calib(intr))
+    proc = FrameProcessor(FakeDetector(np.zeros((0, NUM_KEYPOINTS, 3))), prov,
+                          camera_motion=CameraMotionParams())
+    base = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    R_wc = axis_angle_to_matrix(np.array([0.0, np.radians(25.0), 0.0])) @ base
+    res = []
+    for i in range(20):
+        if i == 3:
+            proc.set_floor(np.array([0.0, 0.0, 1.0]), 500.0, 0.0)      # not plausible
+        if i == 5:
+            proc.set_floor(R_wc.T @ np.array([0.0, 0.0, 1.0]), 1.5, 4 / 30)
+        img = textured_floor_view(R_wc, [0.04 * i, 0.0, 1.5], intr.K)
+        res.append(proc.process(Frame(int(i * 1e9 / 30), img, i, f'f{i}')))
+    assert any('not plausible' in n for n in res[3].notes)
+    cms = [r.camera_motion for r in res]
+    assert not any(c.translation_known for c in cms[1:5])
+    assert all(c.translation_known for c in cms[6:]), [c.frame_state for c in cms]
+    step = cms[-1].position - cms[6].position       # 13 frames of 4 cm, along the optical z
+    assert np.linalg.norm(step - R_wc.T @ [0.52, 0.0, 0.0]) < 0.03, step

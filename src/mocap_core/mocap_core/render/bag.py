@@ -16,7 +16,7 @@ their forward kinematics differs from the exact joints on the trunk by a few cen
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional, Sequence, Tuple, Union
+from typing import Optional, Sequence, Union
 
 import numpy as np
 
@@ -25,13 +25,12 @@ from ..rotations import matrix_to_quat, quat_multiply
 
 def write_rendered_bag(clip_dir: Union[str, Path], out: Union[str, Path],
                        overwrite: bool = True,
-                       camera_motion: Optional[Sequence[Tuple[str, np.ndarray, np.ndarray]]]
-                       = None) -> Path:
+                       camera_motion: Optional[Sequence[tuple]] = None) -> Path:
     """Write the bag of the rendered clip in ``clip_dir`` (its ``data.npz``) to ``out``.
 
-    ``camera_motion``: per frame (state, orientation x y z w, angular velocity rad/s), the
-    camera-motion estimate from the video, written as ``/mocap/camera/motion`` like the
-    keypoint node publishes it."""
+    ``camera_motion``: per frame (state, orientation x y z w, angular velocity rad/s[,
+    position (3,) m or None, linear velocity (3,) m/s]), the camera-motion estimate from the
+    video, written as ``/mocap/camera/motion`` like the keypoint node publishes it."""
     from geometry_msgs.msg import Point, Pose as PoseMsg, PoseStamped, Quaternion
 
     from ..bag_io import BagWriter
@@ -75,10 +74,10 @@ def write_rendered_bag(clip_dir: Union[str, Path], out: Union[str, Path],
             bag.write_msg(T['keypoints'], stamp, keypoints_to_cloud(d['keypoints'][i], hc),
                           qos=sensor_qos)
             if camera_motion is not None and i < len(camera_motion):
-                state, q_cm, w_cm = camera_motion[i]
+                state, q_cm, w_cm, *tr = camera_motion[i]
                 bag.write_msg(CAMERA_MOTION, stamp, camera_motion_to_odometry(
                     state, q_cm, w_cm, make_header(stamp, OPTICAL_FRAME + '_start'),
-                    OPTICAL_FRAME), qos=stream_qos)
+                    OPTICAL_FRAME, *tr), qos=stream_qos)
             rot_w = d['rotations'][i]
             root_w = d['root_positions'][i]
             rot_c = rot_w.copy()
