@@ -2,16 +2,20 @@
 data: a woman walks away from a following camera for 7.4 s, about 8-10 m): the regression test
 of the world stage on real footage (docs/global.md). Skipped where the shared data is absent.
 
-What holds today is asserted; the path goals of the world-frame issue (6-12 m, straightness
->= 0.8) are not met yet (3.0 m, 0.10: GMR fed this back view predicts little translation)
-and are kept as a strict expected failure, which turns into a failure the day they are met
-so that the mark is removed."""
+What holds today is asserted: the camera is seen to move, its translation is measured over
+the physics floor once the floor exists (from about the second second), and the world path
+then follows the camera. The path goals of the world-frame issue (6-12 m, straightness >= 0.8)
+are not met (4.4 m, 0.60: the first second, before the floor, is GMR's alone) and are kept as
+a strict expected failure, which turns into a failure the day they are met so that the mark is
+removed. The clip is slowed down about twice (6.5 steps in 7.4 s, 53 steps/min): the camera's
+measured path is 4.4-4.9 m, as 6.5 steps of 0.65-0.75 m give (docs/global.md)."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from mocap_core.data.splits import shared_data_dir
@@ -47,13 +51,26 @@ def test_the_following_camera_is_seen_to_move_and_nothing_is_fused(walk):
     assert states.count('static') < 0.2 * len(states), states
     diag = run.diagnostics['gmr: gmr']
     assert diag['camera_mode'] == 'auto'
-    # every world frame whose camera moved is GMR's alone
-    assert int(diag['unfused_frames']) >= states.count('moving') - 30, diag
+    # once the physics floor reaches the keypoint node (about 30 frames in), the camera's
+    # translation is measured and those frames are fused; before it GMR is alone
+    frames = dict(kv.rsplit(' ', 1) for kv in diag['camera_motion_frames'].split(', '))
+    assert int(frames.get('moving (translation measured)', 0)) >= 100, diag
+    assert int(diag['unfused_frames']) <= 40, diag
+
+
+def test_the_world_path_follows_the_camera_once_it_is_measured(walk):
+    """From the second second on the path is the person's walk: end to end more than 2 m
+    (the camera went 3.5 m, the person came 0.5 m closer to it), nearly straight."""
+    run, _, _ = walk
+    root = run.stages['world'].root[40:, :2]
+    path = float(np.linalg.norm(np.diff(root, axis=0), axis=1).sum())
+    end = float(np.linalg.norm(root[-1] - root[0]))
+    assert end > 2.0 and end / path > 0.85, (end, path)
 
 
 @pytest.mark.xfail(strict=True, reason='the world path of a person walking away from a '
-                   'following camera: 3.0 m, straightness 0.10 (goals 6-12 m, 0.8): fed the '
-                   "lifter's back view GMR predicts little translation (docs/global.md)")
+                   'following camera: 4.4 m, straightness 0.60 (goals 6-12 m, 0.8): the first '
+                   'second, before the physics floor exists, is GMR alone (docs/global.md)')
 def test_the_world_path_is_the_walk(walk):
     _, world, _ = walk
     assert 6.0 <= world['root_path_m'] <= 12.0 and world['root_straightness'] >= 0.8, world
