@@ -106,8 +106,20 @@ def _lagged_floors(floor_bag: Optional[Path], n: int, fps: float) -> Optional[li
     return out
 
 
+def _true_floors(gt: Dict[str, np.ndarray]) -> list:
+    """Per frame the render's true floor, handed over ``FLOOR_LAG_FRAMES`` late like the
+    physics floor (:func:`_lagged_floors`): the oracle that separates the floor's error from
+    the tracking's (``--camera-floor true``)."""
+    R, C = gt['camera_R'], gt['camera_position']       # world -> camera; camera in world
+    fps = float(gt['fps'])
+    ez = np.array([0.0, 0.0, 1.0])
+    return [None if i < FLOOR_LAG_FRAMES else
+            (R[i - FLOOR_LAG_FRAMES] @ ez, float(C[i - FLOOR_LAG_FRAMES, 2]),
+             (i - FLOOR_LAG_FRAMES) / fps) for i in range(len(R))]
+
+
 def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
-                       floor_bag: Optional[Path] = None) -> dict:
+                       floor_bag: Optional[Path] = None, true_floor: bool = False) -> dict:
     """The clip's bag with the camera-motion estimate from its video added (what the keypoint
     node publishes when it reads the video), and the estimate's accuracy against the true
     camera: ``{'rotation_error_deg_s': median error of the frame-to-frame rotation,
@@ -116,14 +128,16 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
     translation is measured over the physics floor as the keypoint node does, the floor
     handed over ``FLOOR_LAG_FRAMES`` late, and scored too: ``translation_frames`` (share of
     moving frames measured), ``position_error_pct`` (the camera's position at the end
-    against the truth, % of the distance it travelled)."""
+    against the truth, % of the distance it travelled). ``true_floor``: the render's true
+    floor instead (an oracle)."""
     from mocap_core.camera_motion import estimate_video
 
     from ..render.bag import write_rendered_bag
     from ..rotations import matrix_to_axis_angle, quat_to_matrix
 
     fps = float(gt['fps'])
-    floors = _lagged_floors(floor_bag, len(gt['keypoints']), fps)
+    floors = _true_floors(gt) if true_floor else \
+        _lagged_floors(floor_bag, len(gt['keypoints']), fps)
     est = estimate_video(clip_dir / 'video.mp4', gt['K'], fps, gt['keypoints'], floors=floors)
     write_rendered_bag(clip_dir, out, overwrite=True, camera_motion=[
         (e.state, e.orientation, e.angular_velocity,
@@ -157,10 +171,13 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
 
 
 def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
-             params: Dict[str, Dict], progress: bool = False, camera_motion: bool = True):
+             params: Dict[str, Dict], progress: bool = False, camera_motion: bool = True,
+             camera_floor: str = 'physics'):
     """Process one rendered clip (reusing a finished output) and score it. With
     ``camera_motion`` and start ``keypoints``, the input bag carries the camera-motion
-    estimate from the clip's video (start ``video``: the keypoint node makes it)."""
+    estimate from the clip's video (start ``video``: the keypoint node makes it), its
+    translation measured over ``camera_floor`` ('physics': the physics floor of a first run;
+    'true': the render's floor, an oracle)."""
     from .. import topics as T
     from ..camera import CameraCalibration, CameraIntrinsics, write_camera_info_yaml
     from ..render.clip import load_clip
@@ -195,11 +212,14 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
                 # the physics floor: the physics does not depend on the camera motion, so
                 # the first pass gives the floor the second one hands over (late, as live)
                 src = out / 'input_bag'
-                _camera_motion_bag(clip_dir, gt, src)
-                process(src, out / 'floor_bag', params=p, overwrite=True, progress=False,
-                        log=lambda *a: None, log_level='error', **kw)
-                (out / 'camera_motion.json').write_text(json.dumps(
-                    _camera_motion_bag(clip_dir, gt, src, out / 'floor_bag'), indent=1))
+                if camera_floor == 'true':
+                    acc = _camera_motion_bag(clip_dir, gt, src, true_floor=True)
+                else:
+                    _camera_motion_bag(clip_dir, gt, src)
+                    process(src, out / 'floor_bag', params=p, overwrite=True, progress=False,
+                            log=lambda *a: None, log_level='error', **kw)
+                    acc = _camera_motion_bag(clip_dir, gt, src, out / 'floor_bag')
+                (out / 'camera_motion.json').write_text(json.dumps(acc, indent=1))
         summary = process(src, bag, params=p, overwrite=True, progress=progress,
                           log=lambda *a: None, log_level='error', **kw)
         (out / 'summary.json').write_text(json.dumps(summary, indent=1, default=str))
@@ -315,6 +335,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     tag = args.tag or ('_'.join(f'{k}' for k in sorted(args.param)) or 'default')
     if args.no_camera_motion:
         tag += '_nocm'
+    if args.camera_floor == 'true':
+        tag += '_truefloor'
     if args.known_camera_pose:
         tag += '_pose'
         args.param = list(args.param) + [
@@ -332,7 +354,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     for d in tqdm(clips, desc='mocap eval video', unit='clip', disable=args.quiet):
         try:
             scores.append(run_clip(d, work, args.start, args.intrinsics, params,
-                                   camera_motion=not args.no_camera_motion))
+                                   camera_motion=not args.no_camera_motion,
+                                   camera_floor=args.camera_floor))
         except NoOutput as exc:
             no_output.append(str(exc))
         except (EvalError, ProcessError, ValueError, OSError) as exc:
@@ -387,6 +410,11 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--no-camera-motion', action='store_true',
                    help='--start keypoints: leave the camera-motion estimate from the video '
                    'out of the input (the world stage then runs without it)')
+    p.add_argument('--camera-floor', choices=('physics', 'true'), default='physics',
+                   help="--start keypoints: the floor over which the camera's translation is "
+                   'measured: physics (as the keypoint node does: the physics floor of a first '
+                   "run, 30 frames late) or true (the render's floor, same lag: an oracle that "
+                   'separates the floor error from the tracking error)')
     p.add_argument('--tag', help='name of this run (output bags reused by the same tag)')
     p.add_argument('--work', help='where the output bags are kept (default '
                    '~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>)')
