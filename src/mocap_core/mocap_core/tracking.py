@@ -1,0 +1,488 @@
+"""Several people in 2D keypoints, each with an identity that stays the same (no ROS imports).
+
+:class:`PersonTracker` takes, per frame, the persons a detector found, in any order
+((P, 23, 3) keypoints ``u, v`` in pixels and a confidence in [0, 1], the layout of
+:data:`mocap_core.skeleton.KEYPOINT_NAMES`), and returns the tracked persons with their ids.
+
+* **Motion model.** A constant-velocity Kalman filter per track on the box of the seen
+  keypoints (centre ``cx, cy`` and height ``h`` in pixels, and their rates in px/s); the
+  keypoints of the last match, expressed relative to the box (centre and height), ride on the
+  predicted box, so that a track can be compared with a candidate keypoint by keypoint.
+* **Association.** Similarity = object keypoint similarity (OKS, COCO's definition with one
+  tolerance per keypoint, scale = the predicted box height) between the candidate and the
+  track's predicted keypoints, plus a smaller share of the boxes' overlap (IoU); one-to-one by
+  the Hungarian method (``scipy.optimize.linear_sum_assignment``), gated by
+  ``match_threshold``. Candidates that are the same person twice (OKS above
+  ``duplicate_oks``) are merged first, the more confident kept.
+* **Birth and death with hysteresis.** A new candidate starts a *tentative* track; it gets an
+  id only after ``birth_frames`` consecutive matches (a one-frame blip never gets one). A
+  confirmed track that is not matched *coasts* on its prediction (not published) for up to
+  ``max_lost_s``; matched again in that time it keeps its id (re-identification after a short
+  occlusion), and the gate widens with the time lost. After that it is dropped.
+* **Signatures.** :meth:`PersonTracker.set_signature` attaches a vector to an id (the 3D
+  stages' bone lengths, m); a coasting track only takes a candidate whose signature, when the
+  caller gives one, is within ``signature_tolerance`` (relative) of its own.
+* **Order.** Output rows are ordered by how long each id has been tracked, the longest first:
+  row 0 is the *main person* that one-person consumers read.
+
+Ids are positive integers, never reused within one tracker; 0 means "nobody" (a padding row).
+Times are seconds (the frame stamps), pixels are image pixels, origin top-left.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .skeleton import KEYPOINT_NAMES, NUM_KEYPOINTS
+
+#: Per-keypoint OKS tolerance (COCO's sigmas for the 17 body points; the foot points as the
+#: ankles'), in the 23-point layout order.
+KEYPOINT_SIGMAS = np.array(
+    [0.026, 0.025, 0.025, 0.035, 0.035, 0.079, 0.079, 0.072, 0.072, 0.062, 0.062,
+     0.107, 0.107, 0.087, 0.087, 0.089, 0.089, 0.089, 0.089, 0.089, 0.089, 0.089, 0.089])
+assert len(KEYPOINT_SIGMAS) == len(KEYPOINT_NAMES) == NUM_KEYPOINTS
+
+
+@dataclass
+class TrackerParams:
+    """Tuning of :class:`PersonTracker` (see the module docstring)."""
+
+    #: The most persons tracked at once; further new persons are ignored (the most confident
+    #: candidates start tracks first).
+    max_persons: int = 4
+    #: A keypoint counts as seen at this confidence or above.
+    min_confidence: float = 0.3
+    #: A candidate needs this many seen keypoints, else it is ignored.
+    min_keypoints: int = 6
+    #: A candidate whose box of seen keypoints is lower than this (px) is ignored.
+    min_height_px: float = 0.0
+    #: Consecutive matched frames before a tentative track gets an id.
+    birth_frames: int = 3
+    #: A confirmed track unmatched for longer than this (s) is dropped.
+    max_lost_s: float = 1.0
+    #: Least similarity (OKS + 0.3 IoU, in [0, 1.3]) for a candidate to continue a track.
+    match_threshold: float = 0.25
+    #: Candidates more alike than this (OKS) are one person seen twice.
+    duplicate_oks: float = 0.7
+    #: Scale factor of the OKS tolerances (1 = COCO's); larger is more forgiving.
+    oks_scale: float = 2.0
+    #: A new track within this many box heights of a lost track's predicted box takes
+    #: that track's id instead of a new one.
+    reid_distance: float = 1.0
+    #: Relative signature difference (median over entries) beyond which a coasting track
+    #: does not take a candidate.
+    signature_tolerance: float = 0.08
+    #: Kalman filter: acceleration noise (px/s^2, per px of box height) and measurement
+    #: noise (px per px of box height).
+    accel_noise: float = 3.0
+    measurement_noise: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.max_persons < 1:
+            raise ValueError(f'max_persons must be >= 1, got {self.max_persons}')
+        if self.birth_frames < 1:
+            raise ValueError(f'birth_frames must be >= 1, got {self.birth_frames}')
+        if self.max_lost_s < 0:
+            raise ValueError(f'max_lost_s must be >= 0, got {self.max_lost_s}')
+
+
+def keypoint_box(kp: np.ndarray, min_confidence: float) -> Optional[np.ndarray]:
+    """(23, 3) keypoints -> box ``(cx, cy, h, w)`` of the seen keypoints (px), or None when
+    fewer than two are seen. ``h`` is at least a third of ``w`` (a person lying down)."""
+    seen = kp[:, 2] >= min_confidence
+    if np.count_nonzero(seen) < 2:
+        return None
+    p = kp[seen, :2]
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    w, h = hi - lo
+    h = max(h, w / 3.0, 1.0)
+    c = (lo + hi) / 2.0
+    return np.array([c[0], c[1], h, max(w, 1.0)])
+
+
+def box_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """IoU of two ``(cx, cy, h, w)`` boxes."""
+    ax0, ay0, ax1, ay1 = a[0] - a[3] / 2, a[1] - a[2] / 2, a[0] + a[3] / 2, a[1] + a[2] / 2
+    bx0, by0, bx1, by1 = b[0] - b[3] / 2, b[1] - b[2] / 2, b[0] + b[3] / 2, b[1] + b[2] / 2
+    iw = max(0.0, min(ax1, bx1) - max(ax0, bx0))
+    ih = max(0.0, min(ay1, by1) - max(ay0, by0))
+    inter = iw * ih
+    union = a[2] * a[3] + b[2] * b[3] - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+def oks(a: np.ndarray, b: np.ndarray, height: float, min_confidence: float,
+        scale: float = 1.0) -> float:
+    """Object keypoint similarity of (23, 3) keypoints ``a`` and ``b`` over the keypoints seen
+    in both, for a person ``height`` px tall (area ~ 0.5 h^2, as COCO's box area); 0 when
+    fewer than 3 keypoints are shared."""
+    both = (a[:, 2] >= min_confidence) & (b[:, 2] >= min_confidence)
+    if np.count_nonzero(both) < 3:
+        return 0.0
+    d2 = np.sum((a[both, :2] - b[both, :2]) ** 2, axis=-1)
+    area = 0.5 * max(height, 1.0) ** 2
+    k = 2.0 * (KEYPOINT_SIGMAS[both] * scale) ** 2
+    return float(np.mean(np.exp(-d2 / (2.0 * area * k))))
+
+
+class _Kalman:
+    """Constant-velocity filter on ``(cx, cy, h)`` (px) and their rates (px/s)."""
+
+    def __init__(self, z: np.ndarray, params: TrackerParams) -> None:
+        self.p = params
+        self.x = np.concatenate([z, np.zeros(3)])
+        h = max(z[2], 1.0)
+        self.P = np.diag(np.concatenate([np.full(3, (params.measurement_noise * h) ** 2),
+                                         np.full(3, (2.0 * h) ** 2)]))
+
+    def predicted(self, dt: float) -> Tuple[np.ndarray, np.ndarray]:
+        F = np.eye(6)
+        F[:3, 3:] = np.eye(3) * dt
+        h = max(self.x[2], 1.0)
+        q = (self.p.accel_noise * h) ** 2
+        G = np.concatenate([np.eye(3) * dt * dt / 2.0, np.eye(3) * dt])
+        Q = G @ G.T * q
+        return F @ self.x, F @ self.P @ F.T + Q
+
+    def predict(self, dt: float) -> None:
+        self.x, self.P = self.predicted(dt)
+        self.x[2] = max(self.x[2], 1.0)
+
+    def correct(self, z: np.ndarray) -> None:
+        H = np.hstack([np.eye(3), np.zeros((3, 3))])
+        r = (self.p.measurement_noise * max(z[2], 1.0)) ** 2
+        S = H @ self.P @ H.T + np.eye(3) * r
+        K = self.P @ H.T @ np.linalg.inv(S)
+        self.x = self.x + K @ (z - H @ self.x)
+        self.P = (np.eye(6) - K @ H) @ self.P
+
+
+@dataclass
+class _Track:
+    id: int                       # 0 while tentative
+    kalman: _Kalman
+    shape: np.ndarray             # (23, 3): (u - cx) / h, (v - cy) / h, confidence
+    width_ratio: float
+    keypoints: np.ndarray         # (23, 3) of the last match
+    first_s: float
+    last_s: float
+    hits: int = 1
+    row: int = -1
+    missed: int = 0               # frames since the last match
+    signature: Optional[np.ndarray] = None
+
+    def box_at(self, dt: float) -> np.ndarray:
+        x, _ = self.kalman.predicted(dt)
+        h = max(x[2], 1.0)
+        return np.array([x[0], x[1], h, h * self.width_ratio])
+
+    def keypoints_at(self, dt: float) -> np.ndarray:
+        b = self.box_at(dt)
+        out = self.shape.copy()
+        out[:, 0] = b[0] + self.shape[:, 0] * b[2]
+        out[:, 1] = b[1] + self.shape[:, 1] * b[2]
+        return out
+
+
+@dataclass
+class TrackedPerson:
+    """One tracked person of a frame."""
+
+    id: int
+    keypoints: np.ndarray         # (23, 3) u px, v px, confidence
+    box: np.ndarray               # (4,) cx, cy, h, w of the seen keypoints (px)
+    tracked_s: float              # time since the id was first seen (s)
+    row: int = -1                 # index of the candidate it was matched to in update()
+
+
+@dataclass
+class TrackerStats:
+    """Counters for diagnostics."""
+
+    births: int = 0               # ids given
+    deaths: int = 0               # ids dropped after max_lost_s
+    reidentified: int = 0         # ids matched again after being lost
+    blips: int = 0                # tentative tracks that never got an id
+    duplicates: int = 0           # candidates merged as the same person twice
+    ignored: int = 0              # candidates too small, too few points, or beyond max_persons
+    lost_ids: List[int] = field(default_factory=list)   # ids dropped in the last update
+
+
+class PersonTracker:
+    """See the module docstring."""
+
+    def __init__(self, params: Optional[TrackerParams] = None) -> None:
+        self.params = params or TrackerParams()
+        self._tracks: List[_Track] = []
+        self._next_id = 1
+        self._last_s: Optional[float] = None
+        self.stats = TrackerStats()
+
+    # ------------------------------------------------------------------ public
+    def reset(self) -> None:
+        """Forget every track (a new, unrelated stream); ids keep counting up."""
+        self._tracks = []
+        self._last_s = None
+
+    @property
+    def ids(self) -> List[int]:
+        """Ids of the confirmed tracks, matched or coasting."""
+        return [t.id for t in self._tracks if t.id]
+
+    def set_signature(self, track_id: int, signature: Sequence[float]) -> None:
+        """Attach a signature to ``track_id`` (e.g. the lifter's bone lengths of that body)."""
+        for t in self._tracks:
+            if t.id == track_id:
+                t.signature = np.asarray(signature, dtype=np.float64)
+
+    def predicted_boxes(self, stamp_s: float) -> Dict[int, np.ndarray]:
+        """``{key: (cx, cy, h, w)}`` box of every live track predicted to ``stamp_s``; keys are
+        ids for confirmed tracks and negative numbers for tentative ones (for a detector that
+        looks where each person is expected)."""
+        dt = 0.0 if self._last_s is None else max(0.0, stamp_s - self._last_s)
+        return {(t.id if t.id else -(i + 1)): t.box_at(dt) for i, t in enumerate(self._tracks)}
+
+    def update(self, candidates: np.ndarray, stamp_s: float,
+               signatures: Optional[Sequence[Optional[np.ndarray]]] = None
+               ) -> List[TrackedPerson]:
+        """Take this frame's persons (P, 23, 3), in any order, at time ``stamp_s`` (s);
+        return the persons with ids, the longest tracked first. ``signatures``: optional,
+        one per candidate (None where unknown)."""
+        p = self.params
+        self.stats.lost_ids = []
+        cands = np.asarray(candidates, dtype=np.float64).reshape(-1, NUM_KEYPOINTS, 3)
+        cands = np.where(np.isfinite(cands), cands, 0.0)
+        sigs = list(signatures) if signatures is not None else [None] * len(cands)
+        dt = 0.0 if self._last_s is None else stamp_s - self._last_s
+        if dt < 0:
+            self.reset()
+            dt = 0.0
+        self._last_s = stamp_s
+        keep, boxes = self._valid(cands)
+        cands, sigs = cands[keep], [sigs[i] for i in keep]
+        kept = self._merge_duplicates(cands, boxes)
+        rows = [keep[k] for k in kept]
+        cands, boxes, sigs = cands[kept], [boxes[k] for k in kept], [sigs[k] for k in kept]
+
+        pred_kp = [t.keypoints_at(dt) for t in self._tracks]
+        pred_box = [t.box_at(dt) for t in self._tracks]
+        sim = np.zeros((len(self._tracks), len(cands)))
+        for i, t in enumerate(self._tracks):
+            lost = stamp_s - t.last_s
+            widen = 1.0 + 2.0 * min(lost, p.max_lost_s)   # a longer-lost track gets a wider gate
+            for j in range(len(cands)):
+                if not self._signature_ok(t, sigs[j]):
+                    continue
+                s = oks(cands[j], pred_kp[i], pred_box[i][2], p.min_confidence,
+                        p.oks_scale * widen) + 0.3 * box_iou(boxes[j], pred_box[i])
+                sim[i, j] = s
+        # Matching cascade: the tracks seen in the last frame choose first, then the coasting
+        # ones, the tentative ones last, so that a long-lost track (whose gate is wide) cannot
+        # take a person that a track seen a moment ago explains.
+        levels = ([i for i, t in enumerate(self._tracks) if t.id and not t.missed],
+                  [i for i, t in enumerate(self._tracks) if t.id and t.missed],
+                  [i for i, t in enumerate(self._tracks) if not t.id])
+        matches: List[Tuple[int, int]] = []
+        free = list(range(len(cands)))
+        if sim.size:
+            from scipy.optimize import linear_sum_assignment
+            for level in levels:
+                if not level or not free:
+                    continue
+                sub = sim[np.ix_(level, free)]
+                ti, ci = linear_sum_assignment(-sub)
+                got = [(level[r], free[c]) for r, c in zip(ti, ci)
+                       if sub[r, c] >= p.match_threshold]
+                matches += got
+                taken = {c for _, c in got}
+                free = [c for c in free if c not in taken]
+        matched_t = {r for r, _ in matches}
+        matched_c = {c for _, c in matches}
+
+        ready: List[Tuple[_Track, int]] = []
+        for i, j in matches:
+            t = self._tracks[i]
+            if t.id and t.missed:
+                self.stats.reidentified += 1
+            t.missed = 0
+            t.kalman.predict(dt)
+            t.kalman.correct(self._measure(t, cands[j], boxes[j]))
+            self._set_shape(t, cands[j], boxes[j])
+            t.last_s = stamp_s
+            t.row = rows[j]
+            t.hits += 1
+            if sigs[j] is not None and t.signature is None:
+                t.signature = np.asarray(sigs[j], dtype=np.float64)
+            if not t.id and t.hits >= p.birth_frames:
+                ready.append((t, j))
+        # the most confident tentative tracks are confirmed first, while there is room (a
+        # coasting track keeps its place)
+        ready.sort(key=lambda tj: -float(np.sum(cands[tj[1]][:, 2])))
+        for t, _ in ready:
+            self._confirm(t, stamp_s, matched_t)
+        survivors = []
+        for i, t in enumerate(self._tracks):
+            if t.id < 0:                      # its id was taken over by a re-identified track
+                continue
+            if i in matched_t:
+                survivors.append(t)
+                continue
+            t.kalman.predict(dt)
+            t.missed += 1
+            if not t.id:                      # a tentative track must match every frame
+                self.stats.blips += 1
+                continue
+            if stamp_s - t.last_s > p.max_lost_s:
+                self.stats.deaths += 1
+                self.stats.lost_ids.append(t.id)
+                continue
+            survivors.append(t)
+        self._tracks = survivors
+
+        new = [j for j in range(len(cands)) if j not in matched_c]
+        new.sort(key=lambda j: -float(np.sum(cands[j][:, 2])))
+        for j in new:
+            if len(self._tracks) >= 2 * p.max_persons:
+                self.stats.ignored += 1
+                continue
+            t = _Track(0, _Kalman(boxes[j][:3], p), np.zeros((NUM_KEYPOINTS, 3)), 1.0,
+                       cands[j].copy(), stamp_s, stamp_s,
+                       signature=None if sigs[j] is None else np.asarray(sigs[j], float))
+            self._set_shape(t, cands[j], boxes[j])
+            t.row = rows[j]
+            self._tracks.append(t)
+            if p.birth_frames <= 1:
+                self._confirm(t, stamp_s, set())
+
+        out = [TrackedPerson(t.id, t.keypoints.copy(), self._box_of(t), stamp_s - t.first_s,
+                             t.row)
+               for t in self._tracks if t.id and t.last_s == stamp_s]
+        out.sort(key=lambda q: (-q.tracked_s, q.id))
+        return out[:p.max_persons]
+
+    # ------------------------------------------------------------------ helpers
+    def _confirm(self, t: _Track, stamp_s: float, matched: set) -> None:
+        """Give the tentative track ``t`` an id: a lost person's old one when ``t`` continues
+        a coasting track (:meth:`_reid_target`; that track is marked for removal, id -1), else
+        a new one while fewer than ``max_persons`` ids are held; otherwise it stays tentative
+        (counted as ignored) until someone leaves."""
+        lost = self._reid_target(t, stamp_s, matched)
+        if lost is not None:
+            t.id, t.first_s = lost.id, lost.first_s
+            if t.signature is None:
+                t.signature = lost.signature
+            lost.id = -1
+            self.stats.reidentified += 1
+        elif sum(1 for o in self._tracks if o.id > 0) < self.params.max_persons:
+            t.id = self._next_id
+            self._next_id += 1
+            self.stats.births += 1
+        else:
+            self.stats.ignored += 1
+
+    def _reid_target(self, t: _Track, stamp_s: float, matched: set) -> Optional[_Track]:
+        """The lost (coasting, unmatched this frame) track that the tentative track ``t``
+        plausibly continues, or None: its box within ``reid_distance`` box heights of that
+        track's prediction, a height within 0.7-1.4 of it, and a signature that agrees; the
+        nearest such track."""
+        p = self.params
+        best, best_d = None, p.reid_distance
+        tb = self._box_of(t)
+        for i, o in enumerate(self._tracks):
+            if o is t or o.id <= 0 or not o.missed or i in matched:
+                continue
+            ob = o.box_at(stamp_s - o.last_s)
+            d = float(np.hypot(tb[0] - ob[0], tb[1] - ob[1]) / max(ob[2], 1.0))
+            if d < best_d and 0.7 <= tb[2] / max(ob[2], 1.0) <= 1.4 and \
+                    self._signature_ok(o, t.signature):
+                best, best_d = o, d
+        return best
+
+    def _valid(self, cands: np.ndarray) -> Tuple[List[int], List[np.ndarray]]:
+        p = self.params
+        keep, boxes = [], []
+        for j, c in enumerate(cands):
+            seen = int(np.count_nonzero(c[:, 2] >= p.min_confidence))
+            box = keypoint_box(c, p.min_confidence)
+            if seen < p.min_keypoints or box is None or box[2] < p.min_height_px:
+                if seen > 0:
+                    self.stats.ignored += 1
+                continue
+            keep.append(j)
+            boxes.append(box)
+        return keep, boxes
+
+    def _merge_duplicates(self, cands: np.ndarray, boxes: List[np.ndarray]) -> List[int]:
+        """Indices of the candidates to keep (the more confident of a pair that is one
+        person twice), in input order."""
+        p = self.params
+        order = np.argsort([-float(np.sum(c[:, 2])) for c in cands], kind='stable')
+        kept: List[int] = []
+        for j in order:
+            if any(oks(cands[j], cands[k], max(boxes[j][2], boxes[k][2]), p.min_confidence)
+                   > p.duplicate_oks for k in kept):
+                self.stats.duplicates += 1
+                continue
+            kept.append(int(j))
+        kept.sort()
+        return kept
+
+    def _signature_ok(self, t: _Track, sig: Optional[np.ndarray]) -> bool:
+        if sig is None or t.signature is None or not t.missed:
+            return True
+        a, b = np.asarray(sig, float), t.signature
+        if a.shape != b.shape:
+            return True
+        rel = np.abs(a - b) / np.maximum(np.abs(b), 1e-6)
+        return bool(np.median(rel) <= self.params.signature_tolerance)
+
+    def _measure(self, t: _Track, kp: np.ndarray, box: np.ndarray) -> np.ndarray:
+        """The box ``(cx, cy, h)`` that a candidate puts the track at: the track's keypoint
+        shape fitted to the candidate's seen keypoints (least squares in centre and height),
+        so that a partly hidden person does not drag the box towards the part still seen;
+        the candidate's own box when fewer than 4 keypoints are shared or the fit is
+        implausible."""
+        mc = self.params.min_confidence
+        both = (kp[:, 2] >= mc) & (t.shape[:, 2] >= mc)
+        if np.count_nonzero(both) < 4 or np.count_nonzero(both) >= 0.9 * np.count_nonzero(
+                t.shape[:, 2] >= mc):
+            return box[:3]
+        s = t.shape[both, :2]
+        n = len(s)
+        A = np.zeros((2 * n, 3))
+        A[0::2, 0] = 1.0
+        A[1::2, 1] = 1.0
+        A[0::2, 2] = s[:, 0]
+        A[1::2, 2] = s[:, 1]
+        b = kp[both, :2].reshape(-1)
+        sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+        h_prev = max(t.kalman.x[2], 1.0)
+        if not np.all(np.isfinite(sol)) or not 0.7 * h_prev <= sol[2] <= 1.4 * h_prev:
+            return box[:3]
+        return sol
+
+    def _set_shape(self, t: _Track, kp: np.ndarray, box: np.ndarray) -> None:
+        x = t.kalman.x
+        h = max(x[2], 1.0)
+        shape = kp.copy()
+        shape[:, 0] = (kp[:, 0] - x[0]) / h
+        shape[:, 1] = (kp[:, 1] - x[1]) / h
+        seen = kp[:, 2] >= self.params.min_confidence
+        # keypoints not seen now keep their last relative place (with their old confidence
+        # decayed), so that the next frame can still compare them
+        if t.hits > 1:
+            old = t.shape
+            shape[~seen, :2] = old[~seen, :2]
+            shape[~seen, 2] = np.maximum(kp[~seen, 2], 0.5 * old[~seen, 2])
+        t.shape = shape
+        t.width_ratio = float(box[3] / max(box[2], 1.0))
+        t.keypoints = kp.copy()
+
+    @staticmethod
+    def _box_of(t: _Track) -> np.ndarray:
+        x = t.kalman.x
+        h = max(x[2], 1.0)
+        return np.array([x[0], x[1], h, h * t.width_ratio])
