@@ -42,8 +42,8 @@ def _run_node(processes, ros2_cmd, path: Path, *extra: str):
 
 
 def test_node_publishes_every_frame_in_order(processes, ros2_cmd, listener):
-    from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
-                                            stamp_to_ns)
+    from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_ids,
+                                            cloud_to_keypoints, stamp_to_ns)
     from mocap_core.data.openpose import list_openpose_files, read_openpose_file
 
     peer, got = listener
@@ -57,8 +57,13 @@ def test_node_publishes_every_frame_in_order(processes, ros2_cmd, listener):
     stamps = [stamp_to_ns(m.header.stamp) for m in got['kp']]
     assert np.all(np.diff(stamps) > 0)
     np.testing.assert_allclose(np.diff(stamps), 1e9 / 60.0, atol=2)
-    expected = read_openpose_file(list_openpose_files(EXAMPLE)[0][1])
-    np.testing.assert_allclose(cloud_to_keypoints(got['kp'][0]), expected, rtol=1e-6)
+    # a new person gets an id (and is published) on the third consecutive frame seen
+    # (id_after_frames 3): the first two clouds are the all-zero row of nobody, id 0
+    assert [cloud_to_ids(m).tolist() for m in got['kp'][:4]] == [[0], [0], [1], [1]]
+    assert not np.any(cloud_to_keypoints(got['kp'][1])[..., 2])
+    expected = read_openpose_file(list_openpose_files(EXAMPLE)[2][1])
+    np.testing.assert_allclose(cloud_to_keypoints(got['kp'][2]), expected, rtol=1e-6)
+    assert {tuple(cloud_to_ids(m)) for m in got['kp'][2:]} == {(1,)}   # one id throughout
     intr = camera_info_to_intrinsics(got['info'][0])
     assert intr.width >= 738 and intr.height >= 985
     assert got['info'][0].header.stamp == got['kp'][0].header.stamp
@@ -81,8 +86,10 @@ def test_malformed_json_is_skipped_with_the_file_named(processes, ros2_cmd, list
     assert files[3].name in text and 'skipping frame' in text
     assert len(got['kp']) == 9
     from mocap_core.ros_conversions import cloud_to_keypoints
-    empty = [cloud_to_keypoints(m) for m in got['kp'] if not np.any(cloud_to_keypoints(m)[..., 2])]
-    assert len(empty) == 1 and empty[0].shape == (1, 23, 3)
+    empty = [i for i, m in enumerate(got['kp']) if not np.any(cloud_to_keypoints(m)[..., 2])]
+    # the two frames before the person gets an id, and the file with nobody (the 5th cloud)
+    assert empty == [0, 1, 4]
+    assert all(cloud_to_keypoints(got['kp'][i]).shape == (1, 23, 3) for i in empty)
 
 
 def test_missing_directory_exits_with_clear_error(processes, ros2_cmd, tmp_path):
@@ -191,7 +198,8 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
     assert float(values['detector_ms_median']) > 0 and float(values['output_rate_hz']) > 0
     assert float(values['input_rate_hz']) > 0 and values['frames_dropped'] == '0'
     assert 'taiji_640x360.mp4' in values['source']
-    assert values['detector'] == 'mediapipe_blazepose_full'
+    assert values['detector'] == 'mediapipe_blazepose_full_multi'     # max_persons 4
+    assert values['person_ids'] == '1' and values['ids_given'] == '1'
     assert 'calibration file' in values['intrinsics']
 
 
@@ -244,12 +252,15 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
         return [m for m in got if stamp_to_ns(m.header.stamp) >= t0]
 
     def warm_up(pub, got, make, proc):
-        """Publish until a cloud comes back (discovery has matched both ways)."""
+        """Publish until a cloud with the person comes back (discovery has matched both ways
+        and the person has an id, which takes three frames)."""
+        def person():
+            return bool(got) and bool(np.any(cloud_to_keypoints(got[-1])[..., 2]))
         for k in range(60):
-            pub.publish(make(t0 - 10**9 + k * 10**6))
-            if peer.spin(0.5, until=lambda: len(got) > 0, proc=proc):
+            pub.publish(make(t0 - 5 * 10**8 + k * 10**6))
+            if peer.spin(0.5, until=person, proc=proc):
                 break
-        assert got, 'no cloud came back'
+        assert person(), 'no cloud with the person came back'
 
     # image_qos auto: each node subscribes reliably once it has seen this test's reliable
     # publishers (re-checked every second); a large raw image sent to the first, best-effort

@@ -44,6 +44,9 @@ from .skeleton import CONTACT_POINT_NAMES, JOINT_NAMES, NUM_KEYPOINTS, Skeleton
 from .urdf import revolute_joint_names
 
 KEYPOINT_FIELDS: Tuple[str, ...] = ('u', 'v', 'confidence')
+#: The optional per-person id field of the keypoint cloud (float32, the same at every point
+#: of a row; docs/design.md).
+KEYPOINT_ID_FIELD = 'id'
 POSITION_FIELDS: Tuple[str, ...] = ('x', 'y', 'z')
 
 
@@ -136,24 +139,53 @@ def cloud_to_array(msg: PointCloud2, fields: Sequence[str],
     return out
 
 
-def keypoints_to_cloud(keypoints: np.ndarray, header: Header) -> PointCloud2:
-    """Keypoints (P, 23, 3) or (23, 3) of (u px, v px, confidence) -> PointCloud2.
+def keypoints_to_cloud(keypoints: np.ndarray, header: Header,
+                       ids: Optional[Sequence[int]] = None) -> PointCloud2:
+    """Keypoints (P, 23, 3) or (23, 3) of (u px, v px, confidence) -> PointCloud2, one row per
+    person.
 
-    Confidences are clipped to [0, 1]; a keypoint with a non-finite coordinate or confidence
-    is written as (0, 0, 0) (not seen), so consumers never receive NaN.
+    ``ids`` (P,): the person id of each row (positive integers, 0 = nobody, a padding row);
+    when given, the cloud has a fourth float32 field ``id`` holding the row's id at every
+    point (exact for ids below 2**24). Confidences are clipped to [0, 1]; a keypoint with a
+    non-finite coordinate or confidence is written as (0, 0, 0) (not seen), so consumers never
+    receive NaN.
     """
     kp = np.array(keypoints, dtype=np.float64)
     if kp.ndim == 2:
         kp = kp[None]
     if kp.ndim != 3 or kp.shape[1:] != (NUM_KEYPOINTS, 3):
         raise MessageError(f'keypoints must have shape (P, {NUM_KEYPOINTS}, 3), got {kp.shape}')
-    return array_to_cloud(sanitize_keypoints(kp), KEYPOINT_FIELDS, header)
+    kp = sanitize_keypoints(kp)
+    if ids is None:
+        return array_to_cloud(kp, KEYPOINT_FIELDS, header)
+    idv = np.asarray(ids, dtype=np.float64).reshape(-1)
+    if len(idv) != len(kp) or not np.all(np.isfinite(idv)) or np.any(idv < 0) or \
+            np.any(idv >= 2 ** 24) or np.any(idv != np.round(idv)):
+        raise MessageError(f'ids must be {len(kp)} integers in [0, 2**24), got {ids!r}')
+    vals = np.concatenate([kp, np.broadcast_to(idv[:, None, None], kp.shape[:2] + (1,))],
+                          axis=-1)
+    return array_to_cloud(vals, KEYPOINT_FIELDS + (KEYPOINT_ID_FIELD,), header)
 
 
 def cloud_to_keypoints(msg: PointCloud2) -> np.ndarray:
     """PointCloud2 -> (P, 23, 3) float64 keypoints (u, v, confidence), sanitised like
     :func:`keypoints_to_cloud`. Raises MessageError for a malformed cloud."""
     return sanitize_keypoints(cloud_to_array(msg, KEYPOINT_FIELDS, width=NUM_KEYPOINTS))
+
+
+def cloud_to_ids(msg: PointCloud2) -> Optional[np.ndarray]:
+    """The (P,) int64 person id of each row of a keypoint cloud, or None when the cloud has no
+    ``id`` field (an older bag: one person, row 0). A row whose points disagree, or whose id
+    is not a non-negative integer, gets 0 (nobody). Raises MessageError for a malformed
+    cloud."""
+    if not any(f.name == KEYPOINT_ID_FIELD for f in msg.fields):
+        return None
+    arr = cloud_to_array(msg, (KEYPOINT_ID_FIELD,), width=NUM_KEYPOINTS)[..., 0]
+    first = arr[:, 0].astype(np.float64)
+    with np.errstate(invalid='ignore'):
+        ok = np.all(arr == arr[:, :1], axis=1) & np.isfinite(first) & (first >= 0) & \
+            (first == np.round(first))
+    return np.where(ok, first, 0.0).astype(np.int64)
 
 
 #: Positions (m) beyond this magnitude are not a person's pose: the message is rejected.

@@ -79,6 +79,12 @@ class TrackerParams:
     #: noise (px per px of box height).
     accel_noise: float = 3.0
     measurement_noise: float = 0.05
+    #: A coasting track's velocity decays with this time constant (s): a person hidden for a
+    #: while is looked for near where they were last, not far along a straight line (their
+    #: last velocity is often that of a bad, partial detection).
+    coast_velocity_s: float = 0.2
+    #: Largest relative change of a track's box height from one frame to the next.
+    max_height_change: float = 0.15
 
     def __post_init__(self) -> None:
         if self.max_persons < 1:
@@ -331,6 +337,7 @@ class PersonTracker:
                 survivors.append(t)
                 continue
             t.kalman.predict(dt)
+            t.kalman.x[3:] *= np.exp(-dt / max(p.coast_velocity_s, 1e-6))
             t.missed += 1
             if not t.id:                      # a tentative track must match every frame
                 self.stats.blips += 1
@@ -444,25 +451,29 @@ class PersonTracker:
         shape fitted to the candidate's seen keypoints (least squares in centre and height),
         so that a partly hidden person does not drag the box towards the part still seen;
         the candidate's own box when fewer than 4 keypoints are shared or the fit is
-        implausible."""
+        implausible. The height may change by at most ``max_height_change`` per frame (a
+        person's size in the image changes slowly; a detection that sees half a person
+        does not halve the track)."""
         mc = self.params.min_confidence
-        both = (kp[:, 2] >= mc) & (t.shape[:, 2] >= mc)
-        if np.count_nonzero(both) < 4 or np.count_nonzero(both) >= 0.9 * np.count_nonzero(
-                t.shape[:, 2] >= mc):
-            return box[:3]
-        s = t.shape[both, :2]
-        n = len(s)
-        A = np.zeros((2 * n, 3))
-        A[0::2, 0] = 1.0
-        A[1::2, 1] = 1.0
-        A[0::2, 2] = s[:, 0]
-        A[1::2, 2] = s[:, 1]
-        b = kp[both, :2].reshape(-1)
-        sol, *_ = np.linalg.lstsq(A, b, rcond=None)
         h_prev = max(t.kalman.x[2], 1.0)
-        if not np.all(np.isfinite(sol)) or not 0.7 * h_prev <= sol[2] <= 1.4 * h_prev:
-            return box[:3]
-        return sol
+        lim = self.params.max_height_change
+        z = np.array(box[:3], dtype=np.float64)
+        both = (kp[:, 2] >= mc) & (t.shape[:, 2] >= mc)
+        if 4 <= np.count_nonzero(both) < 0.9 * np.count_nonzero(t.shape[:, 2] >= mc):
+            s = t.shape[both, :2]
+            n = len(s)
+            A = np.zeros((2 * n, 3))
+            A[0::2, 0] = 1.0
+            A[1::2, 1] = 1.0
+            A[0::2, 2] = s[:, 0]
+            A[1::2, 2] = s[:, 1]
+            b = kp[both, :2].reshape(-1)
+            sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+            if np.all(np.isfinite(sol)) and 0.7 * h_prev <= sol[2] <= 1.4 * h_prev:
+                z = sol
+        if t.hits > 1:
+            z[2] = float(np.clip(z[2], h_prev / (1.0 + lim), h_prev * (1.0 + lim)))
+        return z
 
     def _set_shape(self, t: _Track, kp: np.ndarray, box: np.ndarray) -> None:
         x = t.kalman.x

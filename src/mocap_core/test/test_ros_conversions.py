@@ -47,6 +47,28 @@ def test_keypoints_roundtrip(header):
     np.testing.assert_allclose(rc.cloud_to_keypoints(msg), kp.astype(np.float32), rtol=1e-6)
 
 
+def test_keypoint_ids_roundtrip_and_old_clouds(header):
+    kp = np.random.default_rng(1).uniform(0, 1, (3, NUM_KEYPOINTS, 3))
+    msg = _wire(rc.keypoints_to_cloud(kp, header, ids=[7, 2, 0]))
+    assert [f.name for f in msg.fields] == ['u', 'v', 'confidence', 'id']
+    assert rc.cloud_to_ids(msg).tolist() == [7, 2, 0]
+    # consumers that read only the keypoints are unaffected by the extra field
+    np.testing.assert_allclose(rc.cloud_to_keypoints(msg), kp.astype(np.float32), rtol=1e-6)
+    # an older cloud without ids: None (one person, row 0)
+    assert rc.cloud_to_ids(rc.keypoints_to_cloud(kp, header)) is None
+    # a row whose points disagree, or a negative id, reads as nobody
+    vals = np.concatenate([kp, np.zeros((3, NUM_KEYPOINTS, 1))], axis=-1)
+    vals[0, :, 3] = 5
+    vals[0, 4, 3] = 6
+    vals[1, :, 3] = -3
+    vals[2, :, 3] = 9
+    odd = rc.array_to_cloud(vals, ('u', 'v', 'confidence', 'id'), header)
+    assert rc.cloud_to_ids(odd).tolist() == [0, 0, 9]
+    for bad in ([1, 2], [1, 2, -1], [1.5, 2, 3], [1, 2, np.nan]):
+        with pytest.raises(rc.MessageError):
+            rc.keypoints_to_cloud(kp, header, ids=bad)
+
+
 def test_keypoints_nan_become_unseen(header):
     kp = np.ones((NUM_KEYPOINTS, 3)) * 0.5
     kp[3, 0] = np.nan

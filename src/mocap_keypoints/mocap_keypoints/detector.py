@@ -138,8 +138,15 @@ class BlazePoseDetector:
         self.close()
 
 
-#: Detector name (parameter ``detector``) -> class.
-DETECTORS: Dict[str, type] = {'blazepose': BlazePoseDetector}
+def _multi(**kwargs):
+    from .multipose import BlazePoseMultiDetector
+    return BlazePoseMultiDetector(**kwargs)
+
+
+_multi.name = 'mediapipe_blazepose_full_multi'
+
+#: Detector name (parameter ``detector``) -> class (or factory).
+DETECTORS: Dict[str, object] = {'blazepose': BlazePoseDetector, 'blazepose_multi': _multi}
 
 
 def create_detector(name: str = 'blazepose', **kwargs) -> Detector:

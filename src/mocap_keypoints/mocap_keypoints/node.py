@@ -1,9 +1,11 @@
 """``ros2 run mocap_keypoints keypoints``: 2D body keypoints with confidences, live.
 
 Publishes for every processed frame, stamped with the image's stamp (docs/design.md §2):
-  * ``/mocap/keypoints2d`` (sensor_msgs/PointCloud2, sensor-data QoS): height = persons
-    (``max_persons``), width = 23 keypoints, float32 ``u, v, confidence``; when nobody is found
-    the cloud is still published, with all confidences 0;
+  * ``/mocap/keypoints2d`` (sensor_msgs/PointCloud2, sensor-data QoS): one row per person
+    (at most ``max_persons``, the longest tracked first), width = 23 keypoints, float32
+    ``u, v, confidence, id`` (the person's id, stable from frame to frame,
+    ``mocap_core.tracking``); when nobody is found the cloud is still published, one row
+    with all confidences 0 and id 0;
   * ``/mocap/camera_info`` (sensor_msgs/CameraInfo): the intrinsics of the keypoints;
   * ``/mocap/camera/motion`` (nav_msgs/Odometry) with ``camera_motion`` (image sources): the
     camera's rotation since the first frame, its angular velocity and whether it is static,
@@ -60,6 +62,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from mocap_core import topics
 from mocap_core.camera import CameraCalibration, read_camera_info_yaml
 from mocap_core.camera_motion import CameraMotionParams
+from mocap_core.tracking import PersonTracker, TrackerParams
 from mocap_core.data.openpose import infer_image_size
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded, record_failure
@@ -108,17 +111,32 @@ PARAMETERS = (
               'detector cannot keep up with (true), or as fast as possible without drops'),
     ParamSpec('loop', False, 'Restart file sources at the end instead of exiting',
               read_only=True),
-    ParamSpec('detector', 'blazepose', 'Keypoint detector (blazepose = MediaPipe BlazePose '
-              'full, bundled with mediapipe 0.10.14)', read_only=True),
-    ParamSpec('tracking', True, 'BlazePose video mode (track the person from frame to frame); '
-              'false runs the person detector on every image (unrelated images, slower)',
-              read_only=True),
+    ParamSpec('detector', 'auto', 'Keypoint detector: blazepose = MediaPipe BlazePose full '
+              '(bundled with mediapipe 0.10.14, one person), blazepose_multi = the same models '
+              'for several people (a window per person, docs/multi_person.md), auto = '
+              'blazepose_multi when max_persons > 1, else blazepose', read_only=True,
+              additional_constraints='auto, blazepose or blazepose_multi'),
+    ParamSpec('tracking', True, 'Video mode: follow people from frame to frame; false '
+              'treats every image as unrelated (the person detector runs on every image, '
+              'slower; a person gets an id at first sight)', read_only=True),
     ParamSpec('min_detection_confidence', 0.5, 'BlazePose person detection threshold',
               min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('min_tracking_confidence', 0.5, 'BlazePose tracking threshold (below it the '
               'person is detected again)', min_value=0.0, max_value=1.0, read_only=True),
-    ParamSpec('max_persons', 1, 'Persons per cloud (most confident first); the cloud height '
-              '(BlazePose finds one person)', min_value=1, max_value=16, read_only=True),
+    ParamSpec('max_persons', 4, 'Most persons followed and published at once (the cloud has '
+              'one row per person, an id field, the longest tracked person in row 0)',
+              min_value=1, max_value=16, read_only=True),
+    ParamSpec('detection_interval', 5, 'blazepose_multi: look for new people in the whole '
+              'image every this many frames (between, each person is tracked in its own '
+              'window)', min_value=1, max_value=1000, read_only=True),
+    ParamSpec('min_person_height_px', 48.0, 'Persons whose seen keypoints span fewer pixels '
+              'in height are ignored', min_value=0.0, read_only=True),
+    ParamSpec('id_after_frames', 3, 'A new person gets an id after being seen in this many '
+              'consecutive frames (a one-frame false detection never gets one)',
+              min_value=1, max_value=100, read_only=True),
+    ParamSpec('id_timeout_s', 1.0, 'A person unseen for longer than this loses the id; seen '
+              'again sooner, near where they were expected, they keep it', min_value=0.0,
+              read_only=True),
     ParamSpec('calibration_file', '', 'Camera calibration (standard camera_info YAML); takes '
               'precedence over the CameraInfo topic', read_only=True),
     ParamSpec('horizontal_fov_deg', 60.0, 'Horizontal field of view for approximate '
@@ -286,21 +304,38 @@ class KeypointsNode(Node):
             fixed_size = (w, h)
             self.detector_name = 'openpose_json (recorded detections)'
         else:
-            detector = create_detector(
-                p['detector'], tracking=p['tracking'],
-                min_detection_confidence=p['min_detection_confidence'],
-                min_tracking_confidence=p['min_tracking_confidence'])
+            name = p['detector']
+            if name == 'auto':
+                name = 'blazepose_multi' if p['max_persons'] > 1 else 'blazepose'
+            if name == 'blazepose_multi':
+                detector = create_detector(
+                    name, max_persons=p['max_persons'],
+                    detection_interval=p['detection_interval'] if p['tracking'] else 1,
+                    min_person_px=p['min_person_height_px'],
+                    min_detection_confidence=p['min_detection_confidence'],
+                    min_tracking_confidence=p['min_tracking_confidence'])
+            else:
+                detector = create_detector(
+                    name, tracking=p['tracking'],
+                    min_detection_confidence=p['min_detection_confidence'],
+                    min_tracking_confidence=p['min_tracking_confidence'])
             self.detector_name = detector.name
         self.detector = detector
         motion = None
         if p['camera_motion'] and self.kind != 'openpose_json':
             motion = CameraMotionParams(max_width=p['camera_motion_max_width'])
+        # unrelated images (tracking false): a person gets an id at first sight and nobody
+        # is carried from one image to the next
+        self.tracker = PersonTracker(TrackerParams(
+            max_persons=p['max_persons'], min_height_px=p['min_person_height_px'],
+            birth_frames=p['id_after_frames'] if p['tracking'] else 1,
+            max_lost_s=p['id_timeout_s'] if p['tracking'] else 0.0))
         self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
                                         undistort=p['undistort'],
                                         annotate=p['publish_annotated'],
                                         fixed_size=fixed_size,
                                         restart_after_s=p['restart_after_s'],
-                                        camera_motion=motion)
+                                        camera_motion=motion, tracker=self.tracker)
         self.pub_kp = self.create_publisher(PointCloud2, topics.KEYPOINTS, SENSOR_QOS)
         self.pub_info = self.create_publisher(CameraInfo, topics.CAMERA_INFO, STREAM_QOS)
         self.pub_motion = (self.create_publisher(Odometry, topics.CAMERA_MOTION, STREAM_QOS)
@@ -610,7 +645,7 @@ class KeypointsNode(Node):
             self.intrinsics_approx = fi.approximate
             self.diag.set_value('intrinsics', fi.detail)
         self.pub_info.publish(intrinsics_to_camera_info(fi.intrinsics, header))
-        self.pub_kp.publish(keypoints_to_cloud(res.keypoints, header))
+        self.pub_kp.publish(keypoints_to_cloud(res.keypoints, header, ids=res.ids))
         cm = res.camera_motion
         if self.pub_motion is not None and cm is not None:
             self.pub_motion.publish(camera_motion_to_odometry(
@@ -656,6 +691,13 @@ class KeypointsNode(Node):
         for key, v in (('detector_ms_median', s['median']), ('detector_ms_p95', s['p95'])):
             self.diag.set_value(key, 'nan' if np.isnan(v) else f'{v * 1e3:.2f}')
         self.diag.set_value('frames_without_person', self.no_person)
+        ts = self.tracker.stats
+        self.diag.set_value('person_ids', ' '.join(str(i) for i in self.tracker.ids) or 'none')
+        self.diag.set_value('ids_given', ts.births)
+        self.diag.set_value('ids_lost', ts.deaths)
+        self.diag.set_value('reidentified', ts.reidentified)
+        self.diag.set_value('false_detections_ignored', ts.blips)
+        self.diag.set_value('persons_ignored', ts.ignored)
         if self.pub_motion is not None:
             m = self.motion_stats.summary()['median']
             self.diag.set_value('camera_motion_ms_median', 'nan' if np.isnan(m) else

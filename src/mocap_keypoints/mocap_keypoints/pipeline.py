@@ -3,8 +3,11 @@ thread does for every frame.
 
 :class:`FrameProcessor` turns a :class:`~mocap_keypoints.sources.Frame` into a
 :class:`FrameResult`: decode the image if needed, run the detector (or take the OpenPose
-detections), keep the ``max_persons`` most confident persons (padding with all-zero persons,
-so a frame without anybody still gives a cloud whose confidences are all 0), pick the
+detections), give the persons their identities with a
+:class:`~mocap_core.tracking.PersonTracker` (rows ordered longest tracked first, at most
+``max_persons``; a frame without anybody gives one all-zero row with id 0, so its cloud's
+confidences are all 0) or, without a tracker, keep the ``max_persons`` most confident
+persons (padding with all-zero persons), pick the
 intrinsics for the image size, undistort the keypoints when the calibration has lens
 distortion, estimate the camera's motion from the image background (``camera_motion``,
 :mod:`mocap_core.camera_motion`) and draw the annotated debug image if asked.
@@ -22,6 +25,7 @@ from mocap_core.skeleton import KEYPOINT_EDGES, KEYPOINT_NAMES, NUM_KEYPOINTS
 from mocap_core.camera_motion import (CameraMotionEstimate, CameraMotionEstimator,
                                       CameraMotionParams)
 from mocap_core.streams import StampOrder
+from mocap_core.tracking import PersonTracker
 
 from .detector import Detector
 from .intrinsics import FrameIntrinsics, IntrinsicsProvider, distortion_supported, \
@@ -54,17 +58,25 @@ def _side_colour(a: int, b: int) -> Tuple[int, int, int]:
 
 
 def draw_keypoints(image: np.ndarray, keypoints: np.ndarray, threshold: float = 0.5,
-                   text: str = '') -> np.ndarray:
+                   text: str = '', ids: Optional[np.ndarray] = None) -> np.ndarray:
     """A copy of ``image`` with the skeletons of (P, 23, 3) ``keypoints`` drawn over it: bones
     between points with confidence >= ``threshold`` (left blue, right orange), points as
-    dots whose size grows with confidence, and ``text`` in the top-left corner."""
+    dots whose size grows with confidence, ``text`` in the top-left corner and, with ``ids``
+    (P,), each person's id above its highest point (id 0 rows are not labelled)."""
     import cv2
 
     out = np.array(image, copy=True)
     scale = max(1.0, max(out.shape[:2]) / 640.0)
     thick = max(1, int(round(2 * scale)))
-    for person in np.asarray(keypoints).reshape(-1, NUM_KEYPOINTS, 3):
+    people = np.asarray(keypoints).reshape(-1, NUM_KEYPOINTS, 3)
+    for r, person in enumerate(people):
         ok = person[:, 2] >= threshold
+        if ids is not None and ids[r] > 0 and np.any(ok):
+            top = int(np.argmin(np.where(ok, person[:, 1], np.inf)))
+            cv2.putText(out, f'id {int(ids[r])}', (int(person[top, 0]) - int(15 * scale),
+                                                   int(person[top, 1] - 12 * scale)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.6 * scale, (0, 255, 255), thick,
+                        cv2.LINE_AA)
         for a, b in KEYPOINT_EDGES:
             if ok[a] and ok[b]:
                 cv2.line(out, (int(round(person[a, 0])), int(round(person[a, 1]))),
@@ -88,7 +100,8 @@ class FrameResult:
     index: int
     name: str
     frame_id: str = ''
-    keypoints: Optional[np.ndarray] = None          # (max_persons, 23, 3)
+    keypoints: Optional[np.ndarray] = None          # (P, 23, 3), P <= max_persons
+    ids: Optional[np.ndarray] = None                # (P,) person ids (with a tracker)
     intrinsics: Optional[FrameIntrinsics] = None
     image_size: Tuple[int, int] = (0, 0)            # width, height
     detector_s: float = 0.0
@@ -111,8 +124,10 @@ class FrameProcessor:
                  max_persons: int = 1, undistort: bool = True, annotate: bool = False,
                  fixed_size: Optional[Tuple[int, int]] = None,
                  restart_after_s: float = 1.0,
-                 camera_motion: Optional[CameraMotionParams] = None) -> None:
+                 camera_motion: Optional[CameraMotionParams] = None,
+                 tracker: Optional[PersonTracker] = None) -> None:
         self.detector = detector
+        self.tracker = tracker
         # stamps jumping back start a new stream: the detector forgets the person it tracked
         self.order = StampOrder(restart_after_s)
         self.intrinsics = intrinsics
@@ -170,6 +185,8 @@ class FrameProcessor:
         restart = self.order.check(frame.stamp_ns) == 'restart'
         if restart and self.detector is not None:
             self.detector.reset()
+        if restart and self.tracker is not None:
+            self.tracker.reset()
         if frame.error is not None:
             res.error = frame.error
             return res
@@ -204,7 +221,16 @@ class FrameProcessor:
         if note:
             res.notes.append(f'intrinsics: {note}')
         res.intrinsics = fi
-        raw = select_persons(people, self.max_persons)
+        if self.tracker is not None:
+            tracked = self.tracker.update(people, frame.stamp_ns * 1e-9)[:self.max_persons]
+            if tracked:
+                raw = np.stack([t.keypoints for t in tracked])
+                res.ids = np.array([t.id for t in tracked], dtype=np.int64)
+            else:
+                raw = np.zeros((1, NUM_KEYPOINTS, 3))
+                res.ids = np.zeros(1, dtype=np.int64)
+        else:
+            raw = select_persons(people, self.max_persons)
         kp = raw
         if self.undistort and fi.distortion and any(d != 0 for d in fi.distortion):
             if distortion_supported(fi.distortion_model):
@@ -220,5 +246,5 @@ class FrameProcessor:
             seen = int(np.sum(raw[0, :, 2] > 0.5)) if len(raw) else 0
             res.annotated = draw_keypoints(
                 image, raw, text=f'{frame.name}  {seen}/{NUM_KEYPOINTS} points > 0.5  '
-                                 f'{res.detector_s * 1e3:.0f} ms')
+                                 f'{res.detector_s * 1e3:.0f} ms', ids=res.ids)
         return res

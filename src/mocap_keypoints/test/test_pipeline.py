@@ -114,6 +114,35 @@ def test_processor_no_person_gives_zero_confidences():
     assert res.keypoints.shape == (1, NUM_KEYPOINTS, 3) and not res.keypoints.any()
 
 
+def test_processor_with_tracker_gives_stable_ids_in_shuffled_rows():
+    from mocap_core.tracking import PersonTracker, TrackerParams
+
+    class Shuffling(FakeDetector):
+        def detect(self, image):
+            self.calls += 1
+            a, b = _person(100.0 + 4 * self.calls), _person(400.0 - 4 * self.calls, conf=0.8)
+            return np.concatenate([a, b] if self.calls % 2 else [b, a])
+
+    proc = FrameProcessor(Shuffling(None), IntrinsicsProvider(), max_persons=4,
+                          tracker=PersonTracker(TrackerParams(birth_frames=2)), annotate=True)
+    img = np.zeros((360, 640, 3), np.uint8)
+    first = proc.process(Frame(0, img, 0))
+    assert first.keypoints.shape == (1, NUM_KEYPOINTS, 3) and first.ids.tolist() == [0]
+    assert not first.person_found                       # not confirmed yet: nobody published
+    by_id = {}
+    for k in range(1, 12):
+        res = proc.process(Frame(k * 33_000_000, img, k))
+        assert sorted(res.ids.tolist()) == [1, 2]
+        for row, i in enumerate(res.ids):
+            by_id.setdefault(int(i), []).append(res.keypoints[row, 0, 0])
+    # each id stays with one person: one moves right, the other left
+    moves = {i: np.diff(u) for i, u in by_id.items()}
+    assert {tuple(np.sign(m).astype(int)) for m in moves.values()} == {(1,) * 10, (-1,) * 10}
+    # a stream restart (stamps back) forgets everyone
+    res = proc.process(Frame(0, img, 99))
+    assert res.ids.tolist() == [0]
+
+
 def test_processor_reports_bad_frames_without_raising():
     det = FakeDetector(_person())
     proc = FrameProcessor(det, IntrinsicsProvider())

@@ -1,0 +1,344 @@
+"""Several people per image with the BlazePose models bundled in MediaPipe (no ROS imports).
+
+MediaPipe 0.10.14 ships the BlazePose person detector (``pose_detection.tflite``) and the full
+landmark model (``pose_landmark_full.tflite``) inside its wheel, but its multi-person API (the
+Tasks ``PoseLandmarker``) wants a ``.task`` bundle, which is a download. :func:`pose_bundle`
+builds that bundle from the two wheel files with MediaPipe's own metadata writer (image
+normalisation of each model) and caches it under ``~/.cache/mocap/models``; nothing is
+downloaded.
+
+Measured on this project's clips (docs/multi_person.md): a Tasks landmarker asked for several
+poses on the whole frame drops its tracking (it re-detects every frame), misses people in
+~10-35 % of frames and returns partial duplicates. So :class:`BlazePoseMultiDetector` works
+the BlazePose way, per person:
+
+* **Detection** every ``detection_interval`` frames (and whenever nobody is followed): the
+  Tasks landmarker in IMAGE mode with ``num_poses = max_persons`` on one region of the image.
+  The regions take turns: the whole image, then squares of the image's short side along its
+  long side (overlapping by at least a third). The detector sees its input at 224 x 224, so
+  in a wide image a person a third of the image high is ~50 px to it and often missed; in a
+  square tile the same person is twice that. Each region is scanned every
+  ``detection_interval`` x (number of regions) frames.
+* **A window per person**: every person found that no window already follows gets a square
+  window on the image (``window_scale`` x the person's box, at least ``min_window_px``) and
+  its own VIDEO-mode landmarker for one pose. The window stays put while the person stays in
+  its central part, so the landmarker tracks inside it as it does on a whole video (landmarks
+  of one frame seed the next; no detection); when the person nears the window's edge, the
+  window is moved onto the person and its landmarker restarted.
+* **Windows end** when their landmarker loses the person for ``max_missed`` frames (in the
+  meantime it looks for them again in its window, as MediaPipe does after losing track), or when
+  two windows follow the same person (the less confident one ends).
+
+Identities are not this module's job: :class:`mocap_core.tracking.PersonTracker` gives them
+downstream, and also merges the duplicates that remain.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+
+from mocap_core.skeleton import NUM_KEYPOINTS
+from mocap_core.tracking import box_iou, keypoint_box, oks
+
+from .detector import blazepose_to_layout
+from .sources import check_image
+
+#: Where the built ``.task`` bundle is cached.
+MODEL_CACHE = Path(os.environ.get('MOCAP_CACHE', Path.home() / '.cache' / 'mocap')) / 'models'
+BUNDLE_NAME = 'pose_landmarker_full_mp0.10.14.task'
+
+
+def pose_bundle(cache_dir: Optional[Path] = None) -> Path:
+    """Path of the pose landmarker ``.task`` bundle, built from the model files in the
+    installed mediapipe wheel on first use (with metadata: the detector's input normalised
+    to [-1, 1], the landmark model's to [0, 1]). Raises RuntimeError when the wheel lacks the
+    models."""
+    cache_dir = Path(cache_dir or MODEL_CACHE)
+    out = cache_dir / BUNDLE_NAME
+    if out.is_file() and out.stat().st_size > 0:
+        return out
+    import mediapipe
+    from mediapipe.tasks.python.metadata.metadata_writers import (metadata_writer,
+                                                                  model_asset_bundle_utils)
+    root = Path(mediapipe.__file__).parent / 'modules'
+    det = root / 'pose_detection' / 'pose_detection.tflite'
+    lmk = root / 'pose_landmark' / 'pose_landmark_full.tflite'
+    for f in (det, lmk):
+        if not f.is_file():
+            raise RuntimeError(f'{f} is missing from the mediapipe wheel: cannot build the '
+                               'multi-person pose model')
+
+    def with_metadata(path: Path, name: str, mean: float, std: float) -> bytes:
+        w = metadata_writer.MetadataWriter.create(bytearray(path.read_bytes()))
+        w.add_general_info(name, 'BlazePose model from the mediapipe wheel')
+        w.add_image_input([mean], [std])
+        model, _ = w.populate()
+        return bytes(model)
+
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(f'.{os.getpid()}.tmp')
+    model_asset_bundle_utils.create_model_asset_bundle(
+        {'pose_detector.tflite': with_metadata(det, 'pose_detector', 127.5, 127.5),
+         'pose_landmarks_detector.tflite': with_metadata(lmk, 'pose_landmarks', 0.0, 255.0)},
+        str(tmp))
+    os.replace(tmp, out)
+    return out
+
+
+@dataclass
+class _Window:
+    x0: int                 # top-left corner in the image (px), may lie outside it
+    y0: int
+    side: int               # square side (px)
+    landmarker: object      # a VIDEO-mode PoseLandmarker (one pose)
+    missed: int = 0
+    last: Optional[np.ndarray] = None   # (23, 3) image keypoints of the last frame
+
+
+class BlazePoseMultiDetector:
+    """Several people per image (see the module docstring).
+
+    Args:
+        max_persons: the most people followed at once.
+        detection_interval: run the whole-image person detection every this many frames
+            (1: every frame); also whenever no window follows anybody.
+        min_person_px: people whose box of seen keypoints is lower than this are ignored.
+        window_scale: window side / the person's box side (height or width, the larger).
+        min_window_px: the smallest window side.
+        max_missed: a window ends after its landmarker misses this many frames in a row.
+        min_detection_confidence, min_tracking_confidence: MediaPipe's thresholds.
+    """
+
+    name = 'mediapipe_blazepose_full_multi'
+
+    def __init__(self, max_persons: int = 4, detection_interval: int = 5,
+                 min_person_px: float = 48.0, window_scale: float = 1.6,
+                 min_window_px: int = 128, max_missed: int = 8,
+                 min_detection_confidence: float = 0.5,
+                 min_tracking_confidence: float = 0.5) -> None:
+        if max_persons < 1:
+            raise ValueError(f'max_persons must be >= 1, got {max_persons}')
+        if detection_interval < 1:
+            raise ValueError(f'detection_interval must be >= 1, got {detection_interval}')
+        os.environ.setdefault('GLOG_minloglevel', '2')
+        import cv2
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            import mediapipe as mp
+            from mediapipe.tasks.python import vision
+            from mediapipe.tasks.python.core.base_options import BaseOptions
+        self._cv2, self._mp, self._vision = cv2, mp, vision
+        self._base = BaseOptions(model_asset_path=str(pose_bundle()))
+        self.max_persons = int(max_persons)
+        self.detection_interval = int(detection_interval)
+        self.min_person_px = float(min_person_px)
+        self.window_scale = float(window_scale)
+        self.min_window_px = int(min_window_px)
+        self.max_missed = int(max_missed)
+        self._det_conf = float(min_detection_confidence)
+        self._trk_conf = float(min_tracking_confidence)
+        self._finder = vision.PoseLandmarker.create_from_options(vision.PoseLandmarkerOptions(
+            base_options=self._base, running_mode=vision.RunningMode.IMAGE,
+            num_poses=self.max_persons, min_pose_detection_confidence=self._det_conf,
+            min_pose_presence_confidence=self._det_conf))
+        self._windows: List[_Window] = []
+        self._frame = 0
+        self._ts_ms = 0
+        self._closed = False
+        #: counters for diagnostics
+        self.detections = 0
+        self.windows_opened = 0
+
+    # ------------------------------------------------------------------ protocol
+    def detect(self, image: np.ndarray) -> np.ndarray:
+        img = check_image(image, 'image')
+        if self._closed:
+            raise RuntimeError('detector is closed')
+        h, w = img.shape[:2]
+        rgb = self._cv2.cvtColor(img, self._cv2.COLOR_BGR2RGB)
+        self._ts_ms += 33          # VIDEO mode wants increasing stamps; only order matters
+        people: List[np.ndarray] = []
+        for win in list(self._windows):
+            kp = self._track(win, rgb)
+            if kp is None:
+                win.missed += 1
+                if win.missed >= self.max_missed:
+                    self._end(win)
+                continue
+            win.missed = 0
+            win.last = kp
+            people.append(kp)
+            self._recentre(win, kp, w, h)
+        self._drop_duplicate_windows(people)
+        if not self._windows or self._frame % self.detection_interval == 0:
+            found = self._find(rgb)
+            for kp in found:
+                box = keypoint_box(kp, 0.3)
+                if box is None or box[2] < self.min_person_px:
+                    continue
+                if any(self._same(kp, q) for q in people):
+                    continue
+                if len(self._windows) >= self.max_persons:
+                    break
+                people.append(kp)
+                self._open(kp, w, h)
+        self._frame += 1
+        people = [p for p in people if (b := keypoint_box(p, 0.3)) is not None and
+                  b[2] >= self.min_person_px]
+        if not people:
+            return np.zeros((0, NUM_KEYPOINTS, 3))
+        return np.stack(people)
+
+    def reset(self) -> None:
+        for win in list(self._windows):
+            self._end(win)
+        self._frame = 0
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self.reset()
+        self._finder.close()
+        self._closed = True
+
+    def __enter__(self) -> 'BlazePoseMultiDetector':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def num_windows(self) -> int:
+        return len(self._windows)
+
+    # ------------------------------------------------------------------ helpers
+    @staticmethod
+    def _landmarks(pose) -> np.ndarray:
+        return np.array([[p.x, p.y,
+                          np.nan if p.visibility is None else p.visibility,
+                          np.nan if p.presence is None else p.presence] for p in pose],
+                        dtype=np.float64)
+
+    @staticmethod
+    def regions(width: int, height: int) -> List[tuple]:
+        """``(x0, y0, x1, y1)`` regions scanned in turn: the whole image, then, for an image
+        more than 1.2 times longer than high (or the reverse), squares of the short side
+        along the long side, evenly spaced, overlapping by at least a third."""
+        out = [(0, 0, width, height)]
+        long_, short = max(width, height), min(width, height)
+        if long_ <= 1.2 * short:
+            return out
+        n = int(np.ceil((long_ - short) / (short * 2.0 / 3.0))) + 1
+        for k in range(n):
+            a = int(round(k * (long_ - short) / (n - 1)))
+            out.append((a, 0, a + short, short) if width >= height else (0, a, short, a + short))
+        return out
+
+    def _find(self, rgb: np.ndarray) -> List[np.ndarray]:
+        """Detection on this turn's region: (23, 3) image keypoints of every person found."""
+        h, w = rgb.shape[:2]
+        regions = self.regions(w, h)
+        x0, y0, x1, y1 = regions[self.detections % len(regions)]
+        self.detections += 1
+        crop = np.ascontiguousarray(rgb[y0:y1, x0:x1])
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', UserWarning)
+            res = self._finder.detect(self._mp.Image(image_format=self._mp.ImageFormat.SRGB,
+                                                     data=crop))
+        out = []
+        for pose in res.pose_landmarks:
+            kp = blazepose_to_layout(self._landmarks(pose), x1 - x0, y1 - y0)
+            seen = kp[:, 2] > 0
+            kp[seen, 0] += x0
+            kp[seen, 1] += y0
+            out.append(kp)
+        out.sort(key=lambda k: -float(np.sum(k[:, 2])))
+        return out
+
+    def _new_landmarker(self):
+        v = self._vision
+        return v.PoseLandmarker.create_from_options(v.PoseLandmarkerOptions(
+            base_options=self._base, running_mode=v.RunningMode.VIDEO, num_poses=1,
+            min_pose_detection_confidence=self._det_conf,
+            min_pose_presence_confidence=self._det_conf,
+            min_tracking_confidence=self._trk_conf))
+
+    def _window_for(self, kp: np.ndarray, w: int, h: int) -> tuple:
+        box = keypoint_box(kp, 0.3)
+        side = int(max(self.min_window_px, self.window_scale * max(box[2], box[3])))
+        return int(round(box[0] - side / 2)), int(round(box[1] - side / 2)), side
+
+    def _open(self, kp: np.ndarray, w: int, h: int) -> None:
+        x0, y0, side = self._window_for(kp, w, h)
+        self._windows.append(_Window(x0, y0, side, self._new_landmarker(), last=kp))
+        self.windows_opened += 1
+
+    def _end(self, win: _Window) -> None:
+        win.landmarker.close()
+        self._windows.remove(win)
+
+    def _track(self, win: _Window, rgb: np.ndarray) -> Optional[np.ndarray]:
+        """Run the window's landmarker on its crop (borders outside the image are black);
+        return image keypoints or None."""
+        M = np.array([[1.0, 0.0, -win.x0], [0.0, 1.0, -win.y0]])
+        crop = self._cv2.warpAffine(rgb, M, (win.side, win.side),
+                                    flags=self._cv2.INTER_LINEAR,
+                                    borderMode=self._cv2.BORDER_CONSTANT)
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', UserWarning)
+            res = win.landmarker.detect_for_video(
+                self._mp.Image(image_format=self._mp.ImageFormat.SRGB, data=crop), self._ts_ms)
+        if not res.pose_landmarks:
+            return None
+        kp = blazepose_to_layout(self._landmarks(res.pose_landmarks[0]), win.side, win.side)
+        seen = kp[:, 2] > 0
+        kp[seen, 0] += win.x0
+        kp[seen, 1] += win.y0
+        return kp
+
+    def _recentre(self, win: _Window, kp: np.ndarray, w: int, h: int) -> None:
+        """Move the window onto the person (and restart its landmarker) when the person's box
+        leaves the window's central part or no longer fits its size."""
+        box = keypoint_box(kp, 0.3)
+        if box is None:
+            return
+        x0, y0, side = self._window_for(kp, w, h)
+        margin = 0.1 * win.side
+        inside = (box[0] - box[3] / 2 >= win.x0 + margin and
+                  box[0] + box[3] / 2 <= win.x0 + win.side - margin and
+                  box[1] - box[2] / 2 >= win.y0 + margin and
+                  box[1] + box[2] / 2 <= win.y0 + win.side - margin)
+        if inside and 0.75 <= side / win.side <= 1.33:
+            return
+        win.landmarker.close()
+        win.landmarker = self._new_landmarker()
+        win.x0, win.y0, win.side = x0, y0, side
+
+    def _same(self, a: np.ndarray, b: np.ndarray) -> bool:
+        ba, bb = keypoint_box(a, 0.3), keypoint_box(b, 0.3)
+        if ba is None or bb is None:
+            return False
+        return oks(a, b, max(ba[2], bb[2]), 0.3, 2.0) > 0.5 or box_iou(ba, bb) > 0.5
+
+    def _drop_duplicate_windows(self, people: List[np.ndarray]) -> None:
+        """End windows that follow the same person as a more confident one (in place on
+        ``people``, which holds one entry per window that found someone, in window order)."""
+        live = [wn for wn in self._windows if wn.missed == 0 and wn.last is not None]
+        if len(live) != len(people):
+            return
+        drop = set()
+        for i in range(len(people)):
+            for j in range(i + 1, len(people)):
+                if i in drop or j in drop or not self._same(people[i], people[j]):
+                    continue
+                worse = i if np.sum(people[i][:, 2]) < np.sum(people[j][:, 2]) else j
+                drop.add(worse)
+        for k in sorted(drop, reverse=True):
+            self._end(live[k])
+            del people[k]
