@@ -61,10 +61,16 @@ class InProcessGraph:
         it. Returns the node."""
         name = node.get_name()
         for pub in node.publishers:
-            topic = pub.topic_name
-            if topic in SYSTEM_TOPICS:
-                continue
-            pub.publish = self._publisher(topic, pub.qos_profile)
+            self._wire(pub)
+        # publishers the node creates later (one per person, as people come) are wired too
+        create = node.create_publisher
+
+        def create_publisher(*args, **kwargs):
+            pub = create(*args, **kwargs)
+            self._wire(pub)
+            return pub
+
+        node.create_publisher = create_publisher
         for sub in node.subscriptions:
             if sub.topic_name not in SYSTEM_TOPICS:
                 self._subscribers[sub.topic_name].append((name, sub.callback))
@@ -74,6 +80,17 @@ class InProcessGraph:
     def subscribers(self, topic: str) -> List[str]:
         """Names of the wired nodes subscribed to ``topic``."""
         return [name for name, _ in self._subscribers.get(topic, [])]
+
+    def _wire(self, pub: Any) -> None:
+        """Publish into the graph; the subscription count is that of the graph (the wired
+        subscribers, plus one for ``record``), so that a node that builds a message only
+        for a topic with subscribers (``get_subscription_count``) does so here too."""
+        topic = pub.topic_name
+        if topic in SYSTEM_TOPICS:
+            return
+        pub.publish = self._publisher(topic, pub.qos_profile)
+        pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + (
+            1 if self.record is not None else 0)
 
     def _publisher(self, topic: str, qos: Any) -> Callable[[Any], None]:
         def publish(msg: Any) -> None:

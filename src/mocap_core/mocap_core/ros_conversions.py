@@ -188,6 +188,37 @@ def cloud_to_ids(msg: PointCloud2) -> Optional[np.ndarray]:
     return np.where(ok, first, 0.0).astype(np.int64)
 
 
+def bodies_to_cloud(positions: np.ndarray, ids: Sequence[int], header: Header) -> PointCloud2:
+    """(B, J, 3) joint positions (m) of B persons and their (B,) ids -> PointCloud2 with one
+    row per person, float32 fields ``x, y, z, id`` (the combined ``/mocap/<stage>/bodies/
+    joints3d``). B may be 0 (a cloud of height 0)."""
+    pos = np.asarray(positions, dtype=np.float64)
+    if pos.ndim != 3 or pos.shape[-1] != 3:
+        raise MessageError(f'positions must have shape (B, J, 3), got {pos.shape}')
+    idv = np.asarray(ids, dtype=np.float64).reshape(-1)
+    if len(idv) != len(pos) or np.any(idv <= 0) or np.any(idv != np.round(idv)):
+        raise MessageError(f'ids must be {len(pos)} positive integers, got {ids!r}')
+    vals = np.concatenate([pos, np.broadcast_to(idv[:, None, None], pos.shape[:2] + (1,))],
+                          axis=-1)
+    return array_to_cloud(vals, POSITION_FIELDS + (KEYPOINT_ID_FIELD,), header)
+
+
+def cloud_to_bodies(msg: PointCloud2) -> Tuple[np.ndarray, np.ndarray]:
+    """The inverse of :func:`bodies_to_cloud`: (B, J, 3) float64 positions and (B,) int64
+    ids. Raises MessageError for a malformed cloud."""
+    arr = cloud_to_array(msg, POSITION_FIELDS + (KEYPOINT_ID_FIELD,))
+    return arr[..., :3].astype(np.float64), arr[:, 0, 3].astype(np.int64) if arr.shape[1] \
+        else np.zeros(len(arr), np.int64)
+
+
+def person_color(person_id: int, alpha: float = 1.0) -> Tuple[float, float, float, float]:
+    """A distinct RGBA colour per person id (golden-angle hues), for markers and plots."""
+    import colorsys
+    hue = (0.58 + 0.618034 * (int(person_id) - 1)) % 1.0
+    r, g, b = colorsys.hsv_to_rgb(hue, 0.75, 1.0)
+    return (r, g, b, float(alpha))
+
+
 #: Positions (m) beyond this magnitude are not a person's pose: the message is rejected.
 MAX_POSITION = 1e4
 

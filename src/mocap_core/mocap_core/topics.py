@@ -78,6 +78,41 @@ WORLD_JOINTS3D = stage_topic('world', 'joints3d')
 WORLD_JOINT_STATES = stage_topic('world', 'joint_states')
 WORLD_MARKERS = stage_topic('world', 'markers')
 
+# several people (docs/design.md, "Several people"): REP-155's /humans/bodies/<body>/ layout
+#: std_msgs/UInt32MultiArray: the ids of the persons tracked in the latest keypoint frame
+#: (published by the keypoint node with every frame; empty when nobody is tracked)
+BODIES_TRACKED = '/humans/bodies/tracked'
+
+
+def body_name(person_id: int) -> str:
+    """``body_<id>``: the name of a person's body, used both as its TF frame (REP-155's
+    ``body_<body_id>``) and as its namespace token (a ROS name token may not start with a
+    digit, so the bare id cannot be one)."""
+    pid = int(person_id)
+    if pid <= 0:
+        raise ValueError(f'person ids are positive integers, got {person_id}')
+    return f'body_{pid}'
+
+
+def body_topic(person_id: int, stage: str, name: str) -> str:
+    """``/humans/bodies/body_<id>/<stage>/<name>``: one person's output of one stage, e.g.
+    ``body_topic(2, 'world', 'motion')``; ``name`` as in :func:`stage_topic`."""
+    return f'/humans/bodies/{body_name(person_id)}/{stage_prefix(stage)[len("/mocap/"):]}{name}'
+
+
+def body_urdf_topic(person_id: int) -> str:
+    """``/humans/bodies/body_<id>/urdf``: std_msgs/String (transient local), the person's
+    skeleton as URDF (as :data:`SKELETON_URDF` for the main person)."""
+    return f'/humans/bodies/{body_name(person_id)}/urdf'
+
+
+def bodies_topic(stage: str, name: str) -> str:
+    """``/mocap/<stage>/bodies/<name>``: one combined message per frame with every person of a
+    stage: ``joints3d`` (PointCloud2, one row per person, fields x, y, z, id) or ``markers``
+    (MarkerArray, one namespace per person)."""
+    return stage_prefix(stage) + 'bodies/' + name
+
+
 #: Every output topic of the pipeline (what ``record:=true`` of the launch file records).
 ALL = [KEYPOINTS, CAMERA_INFO, CAMERA_MOTION, SKELETON_URDF, DIAGNOSTICS, LIFTER_CONTACTS,
        PHYSICS_GRF_LEFT, PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH,

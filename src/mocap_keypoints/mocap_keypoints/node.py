@@ -131,9 +131,11 @@ PARAMETERS = (
               'window)', min_value=1, max_value=1000, read_only=True),
     ParamSpec('min_person_height_px', 48.0, 'Persons whose seen keypoints span fewer pixels '
               'in height are ignored', min_value=0.0, read_only=True),
-    ParamSpec('id_after_frames', 3, 'A new person gets an id after being seen in this many '
-              'consecutive frames (a one-frame false detection never gets one)',
-              min_value=1, max_value=100, read_only=True),
+    ParamSpec('id_after_frames', 0, 'A new person gets an id (and is published) after being '
+              'seen in this many consecutive frames, so that a one-frame false detection never '
+              'gets one; 0 = 3 when max_persons > 1, else 1 (the single-person detector '
+              'tracks one person and has no such blips)', min_value=0, max_value=100,
+              read_only=True),
     ParamSpec('id_timeout_s', 1.0, 'A person unseen for longer than this loses the id; seen '
               'again sooner, near where they were expected, they keep it', min_value=0.0,
               read_only=True),
@@ -328,7 +330,8 @@ class KeypointsNode(Node):
         # is carried from one image to the next
         self.tracker = PersonTracker(TrackerParams(
             max_persons=p['max_persons'], min_height_px=p['min_person_height_px'],
-            birth_frames=p['id_after_frames'] if p['tracking'] else 1,
+            birth_frames=(p['id_after_frames'] or (3 if p['max_persons'] > 1 else 1))
+            if p['tracking'] else 1,
             max_lost_s=p['id_timeout_s'] if p['tracking'] else 0.0))
         self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
                                         undistort=p['undistort'],

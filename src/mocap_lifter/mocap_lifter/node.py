@@ -26,7 +26,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from typing import List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -39,13 +39,14 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.diagnostics import NodeDiagnostics
+from mocap_core.bodies import BodyPublishers
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS, input_qos
 from mocap_core.urdf import skeleton_to_urdf
 
 from .intrinsics import StreamIntrinsics
-from .online import LiftedFrame, LifterStream, OnlineLifter, StreamStep
+from .online import LiftedFrame, OnlineLifter, PeopleStep, PeopleStreams
 from .weights import MODELS, architecture, default_weights, load_weights
 
 PARAMETERS = (
@@ -83,7 +84,15 @@ PARAMETERS = (
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,
               read_only=True),
-    ParamSpec('person', 0, 'Row of the keypoint cloud (person) to track', min_value=0),
+    ParamSpec('person', 0, 'Row of the keypoint cloud whose person the single-person '
+              'topics (/mocap/lifter/...) carry (row 0: the person tracked longest)',
+              min_value=0),
+    ParamSpec('max_persons', 8, 'Most persons lifted at once (one network state each); '
+              'further ids are ignored and counted', min_value=1, max_value=64,
+              read_only=True),
+    ParamSpec('person_timeout_s', 1.0, 'A person absent from the keypoints for longer than '
+              'this (message stamps) is dropped: their last frames are emitted and their '
+              'per-person topics removed', min_value=0.0, read_only=True),
     ParamSpec('body_mass', 70.0, 'Body mass for the URDF inertias (kg)', min_value=1.0),
     ParamSpec('horizontal_fov_deg', 60.0, 'Field of view of the approximate intrinsics used '
               'without a calibrated camera_info (image size from an uncalibrated camera_info, '
@@ -121,13 +130,21 @@ class LifterNode(Node):
         model = load_weights(path, p['device'], causal=(mode == 'causal'))
         if architecture(model) != arch:
             raise ValueError(f'{path} holds {architecture(model)} weights but model:={arch}')
-        lifter = OnlineLifter(model, mode, None if p['latency'] < 0 else p['latency'],
-                              p['skeleton_frames'], p['max_gap_s'], p['device'],
-                              chunk=p['chunk'], flip=p['test_time_flip'],
-                              smooth=p['smooth_sigma'])
-        self.stream = LifterStream(lifter, StreamIntrinsics(p['horizontal_fov_deg']),
-                                   p['person'], p['max_gap_s'])
+        def make_lifter() -> OnlineLifter:
+            return OnlineLifter(model, mode, None if p['latency'] < 0 else p['latency'],
+                                p['skeleton_frames'], p['max_gap_s'], p['device'],
+                                chunk=p['chunk'], flip=p['test_time_flip'],
+                                smooth=p['smooth_sigma'])
+
+        lifter = make_lifter()
+        self.people = PeopleStreams(make_lifter, StreamIntrinsics(p['horizontal_fov_deg']),
+                                    p['person'], p['max_gap_s'], p['person_timeout_s'],
+                                    p['max_persons'])
+        self.bodies = BodyPublishers(self, 'lifter', with_urdf=True)
         self.published_lengths: Optional[np.ndarray] = None
+        self.body_lengths: Dict[int, np.ndarray] = {}
+        self.main_id: Optional[int] = None
+        self.main_last_ns = -1
         self.intrinsics_said = ''
         self.pub = {
             'motion': self.create_publisher(MultiDOFJointTrajectory, topics.LIFTER_MOTION,
@@ -138,6 +155,10 @@ class LifterNode(Node):
             'contacts': self.create_publisher(JointState, topics.LIFTER_CONTACTS, STREAM_QOS),
             'markers': self.create_publisher(MarkerArray, topics.LIFTER_MARKERS, STREAM_QOS),
             'urdf': self.create_publisher(String, topics.SKELETON_URDF, LATCHED_QOS),
+            'bodies_joints3d': self.create_publisher(
+                PointCloud2, topics.bodies_topic('lifter', 'joints3d'), STREAM_QOS),
+            'bodies_markers': self.create_publisher(
+                MarkerArray, topics.bodies_topic('lifter', 'markers'), STREAM_QOS),
         }
         self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
         self.diag.set_value('model', f'{arch} ({mode})')
@@ -160,11 +181,11 @@ class LifterNode(Node):
 
     def on_info(self, msg: CameraInfo) -> None:
         try:
-            self.stream.intrinsics.set_camera_info(rc.camera_info_to_intrinsics(msg))
+            self.people.intrinsics.set_camera_info(rc.camera_info_to_intrinsics(msg))
         except rc.MessageError as exc:
             if msg.width > 0 and msg.height > 0 and not any(msg.k):
                 # an uncalibrated camera (K all zero): its image size is still good
-                self.stream.intrinsics.set_image_size(int(msg.width), int(msg.height))
+                self.people.intrinsics.set_image_size(int(msg.width), int(msg.height))
             else:
                 self.diag.errors += 1
                 self.get_logger().warn(f'ignoring camera_info: {exc}',
@@ -175,23 +196,29 @@ class LifterNode(Node):
         self.diag.input.tick()
         try:
             people = rc.cloud_to_keypoints(msg)
+            ids = rc.cloud_to_ids(msg)
         except rc.MessageError as exc:
             self.diag.errors += 1
             self.get_logger().warn(f'dropping keypoints: {exc}', throttle_duration_sec=2.0)
             return
+        self.people.person = int(self.p['person'])
         with self.diag.processing():
-            step = self.stream.push(rc.stamp_to_ns(msg.header.stamp), people)
-        if step.jumped_back_s > 0:
-            self.get_logger().warn(f'keypoint stamps jumped back by {step.jumped_back_s:.1f} '
-                                   's (a bag restarted?): starting a new stream')
-        if step.nobody:
-            self.get_logger().info('nobody seen in this frame', throttle_duration_sec=2.0)
-        if step.dropped:
-            self.diag.dropped += 1
-            if not step.nobody:
-                self.get_logger().warn(f'frame dropped: {step.dropped}',
+            step = self.people.push(rc.stamp_to_ns(msg.header.stamp), people, ids)
+        if step.main is not None:
+            self.main_id = step.main
+        if not step.steps:
+            self.get_logger().info('nobody seen yet', throttle_duration_sec=2.0)
+        used = False
+        for pid, st in step.steps.items():
+            if st.jumped_back_s > 0:
+                self.get_logger().warn(f'keypoint stamps jumped back by {st.jumped_back_s:.1f}'
+                                       ' s (a bag restarted?): starting a new stream')
+            if st.dropped and not st.nobody:
+                self.diag.dropped += 1
+                self.get_logger().warn(f'frame of person {pid} dropped: {st.dropped}',
                                        throttle_duration_sec=2.0)
-        else:
+            used = used or not st.dropped
+        if used:
             self.frame_id = msg.header.frame_id
             self.last_input = time.monotonic()
         self._emit(step)
@@ -200,27 +227,92 @@ class LifterNode(Node):
         """When the input pauses (end of a bag, a stalled camera), emit the frames still
         waiting for look-ahead or for the intrinsics, with the frames that exist."""
         idle = time.monotonic() - self.last_input
-        if self.stream.pending() and idle > self.p['flush_after_s']:
-            self._emit(self.stream.flush())
+        if self.people.pending() and idle > self.p['flush_after_s']:
+            self._emit(self.people.flush())
 
     def flush(self) -> None:
         """End of the input (offline processing): emit every frame still waiting."""
-        self._emit(self.stream.flush())
+        self._emit(self.people.flush())
 
-    def _emit(self, step: StreamStep) -> None:
-        """Log what a stream step did and publish its frames."""
-        for reason in step.resets:
-            self.get_logger().info(f'buffer and skeleton reset ({reason})')
-        for error in step.errors:
-            self.diag.errors += 1
-            self.get_logger().error(f'frame dropped: {error}', throttle_duration_sec=2.0)
+    def _emit(self, step: PeopleStep) -> None:
+        """Log what a step did and publish its frames: each person's on their own topics,
+        the main person's on the single-person topics, all of a stamp in one combined
+        message."""
+        by_stamp: Dict[int, List[Tuple[int, LiftedFrame]]] = {}
+        for pid, st in step.steps.items():
+            for reason in st.resets:
+                self.get_logger().info(f'person {pid}: buffer and skeleton reset ({reason})')
+            for error in st.errors:
+                self.diag.errors += 1
+                self.get_logger().error(f'frame dropped: {error}', throttle_duration_sec=2.0)
+            for frame in st.frames:
+                if self._finite(frame):
+                    by_stamp.setdefault(frame.stamp_ns, []).append((pid, frame))
         self._report_intrinsics()
-        for frame in step.frames:
-            self.publish(frame)
+        for stamp in sorted(by_stamp):
+            frames = by_stamp[stamp]
+            for pid, frame in frames:
+                self.publish_body(pid, frame)
+                if pid == self.main_id and stamp > self.main_last_ns:
+                    self.main_last_ns = stamp
+                    self.publish(frame)
+            self.publish_combined(stamp, frames)
+        for pid in step.ended:
+            self.bodies.remove(pid)
+            self.body_lengths.pop(pid, None)
+            self.get_logger().info(f'person {pid} gone: their topics are removed')
+        self.diag.set_value('persons', len(self.people.streams))
+        self.diag.set_value('person_ids', ' '.join(map(str, sorted(self.people.streams)))
+                            or 'none')
+        self.diag.set_value('persons_ignored', self.people.ignored)
+
+    def _finite(self, frame: LiftedFrame) -> bool:
+        pose = frame.pose
+        if np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(pose.root_position)) \
+                and np.all(np.isfinite(frame.contacts)):
+            return True
+        self.diag.errors += 1
+        self.get_logger().error('network output not finite; frame dropped',
+                                throttle_duration_sec=2.0)
+        return False
+
+    def publish_body(self, pid: int, frame: LiftedFrame) -> None:
+        """One person's frame on their own topics (built only for topics with
+        subscribers; the URDF whenever their skeleton changes)."""
+        header = rc.make_header(frame.stamp_ns, self.frame_id)
+        pose = frame.pose
+        lengths = pose.skeleton.group_lengths()
+        old = self.body_lengths.get(pid)
+        if old is None or np.max(np.abs(lengths - old)) > self.p['skeleton_tolerance']:
+            self.body_lengths[pid] = lengths
+            self.bodies.urdf(pid, lambda: rc.urdf_to_msg(
+                skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
+        self.bodies.publish(pid, 'motion', lambda: rc.pose_to_motion(pose, header))
+        self.bodies.publish(pid, 'joints3d',
+                            lambda: rc.positions_to_cloud(pose.joint_positions(), header))
+        self.bodies.publish(pid, 'joint_states', lambda: rc.pose_to_joint_state(pose, header))
+        self.bodies.publish(pid, 'contacts', lambda: rc.contacts_to_msg(frame.contacts, header))
+
+    def publish_combined(self, stamp: int, frames: List[Tuple[int, LiftedFrame]]) -> None:
+        """All persons of one stamp: a joints cloud with an id field and the markers, one
+        namespace and colour per person."""
+        header = rc.make_header(stamp, self.frame_id)
+        frames = sorted(frames)
+        if self.pub['bodies_joints3d'].get_subscription_count() > 0:
+            self.pub['bodies_joints3d'].publish(rc.bodies_to_cloud(
+                np.stack([f.pose.joint_positions() for _, f in frames]),
+                [pid for pid, _ in frames], header))
+        if self.pub['bodies_markers'].get_subscription_count() > 0:
+            arr = MarkerArray()
+            for pid, f in frames:
+                arr.markers.extend(rc.pose_to_markers(
+                    f.pose, header, ns=f'lifter/{topics.body_name(pid)}',
+                    color=rc.person_color(pid), contacts=f.contacts).markers)
+            self.pub['bodies_markers'].publish(arr)
 
     def _report_intrinsics(self) -> None:
         """Diagnostics (and one log line per change) of the intrinsics in use."""
-        intr = self.stream.intrinsics
+        intr = self.people.intrinsics
         text = intr.describe()
         self.diag.set_value('intrinsics', text)
         self.diag.warn(None if intr.source == 'camera_info' else
@@ -233,12 +325,8 @@ class LifterNode(Node):
                 self.get_logger().warn(f'no camera_info: using {text}')
 
     def publish(self, frame: LiftedFrame) -> None:
+        """The main person's frame on the single-person topics."""
         pose = frame.pose
-        if not (np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(
-                pose.root_position)) and np.all(np.isfinite(frame.contacts))):
-            self.diag.errors += 1
-            self.get_logger().error('network output not finite; frame dropped')
-            return
         header = rc.make_header(frame.stamp_ns, self.frame_id)
         lengths = pose.skeleton.group_lengths()
         if (self.published_lengths is None or np.max(np.abs(

@@ -365,3 +365,123 @@ class LifterStream:
             if event:
                 step.resets.append(event)
             step.frames.extend(frames)
+
+
+@dataclass
+class PeopleStep:
+    """What one keypoint message (or a flush) did for every person.
+
+    Attributes:
+        steps: ``{id: StreamStep}`` of every person's stream that took part.
+        ended: ids whose stream ended in this step (unseen for longer than the timeout, or a
+            new stream began); their last frames are in ``steps``.
+        main: the id of the main person of the message (the row ``person`` of the cloud,
+            the one tracked longest), or None when that row holds nobody.
+    """
+
+    steps: Dict[int, StreamStep] = field(default_factory=dict)
+    ended: List[int] = field(default_factory=list)
+    main: Optional[int] = None
+
+
+class PeopleStreams:
+    """One :class:`LifterStream` per person id (several people in one keypoint stream).
+
+    Each message's rows are routed by their id (``ids`` from the cloud's ``id`` field; an
+    older cloud without ids gives ``None``: its rows are persons 1, 2, ... in a stable
+    order). A person's stream is created when their id is first seen; while the id is away
+    its stream gets the message without them (all-unseen keypoints, so that its windows
+    keep their timing); once the id has been away for longer than ``timeout_s`` (message
+    stamps) its stream is flushed and ended. All streams share one
+    :class:`~mocap_lifter.intrinsics.StreamIntrinsics` (one camera).
+
+    Args:
+        make_lifter: returns a new :class:`OnlineLifter` (they share one network).
+        intrinsics: the camera's intrinsics.
+        person: row of the cloud that is the main person.
+        max_gap_s: as :class:`LifterStream`.
+        timeout_s: a person unseen this long (s) ends their stream.
+        max_persons: the most streams at once; further ids are ignored (counted).
+    """
+
+    def __init__(self, make_lifter, intrinsics: StreamIntrinsics, person: int = 0,
+                 max_gap_s: float = 1.0, timeout_s: float = 1.0, max_persons: int = 8) -> None:
+        self.make_lifter = make_lifter
+        self.intrinsics = intrinsics
+        self.person = int(person)
+        self.max_gap_s = float(max_gap_s)
+        self.timeout_ns = int(float(timeout_s) * 1e9)
+        self.max_persons = int(max_persons)
+        self.streams: Dict[int, LifterStream] = {}
+        self.last_seen: Dict[int, int] = {}
+        self.ignored = 0           # rows of ids beyond max_persons
+        self._last_ns: Optional[int] = None
+
+    @staticmethod
+    def row_ids(people: np.ndarray, ids: Optional[np.ndarray]) -> np.ndarray:
+        """(P,) the id of each row: ``ids``, or 1..P for a cloud without ids (rows with
+        nobody in them get 0)."""
+        n = len(people)
+        if ids is None:
+            seen = np.any(np.asarray(people)[..., 2] > 0, axis=-1) if n else np.zeros(0, bool)
+            return np.where(seen, np.arange(1, n + 1), 0)
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if len(ids) != n:
+            raise ValueError(f'{len(ids)} ids for {n} rows')
+        return ids
+
+    def pending(self) -> int:
+        return sum(s.pending() for s in self.streams.values())
+
+    def push(self, stamp_ns: int, people: np.ndarray, ids: Optional[np.ndarray] = None
+             ) -> PeopleStep:
+        """One keypoint message: (P, 23, 3) keypoints and their (P,) ids (or None)."""
+        people = np.asarray(people, dtype=np.float64).reshape(-1, NUM_KEYPOINTS, 3)
+        rid = self.row_ids(people, ids)
+        out = PeopleStep()
+        if self.person < len(rid) and rid[self.person] > 0:
+            out.main = int(rid[self.person])
+        if self._last_ns is not None and stamp_ns < self._last_ns - int(self.max_gap_s * 1e9):
+            # a new stream (a bag looped): every person's stream ends; ids start again
+            for pid in list(self.streams):
+                self._end(pid, out)
+        self._last_ns = int(stamp_ns) if self._last_ns is None else max(self._last_ns,
+                                                                        int(stamp_ns))
+        rows = {}
+        for r, pid in enumerate(rid.tolist()):
+            if pid > 0 and pid not in rows and np.any(people[r, :, 2] > 0):
+                rows[pid] = r
+        for pid, r in rows.items():
+            if pid not in self.streams:
+                if len(self.streams) >= self.max_persons:
+                    self.ignored += 1
+                    continue
+                self.streams[pid] = LifterStream(self.make_lifter(), self.intrinsics, 0,
+                                                 self.max_gap_s)
+            self.last_seen[pid] = int(stamp_ns)
+            out.steps[pid] = self.streams[pid].push(stamp_ns, people[r:r + 1])
+        empty = np.zeros((0, NUM_KEYPOINTS, 3))
+        for pid in list(self.streams):
+            if pid in out.steps:
+                continue
+            if stamp_ns - self.last_seen[pid] > self.timeout_ns:
+                self._end(pid, out)
+            else:
+                out.steps[pid] = self.streams[pid].push(stamp_ns, empty)
+        return out
+
+    def flush(self) -> PeopleStep:
+        """End of the input or a pause: every stream's waiting frames (streams stay)."""
+        out = PeopleStep()
+        for pid, s in self.streams.items():
+            out.steps[pid] = s.flush()
+        return out
+
+    def _end(self, pid: int, out: PeopleStep) -> None:
+        step = self.streams.pop(pid).flush()
+        self.last_seen.pop(pid, None)
+        if pid in out.steps:
+            out.steps[pid].frames.extend(step.frames)
+        else:
+            out.steps[pid] = step
+        out.ended.append(pid)

@@ -80,7 +80,9 @@ def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds,
     """Regression: 20 frames with a person, then 40 with every confidence 0, and no
     camera_info. The node used to reset at every frame (intrinsics from each frame's extent)
     and to fail on the first empty frame ('zero-size array to reduction operation maximum
-    which has no identity')."""
+    which has no identity'). Frames keep flowing while the person is away, until they have
+    been away for person_timeout_s (1 s = 30 frames): then they are gone, their last frames
+    are emitted and nothing more is published for them."""
     from mocap_core import topics
 
     graph, node, recorded = lifter
@@ -91,8 +93,10 @@ def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds,
     graph.flush()
     stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
               for topic, m in recorded if topic == topics.LIFTER_MOTION]
-    assert stamps == [T0 + k * DT for k in range(60)]
+    # last seen at frame 19; frame 50 is the first more than 1 s later
+    assert stamps == [T0 + k * DT for k in range(50)]
     values = _values(node)
+    assert values['persons'] == '0' and values['person_ids'] == 'none'
     assert values['errors'] == '0' and values['frames_dropped'] == '0'
     assert 'last_error' not in values
     assert values['intrinsics'].startswith('approximate ') and \
@@ -111,7 +115,7 @@ def test_uncalibrated_camera_info_gives_the_image_size(lifter, clouds):
     uncalibrated.k = [0.0] * 9
     graph.publish(topics.CAMERA_INFO, uncalibrated)
     graph.publish(topics.KEYPOINTS, _stamped(kp[0], 0))
-    assert node.stream.lifter.frames_seen == 1      # in the network's buffer, not waiting
+    assert node.people.streams[1].lifter.frames_seen == 1   # in the network's buffer
     graph.flush()
     assert sum(1 for topic, _ in recorded if topic == topics.LIFTER_MOTION) == 1
     values = _values(node)

@@ -192,6 +192,8 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
         p = {k: dict(v) for k, v in params.items()}
         if start == 'video':
             src = clip_dir / 'video.mp4'
+            # one person per render: the single-person detector, as the recorded detections
+            p.setdefault('keypoints', {}).setdefault('max_persons', 1)
             if intrinsics == 'true':
                 K = gt['K']
                 w, h = (int(x) for x in gt['image_size'])
