@@ -3,7 +3,6 @@ and the node's per-person and combined topics."""
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 import numpy as np
