@@ -25,7 +25,7 @@ Topic contracts implemented here:
 
 from __future__ import annotations
 
-from typing import Dict, Iterable, Mapping, Optional, Sequence, Tuple
+from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
@@ -384,6 +384,98 @@ def msg_to_contacts(msg: JointState) -> np.ndarray:
     if not np.all(np.isfinite(p)):
         raise MessageError('contacts message has non-finite probabilities')
     return np.clip(p, 0.0, 1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Several people in one message (docs/design.md, "Several people")
+# ---------------------------------------------------------------------------------------------
+def _body_prefix(person_id: int) -> str:
+    from .topics import body_name
+    return body_name(person_id) + '/'
+
+
+def _split_bodies(names: Sequence[str]) -> Dict[int, List[int]]:
+    """Indices of the names of each ``body_<id>/`` prefix, in order of first appearance."""
+    out: Dict[int, List[int]] = {}
+    for i, n in enumerate(names):
+        head, sep, _ = n.partition('/')
+        if not sep or not head.startswith('body_') or not head[5:].isdigit() or \
+                int(head[5:]) <= 0:
+            raise MessageError(f'joint name {n!r} has no body_<id>/ prefix')
+        out.setdefault(int(head[5:]), []).append(i)
+    return out
+
+
+def bodies_to_motion(bodies: Sequence[Tuple[int, Pose]], header: Header
+                     ) -> MultiDOFJointTrajectory:
+    """Several persons' poses of one frame -> one MultiDOFJointTrajectory: each person's
+    joints (as :func:`pose_to_motion`) with names prefixed ``body_<id>/``, in the given order
+    (the main person first). Lossless; :func:`motion_to_bodies` is the inverse."""
+    msg = MultiDOFJointTrajectory()
+    msg.header = header
+    point = MultiDOFJointTrajectoryPoint()
+    point.time_from_start = Duration(sec=0, nanosec=0)
+    for pid, pose in bodies:
+        one = pose_to_motion(pose, header)
+        prefix = _body_prefix(pid)
+        msg.joint_names.extend(prefix + n for n in one.joint_names)
+        point.transforms.extend(one.points[0].transforms)
+    msg.points = [point]
+    return msg
+
+
+def motion_to_bodies(msg: MultiDOFJointTrajectory) -> List[Tuple[int, Pose]]:
+    """The inverse of :func:`bodies_to_motion`: ``[(id, Pose)]`` in the message's order.
+    Raises MessageError for a name without a ``body_<id>/`` prefix or a malformed body."""
+    if len(msg.points) == 0:
+        raise MessageError('MultiDOFJointTrajectory has no point')
+    transforms = msg.points[0].transforms
+    if len(transforms) != len(msg.joint_names):
+        raise MessageError(f'MultiDOFJointTrajectory has {len(msg.joint_names)} joint names '
+                           f'but {len(transforms)} transforms')
+    out = []
+    for pid, idx in _split_bodies(msg.joint_names).items():
+        one = MultiDOFJointTrajectory()
+        one.header = msg.header
+        one.joint_names = [msg.joint_names[i].partition('/')[2] for i in idx]
+        pt = MultiDOFJointTrajectoryPoint()
+        pt.transforms = [transforms[i] for i in idx]
+        one.points = [pt]
+        out.append((pid, motion_to_pose(one)))
+    return out
+
+
+def bodies_contacts_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header: Header
+                           ) -> JointState:
+    """Several persons' (4,) contact probabilities -> one JointState, names prefixed
+    ``body_<id>/`` (as :func:`contacts_to_msg` per person)."""
+    msg = JointState()
+    msg.header = header
+    for pid, probs in bodies:
+        one = contacts_to_msg(probs, header)
+        msg.name.extend(_body_prefix(pid) + n for n in one.name)
+        msg.position.extend(one.position)
+    return msg
+
+
+def msg_to_bodies_contacts(msg: JointState) -> List[Tuple[int, np.ndarray]]:
+    """The inverse of :func:`bodies_contacts_to_msg`: ``[(id, (4,) probabilities)]``."""
+    if len(msg.position) != len(msg.name):
+        raise MessageError(f'contacts message has {len(msg.name)} names but '
+                           f'{len(msg.position)} values')
+    out = []
+    for pid, idx in _split_bodies(msg.name).items():
+        one = JointState()
+        one.name = [msg.name[i].partition('/')[2] for i in idx]
+        one.position = [msg.position[i] for i in idx]
+        out.append((pid, msg_to_contacts(one)))
+    return out
+
+
+def is_bodies_message(names: Sequence[str]) -> bool:
+    """Whether joint or contact names are prefixed ``body_<id>/`` (a several-people
+    message) rather than plain (one person)."""
+    return bool(names) and str(names[0]).startswith('body_') and '/' in str(names[0])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -298,3 +298,42 @@ def test_compressed_image_bad_messages_raise(header, fmt, data, reason):
     msg.data = data
     with pytest.raises(rc.MessageError, match=reason):
         rc.compressed_image_to_bgr(msg)
+
+
+def test_bodies_messages_roundtrip(header, pose):
+    """Several people in one motion / contacts / joints message, and back."""
+    rng = np.random.default_rng(8)
+    other = Pose(Skeleton.from_group_lengths(rng.uniform(0.08, 0.45, 10)),
+                 quat_normalize(rng.normal(size=(NUM_JOINTS, 4))), rng.normal(size=3))
+    msg = _wire(rc.bodies_to_motion([(12, pose), (3, other)], header))
+    assert msg.joint_names[0] == 'body_12/pelvis' and len(msg.joint_names) == 2 * NUM_JOINTS
+    assert rc.is_bodies_message(msg.joint_names)
+    assert not rc.is_bodies_message(rc.pose_to_motion(pose, header).joint_names)
+    back = rc.motion_to_bodies(msg)
+    assert [pid for pid, _ in back] == [12, 3]             # order kept: the main person first
+    for (_, b), ref in zip(back, (pose, other)):
+        np.testing.assert_allclose(b.rotations, ref.rotations, atol=1e-12)
+        np.testing.assert_allclose(b.root_position, ref.root_position, atol=1e-12)
+        np.testing.assert_allclose(b.skeleton.offsets, ref.skeleton.offsets, atol=1e-12)
+    c = _wire(rc.bodies_contacts_to_msg([(3, [0.1, 0.2, 0.3, 0.4]), (12, [1, 0, 1, 0])],
+                                        header))
+    got = rc.msg_to_bodies_contacts(c)
+    assert [pid for pid, _ in got] == [3, 12]
+    np.testing.assert_allclose(got[0][1], [0.1, 0.2, 0.3, 0.4])
+    cloud = _wire(rc.bodies_to_cloud(np.stack([pose.joint_positions(),
+                                               other.joint_positions()]), [12, 3], header))
+    pos, ids = rc.cloud_to_bodies(cloud)
+    assert ids.tolist() == [12, 3]
+    np.testing.assert_allclose(pos[1], other.joint_positions(), atol=1e-5)
+    # malformed: a name without a body prefix, a body missing a joint
+    bad = rc.bodies_to_motion([(1, pose)], header)
+    bad.joint_names[4] = 'left_toe'
+    with pytest.raises(rc.MessageError, match='prefix'):
+        rc.motion_to_bodies(bad)
+    short = rc.bodies_to_motion([(1, pose)], header)
+    short.joint_names.pop()
+    short.points[0].transforms.pop()
+    with pytest.raises(rc.MessageError):
+        rc.motion_to_bodies(short)
+    with pytest.raises(rc.MessageError):
+        rc.bodies_to_cloud(np.zeros((2, 18, 3)), [1, 0], header)

@@ -6,6 +6,7 @@ Publishes for every processed frame, stamped with the image's stamp (docs/design
     ``u, v, confidence, id`` (the person's id, stable from frame to frame,
     ``mocap_core.tracking``); when nobody is found the cloud is still published, one row
     with all confidences 0 and id 0;
+  * ``/humans/bodies/tracked`` (std_msgs/UInt32MultiArray): the ids in the cloud;
   * ``/mocap/camera_info`` (sensor_msgs/CameraInfo): the intrinsics of the keypoints;
   * ``/mocap/camera/motion`` (nav_msgs/Odometry) with ``camera_motion`` (image sources): the
     camera's rotation since the first frame, its angular velocity and whether it is static,
@@ -58,6 +59,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+from std_msgs.msg import UInt32MultiArray
 
 from mocap_core import topics
 from mocap_core.camera import CameraCalibration, read_camera_info_yaml
@@ -340,6 +342,8 @@ class KeypointsNode(Node):
                                         restart_after_s=p['restart_after_s'],
                                         camera_motion=motion, tracker=self.tracker)
         self.pub_kp = self.create_publisher(PointCloud2, topics.KEYPOINTS, SENSOR_QOS)
+        self.pub_tracked = self.create_publisher(UInt32MultiArray, topics.BODIES_TRACKED,
+                                                 STREAM_QOS)
         self.pub_info = self.create_publisher(CameraInfo, topics.CAMERA_INFO, STREAM_QOS)
         self.pub_motion = (self.create_publisher(Odometry, topics.CAMERA_MOTION, STREAM_QOS)
                            if motion is not None else None)
@@ -649,6 +653,8 @@ class KeypointsNode(Node):
             self.diag.set_value('intrinsics', fi.detail)
         self.pub_info.publish(intrinsics_to_camera_info(fi.intrinsics, header))
         self.pub_kp.publish(keypoints_to_cloud(res.keypoints, header, ids=res.ids))
+        if res.ids is not None:
+            self.pub_tracked.publish(UInt32MultiArray(data=[int(i) for i in res.ids if i > 0]))
         cm = res.camera_motion
         if self.pub_motion is not None and cm is not None:
             self.pub_motion.publish(camera_motion_to_odometry(

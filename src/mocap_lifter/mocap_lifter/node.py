@@ -159,6 +159,10 @@ class LifterNode(Node):
                 PointCloud2, topics.bodies_topic('lifter', 'joints3d'), STREAM_QOS),
             'bodies_markers': self.create_publisher(
                 MarkerArray, topics.bodies_topic('lifter', 'markers'), STREAM_QOS),
+            'bodies_motion': self.create_publisher(
+                MultiDOFJointTrajectory, topics.bodies_topic('lifter', 'motion'), STREAM_QOS),
+            'bodies_contacts': self.create_publisher(
+                JointState, topics.bodies_topic('lifter', 'contacts'), STREAM_QOS),
         }
         self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
         self.diag.set_value('model', f'{arch} ({mode})')
@@ -251,12 +255,16 @@ class LifterNode(Node):
         self._report_intrinsics()
         for stamp in sorted(by_stamp):
             frames = by_stamp[stamp]
+            # the main person first (the combined messages' order)
+            frames.sort(key=lambda pf: (pf[0] != self.main_id, pf[0]))
+            # combined first: the next stage, which follows everybody from the combined
+            # motion, hears it before the single-person topics
+            self.publish_combined(stamp, frames)
             for pid, frame in frames:
                 self.publish_body(pid, frame)
                 if pid == self.main_id and stamp > self.main_last_ns:
                     self.main_last_ns = stamp
                     self.publish(frame)
-            self.publish_combined(stamp, frames)
         for pid in step.ended:
             self.bodies.remove(pid)
             self.body_lengths.pop(pid, None)
@@ -294,10 +302,16 @@ class LifterNode(Node):
         self.bodies.publish(pid, 'contacts', lambda: rc.contacts_to_msg(frame.contacts, header))
 
     def publish_combined(self, stamp: int, frames: List[Tuple[int, LiftedFrame]]) -> None:
-        """All persons of one stamp: a joints cloud with an id field and the markers, one
+        """All persons of one stamp (main person first): the lossless motion and contacts
+        (the physics stage's input), a joints cloud with an id field and the markers, one
         namespace and colour per person."""
         header = rc.make_header(stamp, self.frame_id)
-        frames = sorted(frames)
+        if self.pub['bodies_motion'].get_subscription_count() > 0:
+            self.pub['bodies_motion'].publish(rc.bodies_to_motion(
+                [(pid, f.pose) for pid, f in frames], header))
+        if self.pub['bodies_contacts'].get_subscription_count() > 0:
+            self.pub['bodies_contacts'].publish(rc.bodies_contacts_to_msg(
+                [(pid, f.contacts) for pid, f in frames], header))
         if self.pub['bodies_joints3d'].get_subscription_count() > 0:
             self.pub['bodies_joints3d'].publish(rc.bodies_to_cloud(
                 np.stack([f.pose.joint_positions() for _, f in frames]),

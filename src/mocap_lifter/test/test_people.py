@@ -124,7 +124,8 @@ def test_node_publishes_each_person_and_all_together(two_people):
     from mocap_core import topics
     from mocap_core.inprocess import InProcessGraph
     from mocap_core.ros_conversions import (cloud_to_bodies, intrinsics_to_camera_info,
-                                            keypoints_to_cloud, make_header, motion_to_pose)
+                                            keypoints_to_cloud, make_header, motion_to_bodies,
+                                            motion_to_pose, msg_to_bodies_contacts)
     from mocap_lifter.node import LifterNode
 
     a, b, intr = two_people
@@ -152,7 +153,17 @@ def test_node_publishes_each_person_and_all_together(two_people):
         combined = by_topic[topics.bodies_topic('lifter', 'joints3d')]
         assert len(combined) == 40
         pos, ids = cloud_to_bodies(combined[-1])
-        assert ids.tolist() == [1, 2] and pos.shape == (2, 18, 3)
+        assert sorted(ids.tolist()) == [1, 2] and pos.shape == (2, 18, 3)
+        # the lossless combined motion and contacts (the physics stage's input)
+        motions = by_topic[topics.bodies_topic('lifter', 'motion')]
+        assert len(motions) == 40
+        bodies = motion_to_bodies(motions[-1])
+        assert sorted(pid for pid, _ in bodies) == [1, 2]
+        np.testing.assert_allclose(
+            dict(bodies)[2].root_position,
+            motion_to_pose(by_topic[topics.body_topic(2, 'lifter', 'motion')][-1]).root_position)
+        contacts = msg_to_bodies_contacts(by_topic[topics.bodies_topic('lifter', 'contacts')][-1])
+        assert sorted(pid for pid, _ in contacts) == [1, 2]
         markers = by_topic[topics.bodies_topic('lifter', 'markers')][-1]
         assert {m.ns for m in markers.markers} == {'lifter/body_1', 'lifter/body_2'}
         # the single-person topics: one message per stamp, stamps increasing
