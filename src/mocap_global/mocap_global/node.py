@@ -52,6 +52,7 @@ from __future__ import annotations
 import collections
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
@@ -66,6 +67,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
+from mocap_core.bodies import BodyPublishers
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
@@ -76,7 +78,25 @@ from .model import TTA_MODES, with_tta
 from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame
 from .weights import default_weights, load_weights
 
+@dataclass
+class _Person:
+    """The world stage's state of one person (or of the single-person input)."""
+
+    online: Optional[OnlineGMR] = None        # built at the person's first frame (frame_id)
+    last_stamp: int = -1
+    path: PathMsg = field(default_factory=PathMsg)
+    said_waiting: bool = False
+    seen_ns: int = 0                          # stamp of their last input frame
+
+
 PARAMETERS = (
+    ParamSpec('bodies_motion_topic', topics.bodies_topic('physics', 'motion'), 'Input '
+              'motion of every person (names prefixed body_<id>/); once it delivers, each '
+              'person gets their own world pose and motion_topic is ignored; empty = one '
+              'person only', read_only=True),
+    ParamSpec('person_timeout_s', 1.0, 'A person absent from the input for longer than this '
+              '(stamps) is dropped: their last frames are emitted, their state and topics '
+              'removed', min_value=0.0, read_only=True),
     ParamSpec('motion_topic', topics.PHYSICS_MOTION, 'Input motion '
               '(MultiDOFJointTrajectory): the physics or the lifter stage', read_only=True),
     ParamSpec('weights', '', 'GMR weights file; empty = the shipped weights '
@@ -216,16 +236,18 @@ class GMRNode(Node):
         if p['lookahead'] + p['chunk'] > window - 1:
             raise ValueError(f"lookahead + chunk ({p['lookahead']} + {p['chunk']}) must be "
                              f'at most window - 1 ({window - 1})')
-        self.online: Optional[OnlineGMR] = None   # built at the first frame (frame_id)
-        self.last_stamp = -1
+        self.single = _Person()                   # the single-person input
+        self.persons: Dict[int, _Person] = {}     # several people (the combined input)
+        self.bodies_mode = False
+        self.main_id: Optional[int] = None
+        self.main_last_ns = -1
+        self.bodies = BodyPublishers(self, 'world')
         self.last_input = time.monotonic()
-        self.said_waiting = False
         self.restarts = 0
         self.restart_time: Optional[float] = None
         self.intervals: List[float] = []
         self.rate_checked = False
         self.nonfinite_reported = 0
-        self.path = PathMsg()
         self.pub = {
             'motion': self.create_publisher(MultiDOFJointTrajectory, topics.WORLD_MOTION,
                                             STREAM_QOS),
@@ -236,6 +258,12 @@ class GMRNode(Node):
             'path': self.create_publisher(PathMsg, topics.WORLD_PATH, STREAM_QOS),
             'markers': self.create_publisher(MarkerArray, topics.WORLD_MARKERS, STREAM_QOS),
             'floor': self.create_publisher(TransformStamped, topics.WORLD_FLOOR, STREAM_QOS),
+            'bodies_motion': self.create_publisher(
+                MultiDOFJointTrajectory, topics.bodies_topic('world', 'motion'), STREAM_QOS),
+            'bodies_joints3d': self.create_publisher(
+                PointCloud2, topics.bodies_topic('world', 'joints3d'), STREAM_QOS),
+            'bodies_markers': self.create_publisher(
+                MarkerArray, topics.bodies_topic('world', 'markers'), STREAM_QOS),
         }
         self.input_frame = ''
         if p['camera_mode'] not in ('auto', 'static', 'moving'):
@@ -271,6 +299,11 @@ class GMRNode(Node):
         self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
             input_qos(STREAM_QOS, p['queue_depth'])))
+        if p['bodies_motion_topic']:
+            self.diag.watch('bodies', self.create_subscription(
+                MultiDOFJointTrajectory, p['bodies_motion_topic'],
+                guarded(self, self.on_bodies_motion, 'bodies motion'),
+                input_qos(STREAM_QOS, p['queue_depth'])))
         if self.camera_mode == 'known':
             msg_type = Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped
             self.diag.watch('camera_pose', self.create_subscription(
@@ -449,13 +482,20 @@ class GMRNode(Node):
         _, A, b = self.floor
         return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b))
 
-    def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
-        """One input frame: convert, check the stamp, push to :class:`OnlineGMR`, publish
-        the frames that became ready."""
-        self.diag.input.tick()
+    @property
+    def online(self) -> Optional[OnlineGMR]:
+        """The main person's :class:`OnlineGMR` (the single-person input's without several
+        people), or None before the first frame."""
+        if self.bodies_mode:
+            person = self.persons.get(self.main_id)
+            return None if person is None else person.online
+        return self.single.online
+
+    def _pose(self, msg: MultiDOFJointTrajectory, pose=None):
+        """The message's pose in the model's joint order, or None (reported)."""
         names = self.model.cfg.joint_names
         try:
-            pose = rc.motion_to_pose(msg, names)
+            return rc.motion_to_pose(msg, names) if pose is None else pose
         except rc.MessageError as exc:
             self.diag.errors += 1
             if 'lacks joint' in str(exc):
@@ -466,27 +506,84 @@ class GMRNode(Node):
                     throttle_duration_sec=2.0)
             else:
                 self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
+            return None
+
+    def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
+        """One input frame of the single-person input (ignored once the combined input of
+        several people delivers)."""
+        if self.bodies_mode:
+            return
+        self.diag.input.tick()
+        pose = self._pose(msg)
+        if pose is not None:
+            self._push(None, self.single, rc.stamp_to_ns(msg.header.stamp), pose,
+                       msg.header.frame_id)
+
+    def on_bodies_motion(self, msg: MultiDOFJointTrajectory) -> None:
+        """One input frame of every person (names prefixed ``body_<id>/``, the main person
+        first)."""
+        self.diag.input.tick()
+        if not self.bodies_mode:
+            self.bodies_mode = True
+            # the main person comes again with the combined input: what the single-person
+            # input left waiting is dropped (not published twice)
+            self.single = _Person()
+            self.get_logger().info(f"following every person on {self.p['bodies_motion_topic']}"
+                                   f" ({self.p['motion_topic']} is ignored from now on)")
+        try:
+            bodies = rc.motion_to_bodies(msg)
+        except rc.MessageError as exc:
+            self.diag.errors += 1
+            self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
             return
         stamp = rc.stamp_to_ns(msg.header.stamp)
-        if self.last_stamp - stamp > self.p['max_gap_s'] * 1e9:
+        names = list(self.model.cfg.joint_names)
+        for pid, pose in bodies:
+            if list(pose.joint_names) != names:
+                pose = self._pose(rc.pose_to_motion(pose, msg.header))
+                if pose is None:
+                    continue
+            person = self.persons.get(pid)
+            if person is None:
+                person = self.persons[pid] = _Person()
+                self.get_logger().info(f'person {pid}: new')
+                self.main_id = min(self.persons)
+            person.seen_ns = stamp
+            self._push(pid, person, stamp, pose, msg.header.frame_id)
+        timeout = int(self.p['person_timeout_s'] * 1e9)
+        for pid in [q for q, pr in self.persons.items()
+                    if stamp - pr.seen_ns > timeout or pr.seen_ns - stamp > max(timeout, 10**9)]:
+            person = self.persons.pop(pid)
+            if person.online is not None and person.online.pending():
+                self._publish(pid, person, person.online.flush())
+            self.main_id = min(self.persons) if self.persons else None
+            self.bodies.remove(pid)
+            self.get_logger().info(f'person {pid} gone: their topics are removed')
+
+    def _push(self, pid: Optional[int], person: _Person, stamp: int, pose,
+              frame_id: str) -> None:
+        """Check the stamp, push to the person's :class:`OnlineGMR`, publish the frames
+        that became ready."""
+        if person.last_stamp - stamp > self.p['max_gap_s'] * 1e9:
             # a new stream (e.g. a bag played again): the accumulation restarts below
             self.get_logger().warn(
-                f'motion stamps jumped back by {(self.last_stamp - stamp) * 1e-9:.1f} s '
+                f'motion stamps jumped back by {(person.last_stamp - stamp) * 1e-9:.1f} s '
                 '(a bag restarted?): starting a new stream')
-            self.last_stamp = -1
-        if stamp <= self.last_stamp:
+            person.last_stamp = -1
+        if stamp <= person.last_stamp:
             self.diag.dropped += 1
             self.get_logger().warn('motion stamp did not advance; frame dropped',
                                    throttle_duration_sec=2.0)
             return
-        if self.online is None:
-            self.online = self._make_online(msg.header.frame_id)
-        gap = (stamp - self.last_stamp) * 1e-9 if self.last_stamp >= 0 else 0.0
-        self.last_stamp = stamp
-        self._check_rate(gap)
+        if person.online is None:
+            person.online = self._make_online(frame_id)
+        gap = (stamp - person.last_stamp) * 1e-9 if person.last_stamp >= 0 else 0.0
+        person.last_stamp = stamp
+        if pid is None or pid == self.main_id:
+            self._check_rate(gap)
         try:
             with self.diag.processing():
-                frames, event = self.online.push(
+                frames, event = person.online.push(
                     stamp, pose, self._anchor(stamp, 'optical' not in self.input_frame))
         except ValueError as exc:
             self.diag.errors += 1
@@ -501,12 +598,12 @@ class GMRNode(Node):
             self.diag.warn(f'accumulation restarted ({event})')
             self.get_logger().warn(f'time gap of {gap:.3f} s (> max_gap_s): world pose '
                                    'accumulation restarted from a new gravity-aligned pose')
-        if not frames and self.online.pending() and not self.said_waiting:
-            self.said_waiting = True
+        if not frames and person.online.pending() and not person.said_waiting:
+            person.said_waiting = True
             self.get_logger().info(
-                f'waiting for {self.online.frames_needed()} frames (look-ahead) before the '
+                f'waiting for {person.online.frames_needed()} frames (look-ahead) before the '
                 'first world pose')
-        self._publish(frames)
+        self._publish(pid, person, frames)
 
     def _check_rate(self, dt: float) -> None:
         """Warn once when the input rate is not the model's (the motions per frame would be
@@ -524,22 +621,34 @@ class GMRNode(Node):
                 self.diag.warn(msg)
                 self.get_logger().warn(msg)
 
+    def _everyone(self):
+        """``(id or None, state)`` of every person followed now."""
+        if self.bodies_mode:
+            return list(self.persons.items())
+        return [(None, self.single)]
+
     def on_idle(self) -> None:
         """Emit the frames waiting for look-ahead when the input pauses; clear the restart
         warning on /diagnostics after 5 s."""
         if self.restart_time is not None and time.monotonic() - self.restart_time > 5.0:
             self.restart_time = None
             self.diag.warn(None)
-        if self.online is not None and self.online.pending() and \
-                time.monotonic() - self.last_input > self.p['flush_after_s']:
-            self._publish(self.online.flush())
+        if time.monotonic() - self.last_input > self.p['flush_after_s']:
+            for pid, person in self._everyone():
+                if person.online is not None and person.online.pending():
+                    self._publish(pid, person, person.online.flush())
 
     def flush(self) -> None:
         """End of the input (offline processing): emit the frames waiting for look-ahead."""
-        if self.online is not None and self.online.pending():
-            self._publish(self.online.flush())
+        for pid, person in self._everyone():
+            if person.online is not None and person.online.pending():
+                self._publish(pid, person, person.online.flush())
 
-    def _publish(self, frames: Sequence[WorldFrame]) -> None:
+    def _publish(self, pid: Optional[int], person: _Person,
+                 frames: Sequence[WorldFrame]) -> None:
+        """A person's ready frames: on their own topics and combined (several people), and
+        on the single-person topics for the main person (or the single-person input)."""
+        good = []
         for f in frames:
             pose = f.pose
             if not (np.all(np.isfinite(pose.rotations))
@@ -548,26 +657,37 @@ class GMRNode(Node):
                 self.get_logger().error('world pose not finite; frame dropped',
                                         throttle_duration_sec=2.0)
                 continue
+            good.append(f)
             header = rc.make_header(f.stamp_ns, self.output_frame)
-            self.pub['motion'].publish(rc.pose_to_motion(pose, header))
-            self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(), header))
-            self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
             odom = rc.root_to_odometry(pose.root_position, pose.rotations[0], header,
                                        linear_velocity=f.linear_velocity,
                                        angular_velocity=f.angular_velocity)
-            self.pub['odom'].publish(odom)
             if f.first:
-                self.path.poses = []             # a new segment: a new path
-            rc.append_to_path(self.path, odom, self.p['path_length'])
-            self.pub['path'].publish(self.path)
-            self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='world'))
-            self.pub['floor'].publish(rc.transform_stamped(
-                header, self.input_frame or 'input', f.input_rotation, f.input_translation))
+                person.path.poses = []           # a new segment: a new path
+            rc.append_to_path(person.path, odom, self.p['path_length'])
+            if pid is not None:
+                self._publish_body(pid, pose, header, odom, person.path)
+            if pid is None or (pid == self.main_id and f.stamp_ns > self.main_last_ns):
+                if pid is not None:
+                    self.main_last_ns = f.stamp_ns
+                self.pub['motion'].publish(rc.pose_to_motion(pose, header))
+                self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(),
+                                                                   header))
+                self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
+                self.pub['odom'].publish(odom)
+                self.pub['path'].publish(person.path)
+                self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='world'))
+                self.pub['floor'].publish(rc.transform_stamped(
+                    header, self.input_frame or 'input', f.input_rotation,
+                    f.input_translation))
             self.diag.output.tick()
-        if self.online is not None:
-            self._report_nonfinite(self.online.nonfinite_outputs)
-            fusion = self.online.fusion
-            self.diag.set_value('segments', self.online.segments)
+        if pid is not None:
+            self._publish_combined(pid, good)
+        online = self.online
+        if online is not None:
+            self._report_nonfinite(online.nonfinite_outputs)
+            fusion = online.fusion
+            self.diag.set_value('segments', online.segments)
             if fusion is not None:
                 self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
             if self.camera_mode == 'known':
@@ -575,7 +695,32 @@ class GMRNode(Node):
             if self.camera_mode == 'auto':
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
-                self.diag.set_value('unfused_frames', self.online.unanchored_frames)
+                self.diag.set_value('unfused_frames', online.unanchored_frames)
+        self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
+
+    def _publish_body(self, pid: int, pose, header, odom: Odometry, path: PathMsg) -> None:
+        """One person's world frame on their own topics (built only for subscribers)."""
+        b = self.bodies
+        b.publish(pid, 'motion', lambda: rc.pose_to_motion(pose, header))
+        b.publish(pid, 'joints3d', lambda: rc.positions_to_cloud(pose.joint_positions(), header))
+        b.publish(pid, 'joint_states', lambda: rc.pose_to_joint_state(pose, header))
+        b.publish(pid, 'odom', lambda: odom)
+        b.publish(pid, 'path', lambda: path)
+
+    def _publish_combined(self, pid: int, frames: Sequence[WorldFrame]) -> None:
+        """Combined world messages of person ``pid``'s frames (one per frame: the persons'
+        world frames become ready at their own times)."""
+        for f in frames:
+            header = rc.make_header(f.stamp_ns, self.output_frame)
+            if self.pub['bodies_motion'].get_subscription_count() > 0:
+                self.pub['bodies_motion'].publish(rc.bodies_to_motion([(pid, f.pose)], header))
+            if self.pub['bodies_joints3d'].get_subscription_count() > 0:
+                self.pub['bodies_joints3d'].publish(rc.bodies_to_cloud(
+                    f.pose.joint_positions()[None], [pid], header))
+            if self.pub['bodies_markers'].get_subscription_count() > 0:
+                self.pub['bodies_markers'].publish(rc.pose_to_markers(
+                    f.pose, header, ns=f'world/{topics.body_name(pid)}',
+                    color=rc.person_color(pid)))
 
     def _report_nonfinite(self, count: int) -> None:
         """Diagnostics and a rate-limited warning for frames whose network output was not

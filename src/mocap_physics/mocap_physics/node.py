@@ -66,7 +66,7 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
@@ -76,11 +76,15 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from mocap_core import topics
+from mocap_core.topics import body_name
+from mocap_core.bodies import BodyPublishers
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
-from mocap_core.ros_conversions import (MessageError, make_header, motion_to_pose,
+from mocap_core.ros_conversions import (MessageError, bodies_to_cloud, bodies_to_motion,
+                                        make_header, motion_to_bodies, motion_to_pose,
+                                        msg_to_bodies_contacts, person_color,
                                         msg_to_contacts, pose_to_joint_state, pose_to_markers,
                                         pose_to_motion, positions_to_cloud, stamp_to_ns,
                                         wrench_to_msg)
@@ -103,6 +107,15 @@ PARAMETERS = (
               'contacts with its stamp', min_value=0.0, max_value=5.0),
     ParamSpec('contacts_max_age_s', 0.1, 'Otherwise use the newest older contacts if at most '
               'this old (stamp time), else none', min_value=0.0),
+    ParamSpec('bodies_motion_topic', topics.bodies_topic('lifter', 'motion'), 'Input motion '
+              'of every person (names prefixed body_<id>/); once it delivers, each person is '
+              'simulated on their own and motion_topic is ignored; empty = one person only',
+              read_only=True),
+    ParamSpec('bodies_contacts_topic', topics.bodies_topic('lifter', 'contacts'), 'Input '
+              'foot contacts of every person (names prefixed body_<id>/)', read_only=True),
+    ParamSpec('person_timeout_s', 1.0, 'A person absent from the input for longer than this '
+              '(stamps) is dropped: their state and per-person topics are removed',
+              min_value=0.0, read_only=True),
     ParamSpec('queue_depth', 100, 'Input messages queued while a frame is processed (older '
               'ones are lost when the queue is full)', min_value=1, read_only=True),
     ParamSpec('body_mass', _D.body_mass, 'Body mass, kg (segment masses: de Leva 1996)',
@@ -240,12 +253,14 @@ class PhysicsNode(Node):
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         contacts_topic = p['contacts_topic']
-        self.online = OnlinePhysics(
-            self.params, self._floor_source(), frame_id=p['frame_id'],
-            contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
-            contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
-                               if contacts_topic else None),
-            report=self._report, record_time=self.diag.latency.add)
+        self.online = self._make_online(contacts_topic)
+        # several people (the combined input): one OnlinePhysics per id
+        self.persons: Dict[int, OnlinePhysics] = {}
+        self.person_seen_ns: Dict[int, int] = {}
+        self.bodies_mode = False
+        self.main_id: Optional[int] = None
+        self.main_last_ns = -1
+        self.bodies = BodyPublishers(self, 'physics')
         self.pub_motion = self.create_publisher(MultiDOFJointTrajectory, topics.PHYSICS_MOTION,
                                                 STREAM_QOS)
         self.pub_joints = self.create_publisher(PointCloud2, topics.PHYSICS_JOINTS3D,
@@ -263,6 +278,10 @@ class PhysicsNode(Node):
         self.pub_markers = (self.create_publisher(MarkerArray, topics.PHYSICS_MARKERS,
                                                   STREAM_QOS)
                             if p['publish_markers'] else None)
+        self.pub_bodies = {
+            name: self.create_publisher(kind, topics.bodies_topic('physics', name), STREAM_QOS)
+            for name, kind in (('motion', MultiDOFJointTrajectory), ('joints3d', PointCloud2),
+                               ('markers', MarkerArray))}
         self.diag.set_value('gains', 'fixed' if not learned else f'learned ({weights})')
         self.diag.set_value('model', 'none yet (waiting for the first motion)')
         qos = input_qos(STREAM_QOS, p['queue_depth'])
@@ -274,6 +293,14 @@ class PhysicsNode(Node):
             self.contacts_sub = self.create_subscription(
                 JointState, contacts_topic, guarded(self, self.on_contacts, 'contacts'), qos)
             self.diag.watch('contacts', self.contacts_sub)
+        if p['bodies_motion_topic']:
+            self.diag.watch('bodies', self.create_subscription(
+                MultiDOFJointTrajectory, p['bodies_motion_topic'],
+                guarded(self, self.on_bodies_motion, 'bodies motion'), qos))
+        if p['bodies_contacts_topic']:
+            self.create_subscription(
+                JointState, p['bodies_contacts_topic'],
+                guarded(self, self.on_bodies_contacts, 'bodies contacts'), qos)
         self.diag.watch('motion', self.pub_motion)
         self.create_timer(0.01, guarded(self, self.on_timer, 'process'))
         self.diag.on_publish(guarded(self, self.refresh_diagnostics, 'diagnostics'))
@@ -281,6 +308,16 @@ class PhysicsNode(Node):
             f"physics on {p['motion_topic']} (contacts: {contacts_topic or 'none'}); "
             f"k={p['substeps']}, kp={p['kp_joint']:g}, kd={p['kd_joint']:g}, "
             f"mu={p['friction']:g}, floor: {p['floor_source']}")
+
+    def _make_online(self, contacts_topic: str) -> OnlinePhysics:
+        """A new per-person streaming state (its own floor estimate)."""
+        p = self.p
+        return OnlinePhysics(
+            self.params, self._floor_source(), frame_id=p['frame_id'],
+            contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
+            contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
+                               if contacts_topic else None),
+            report=self._report, record_time=self.diag.latency.add)
 
     def _floor_source(self) -> FloorSource:
         """The floor of ``floor_source`` (module docstring); raises ValueError."""
@@ -324,6 +361,8 @@ class PhysicsNode(Node):
 
     # -- input ---------------------------------------------------------------------------------
     def on_contacts(self, msg: JointState) -> None:
+        if self.bodies_mode:
+            return                       # the main person's come with the combined input
         try:
             probs = msg_to_contacts(msg)
         except MessageError as exc:
@@ -331,7 +370,68 @@ class PhysicsNode(Node):
             return
         self._publish(self.online.add_contacts(stamp_to_ns(msg.header.stamp), probs))
 
+    def on_bodies_contacts(self, msg: JointState) -> None:
+        try:
+            bodies = msg_to_bodies_contacts(msg)
+        except MessageError as exc:
+            self._problem('contacts', f"ignoring {self.p['bodies_contacts_topic']}: {exc}")
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        for pid, probs in bodies:
+            online = self.persons.get(pid)
+            if online is not None:
+                self._publish(online.add_contacts(stamp, probs), pid)
+            else:                                  # contacts before the person's first motion
+                self._person(pid).add_contacts(stamp, probs)
+
+    def _person(self, pid: int) -> OnlinePhysics:
+        online = self.persons.get(pid)
+        if online is None:
+            online = self.persons[pid] = self._make_online(self.p['bodies_contacts_topic'])
+            self.get_logger().info(f'person {pid}: new')
+            self.main_id = min(self.persons)
+        return online
+
+    def on_bodies_motion(self, msg: MultiDOFJointTrajectory) -> None:
+        self.diag.input.tick()
+        stamp = stamp_to_ns(msg.header.stamp)
+        if not self.bodies_mode:
+            self.bodies_mode = True
+            # the main person comes again with the combined input: what the single-person
+            # input left waiting is dropped (not published twice)
+            self.online = self._make_online(self.p['contacts_topic'])
+            self.get_logger().info(f"following every person on {self.p['bodies_motion_topic']}"
+                                   f" ({self.p['motion_topic']} is ignored from now on)")
+        try:
+            bodies = motion_to_bodies(msg)
+        except MessageError as exc:
+            self.diag.dropped += 1
+            self._problem('motion', f'dropping a motion message: {exc}')
+            return
+        for pid, pose in bodies:
+            online = self._person(pid)
+            self.person_seen_ns[pid] = stamp
+            accepted, frames = online.admit(stamp)
+            self._publish(frames, pid)
+            if accepted:
+                self._publish(online.add_motion(stamp, pose, msg.header.frame_id), pid)
+        timeout = int(self.p['person_timeout_s'] * 1e9)
+        for pid in [q for q, t in self.person_seen_ns.items() if stamp - t > timeout or
+                    t - stamp > max(timeout, 10**9)]:
+            self._end_person(pid)
+
+    def _end_person(self, pid: int) -> None:
+        """Person ``pid`` is gone: their waiting frames, then their state and topics go."""
+        online = self.persons.pop(pid)
+        self.person_seen_ns.pop(pid, None)
+        self.main_id = min(self.persons) if self.persons else None
+        self._publish(online.flush(), pid)
+        self.bodies.remove(pid)
+        self.get_logger().info(f'person {pid} gone: their topics are removed')
+
     def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
+        if self.bodies_mode:
+            return                       # the main person comes with the combined input
         self.diag.input.tick()
         stamp = stamp_to_ns(msg.header.stamp)
         accepted, frames = self.online.admit(stamp)     # before decoding, as documented
@@ -349,17 +449,65 @@ class PhysicsNode(Node):
     def on_timer(self) -> None:
         """Frames whose contacts did not come in time go now."""
         self._publish(self.online.process())
+        for pid, online in list(self.persons.items()):
+            self._publish(online.process(), pid)
 
     def flush(self) -> None:
         """End of the input (offline processing): step every waiting frame now, with the
         contacts that arrived (no more waiting for late ones)."""
         self._publish(self.online.flush())
+        for pid, online in list(self.persons.items()):
+            self._publish(online.flush(), pid)
 
     # -- output --------------------------------------------------------------------------------
-    def _publish(self, frames: List[PhysicsFrame]) -> None:
+    def _publish(self, frames: List[PhysicsFrame], pid: Optional[int] = None) -> None:
+        """Publish frames of the single-person input (``pid`` None) or of person ``pid``: on
+        their own topics, combined (one message per call and stamp), and, for the main
+        person, on the single-person topics."""
+        if not frames:
+            return
+        if pid is not None:
+            # combined first: the next stage follows everybody from it, and hears it before
+            # the single-person topics
+            self._publish_combined(pid, frames)
         for frame in frames:
-            self._publish_frame(frame)
+            if pid is None:
+                self._publish_frame(frame)
+            else:
+                self._publish_body(pid, frame)
+                if pid == self.main_id and frame.stamp_ns > self.main_last_ns:
+                    self.main_last_ns = frame.stamp_ns
+                    self._publish_frame(frame)
             self.diag.output.tick()
+
+    def _publish_body(self, pid: int, frame: PhysicsFrame) -> None:
+        res = frame.result
+        header = make_header(frame.stamp_ns, frame.frame_id)
+        pose = res.pose
+        b = self.bodies
+        b.publish(pid, 'motion', lambda: pose_to_motion(pose, header))
+        b.publish(pid, 'joints3d', lambda: positions_to_cloud(pose.joint_positions(), header))
+        b.publish(pid, 'joint_states', lambda: pose_to_joint_state(
+            pose, header, revolute_efforts(pose.revolute_angles(),
+                                           res.joint_torques.reshape(-1, 3))))
+        for foot in ('left', 'right'):
+            w = res.feet[foot]
+            b.publish(pid, f'grf/{foot}', lambda w=w: wrench_to_msg(w.force, w.moment, header))
+
+    def _publish_combined(self, pid: int, frames: List[PhysicsFrame]) -> None:
+        pubs = self.pub_bodies
+        for frame in frames:
+            header = make_header(frame.stamp_ns, frame.frame_id)
+            pose = frame.result.pose
+            if pubs['motion'].get_subscription_count() > 0:
+                pubs['motion'].publish(bodies_to_motion([(pid, pose)], header))
+            if pubs['joints3d'].get_subscription_count() > 0:
+                pubs['joints3d'].publish(bodies_to_cloud(pose.joint_positions()[None], [pid],
+                                                         header))
+            if pubs['markers'].get_subscription_count() > 0:
+                pubs['markers'].publish(pose_to_markers(
+                    pose, header, ns=f'physics/{body_name(pid)}', color=person_color(pid),
+                    contacts=frame.result.contact_active.astype(float)))
 
     def _publish_frame(self, frame: PhysicsFrame) -> None:
         res = frame.result
@@ -376,7 +524,9 @@ class PhysicsNode(Node):
         com.point.x, com.point.y, com.point.z = (float(c) for c in res.center_of_mass)
         self.pub_com.publish(com)
         if self.pub_markers is not None:
-            names = self.online.cycle.model.contact_names
+            source = self.persons.get(self.main_id, self.online) if self.bodies_mode else \
+                self.online
+            names = source.cycle.model.contact_names
             # every contact point always has its arrow (ids 10-13 stay the same; zero
             # length without force)
             forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
@@ -393,7 +543,11 @@ class PhysicsNode(Node):
                 make_header(frame.stamp_ns, frame.input_frame), frame.floor, frame.frame_id))
 
     def refresh_diagnostics(self) -> None:
-        online = self.online
+        # several people: the main person's state (the counters below are theirs)
+        online = self.persons.get(self.main_id, self.online) if self.bodies_mode else \
+            self.online
+        self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
+        self.diag.set_value('person_ids', ' '.join(map(str, sorted(self.persons))) or 'none')
         st = online.cycle.stats
         d = self.diag
         model = online.cycle.model

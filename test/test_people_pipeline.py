@@ -1,0 +1,114 @@
+"""Several people through the pipeline's nodes in one process (InProcessGraph, lossless and
+deterministic): each person is followed by every stage on their own, and a person's output
+does not depend on who else is in the picture."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BAGS = [ROOT / 'bags' / 'gt_cmu_walk_12_02', ROOT / 'bags' / 'gt_bandai_wave_normal']
+DT = 33_333_333
+T0 = 1_700_000_000_000_000_000
+FRAMES = 60
+
+
+@pytest.fixture(scope='module')
+def two_people():
+    """(F, 23, 3) keypoints of two recorded persons (the second shifted 300 px right) and
+    the first bag's camera_info."""
+    from mocap_core import topics
+    from mocap_core.bag_io import BagReader, deserialize
+    from mocap_core.ros_conversions import cloud_to_keypoints
+
+    out, info = [], None
+    for bag in BAGS:
+        kp = []
+        with BagReader(bag) as reader:
+            for m in reader.messages(topics=[topics.KEYPOINTS, topics.CAMERA_INFO]):
+                msg = deserialize(m.data, m.msgtype)
+                if m.topic == topics.KEYPOINTS and len(kp) < FRAMES:
+                    kp.append(cloud_to_keypoints(msg)[0])
+                elif m.topic == topics.CAMERA_INFO and info is None:
+                    info = msg
+        out.append(np.array(kp))
+    out[1][..., 0] += 300.0 * (out[1][..., 2] > 0)
+    return out[0], out[1], info
+
+
+def _run(frames, info, with_gmr=False):
+    """Feed keypoint frames ``[(rows, ids)]`` through lifter -> physics (-> GMR); return
+    ``{topic: [msg]}``."""
+    import rclpy
+
+    from mocap_core import topics
+    from mocap_core.inprocess import InProcessGraph
+    from mocap_core.ros_conversions import keypoints_to_cloud, make_header
+    from mocap_lifter.node import LifterNode
+    from mocap_physics.node import PhysicsNode
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    by_topic = {}
+    graph = InProcessGraph(record=lambda t, m, q: by_topic.setdefault(t, []).append(m))
+    nodes = [graph.add(LifterNode(context=context)),
+             graph.add(PhysicsNode(context=context))]
+    if with_gmr:
+        from mocap_global.node import GMRNode
+        nodes.append(graph.add(GMRNode(context=context)))
+    try:
+        for k, (rows, ids) in enumerate(frames):
+            info.header.stamp.sec, info.header.stamp.nanosec = divmod(T0 + k * DT, 10**9)
+            graph.publish(topics.CAMERA_INFO, info)
+            graph.publish(topics.KEYPOINTS, keypoints_to_cloud(
+                rows, make_header(T0 + k * DT, info.header.frame_id), ids=ids))
+        graph.flush()
+        return by_topic, nodes
+    finally:
+        for n in nodes:
+            n.destroy_node()
+        context.try_shutdown()
+
+
+def test_two_people_through_every_stage(two_people):
+    from mocap_core import topics
+    from mocap_core.ros_conversions import motion_to_bodies, motion_to_pose
+
+    a, b, info = two_people
+    both, _ = _run([(np.stack([a[k], b[k]]), [1, 2]) for k in range(FRAMES)], info, True)
+    alone, _ = _run([(a[k][None], [1]) for k in range(FRAMES)], info, True)
+    for pid in (1, 2):
+        for name in ('motion', 'joints3d', 'joint_states', 'grf/left', 'grf/right'):
+            assert len(both[topics.body_topic(pid, 'physics', name)]) == FRAMES, (pid, name)
+    combined = both[topics.bodies_topic('physics', 'motion')]
+    assert sorted({pid for m in combined for pid, _ in motion_to_bodies(m)}) == [1, 2]
+    # the main person (row 0, id 1) on the single-person topic: exactly as when alone
+    main = both[topics.PHYSICS_MOTION]
+    ref = alone[topics.PHYSICS_MOTION]
+    assert len(main) == len(ref) == FRAMES
+    for m, r in zip(main, ref):
+        pm, pr = motion_to_pose(m), motion_to_pose(r)
+        np.testing.assert_allclose(pm.root_position, pr.root_position, atol=1e-9)
+        np.testing.assert_allclose(pm.rotations, pr.rotations, atol=1e-9)
+    # person 2 is simulated separately (another body, somewhere else)
+    p1 = motion_to_pose(both[topics.body_topic(1, 'physics', 'motion')][-1])
+    p2 = motion_to_pose(both[topics.body_topic(2, 'physics', 'motion')][-1])
+    assert np.linalg.norm(p1.root_position - p2.root_position) > 0.3
+    # the world stage: each person's own world pose; the main person's as when alone
+    for pid in (1, 2):
+        for name in ('motion', 'joints3d', 'joint_states', 'odom', 'path'):
+            assert len(both[topics.body_topic(pid, 'world', name)]) == FRAMES, (pid, name)
+    main = both[topics.WORLD_MOTION]
+    ref = alone[topics.WORLD_MOTION]
+    assert len(main) == len(ref) == FRAMES
+    for m, r in zip(main, ref):
+        np.testing.assert_allclose(motion_to_pose(m).root_position,
+                                   motion_to_pose(r).root_position, atol=1e-6)
+    w1 = motion_to_pose(both[topics.body_topic(1, 'world', 'motion')][-1])
+    w2 = motion_to_pose(both[topics.body_topic(2, 'world', 'motion')][-1])
+    assert np.abs(w1.rotations - w2.rotations).max() > 0.1     # a walker and a waver
+    worlds = both[topics.bodies_topic('world', 'motion')]
+    assert sorted({pid for m in worlds for pid, _ in motion_to_bodies(m)}) == [1, 2]
