@@ -28,7 +28,8 @@ setup(
         ],
         # the core finds the pipeline's parts through these groups (mocap_core.plugins)
         'mocap.nodes': ['lifter = mocap_lifter.node:LifterNode'],
-        'mocap.benches': ['lifter = mocap_lifter.bench:main'],
+        'mocap.benches': ['lifter = mocap_lifter.bench:main',
+                          'people = mocap_lifter.people_bench:main'],
         'mocap.commands': ['lifter = mocap_lifter.training.cli'],
     },
 )

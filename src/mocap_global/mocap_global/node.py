@@ -68,6 +68,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers
+from mocap_core.tf import TfBroadcaster, pose_to_transforms
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
@@ -97,6 +98,9 @@ PARAMETERS = (
     ParamSpec('person_timeout_s', 1.0, 'A person absent from the input for longer than this '
               '(stamps) is dropped: their last frames are emitted, their state and topics '
               'removed', min_value=0.0, read_only=True),
+    ParamSpec('publish_tf', True, 'Publish every person\'s skeleton on /tf: frames '
+              'body_<id> (the pelvis, in frame_id) and body_<id>/<joint> (mocap_core.tf); '
+              'built only while /tf has subscribers', read_only=True),
     ParamSpec('motion_topic', topics.PHYSICS_MOTION, 'Input motion '
               '(MultiDOFJointTrajectory): the physics or the lifter stage', read_only=True),
     ParamSpec('weights', '', 'GMR weights file; empty = the shipped weights '
@@ -242,6 +246,7 @@ class GMRNode(Node):
         self.main_id: Optional[int] = None
         self.main_last_ns = -1
         self.bodies = BodyPublishers(self, 'world')
+        self.tf = TfBroadcaster(self) if p['publish_tf'] else None
         self.last_input = time.monotonic()
         self.restarts = 0
         self.restart_time: Optional[float] = None
@@ -659,6 +664,8 @@ class GMRNode(Node):
                 continue
             good.append(f)
             header = rc.make_header(f.stamp_ns, self.output_frame)
+            if self.tf is not None and self.tf.subscribers() > 0:
+                self.tf.send(pose_to_transforms(pose, header, 1 if pid is None else pid))
             odom = rc.root_to_odometry(pose.root_position, pose.rotations[0], header,
                                        linear_velocity=f.linear_velocity,
                                        angular_velocity=f.angular_velocity)

@@ -28,6 +28,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..camera import CameraIntrinsics
+from ..kinematics import forward_kinematics
 from ..rotations import axis_angle_to_quat, quat_multiply
 from ..skeleton import KEYPOINT_EDGES, NUM_KEYPOINTS
 from .motion import Motion
@@ -62,6 +63,8 @@ class Scene:
         depth: (F, A) distance of each actor's pelvis from the camera (m; inf when absent).
         camera: the camera.
         fps: frame rate (Hz).
+        joints: (F, A, J, 3) every actor's joint positions in the camera's optical frame (m;
+            NaN where the actor is absent), the 3D truth per person.
     """
 
     keypoints: List[np.ndarray]
@@ -70,6 +73,7 @@ class Scene:
     depth: np.ndarray
     camera: VirtualCamera
     fps: float
+    joints: Optional[np.ndarray] = None
 
     @property
     def num_frames(self) -> int:
@@ -115,9 +119,12 @@ def make_scene(actors: Sequence[Actor], frames: int, camera: VirtualCamera,
     W, H = camera.intrinsics.width, camera.intrinsics.height
     clean = np.zeros((frames, A, NUM_KEYPOINTS, 3))
     depth = np.full((frames, A), np.inf)
+    joints = np.full((frames, A, actors[0].motion.skeleton.num_joints if A else 0, 3), np.nan)
     for a, actor in enumerate(actors):
         rot, root = place(actor)
         kp3 = keypoints_3d(actor.motion.skeleton, rot, root)
+        sk = actor.motion.skeleton
+        pos3 = forward_kinematics(sk.parents, sk.offsets, rot, root).positions
         stop = frames if actor.stop is None else min(actor.stop, frames)
         for f in range(actor.start, stop):
             k = actor.clip_start + f - actor.start
@@ -131,6 +138,7 @@ def make_scene(actors: Sequence[Actor], frames: int, camera: VirtualCamera,
             clean[f, a, :, :2] = uv
             clean[f, a, :, 2] = inside.astype(float)
             depth[f, a] = float(np.linalg.norm(camera.world_to_camera(root[k])))
+            joints[f, a] = camera.world_to_camera(pos3[k])
     edges = np.array(KEYPOINT_EDGES)
     out_kp: List[np.ndarray] = []
     out_truth: List[np.ndarray] = []
@@ -177,7 +185,7 @@ def make_scene(actors: Sequence[Actor], frames: int, camera: VirtualCamera,
         idx = rng.permutation(len(rows)) if shuffle else np.arange(len(rows))
         out_kp.append(np.array(rows, dtype=np.float64).reshape(-1, NUM_KEYPOINTS, 3)[idx])
         out_truth.append(np.array(truth, dtype=int)[idx])
-    return Scene(out_kp, out_truth, clean, depth, camera, fps)
+    return Scene(out_kp, out_truth, clean, depth, camera, fps, joints)
 
 
 def crossing_camera(width: int = 1280, height: int = 720, distance: float = 7.0,
