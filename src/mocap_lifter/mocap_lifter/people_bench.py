@@ -181,8 +181,9 @@ def write_report(path: Path, ident: dict, acc: dict, seeds: int) -> None:
         '# Several people: identities, per-person accuracy, time per frame',
         '',
         f'`mocap bench people --seeds {seeds}` on {platform.node()} ({machine}), '
-        f'{time.strftime("%Y-%m-%d")}. Synthetic scenes of `mocap_core.data.multi_person` (three recorded clips, crossing paths, occlusion, '
-        'entries and exits, one-frame false detections, rows shuffled every frame).',
+        f'{time.strftime("%Y-%m-%d")}. Synthetic scenes of `mocap_core.data.multi_person` '
+        '(three recorded clips, crossing paths, occlusion, entries and exits, one-frame false '
+        'detections, rows shuffled every frame).',
         '',
         '## Identities (tracker, keypoint node defaults)',
         '',
