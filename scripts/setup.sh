@@ -94,6 +94,8 @@ if [ "${FORCE:-0}" = 1 ] || [ ! -f ros2_ws/install/setup.bash ] || [ "$(cat "$st
     source "$venv/bin/activate"
     # ament_cmake, the rosidl generators and the message packages are CMake packages in the venv
     export CMAKE_PREFIX_PATH="$venv${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+    # ... found through the ament index the pip-installed ROS keeps in the venv (typesupports)
+    export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
     rm -rf build install log
     colcon --log-base log build --symlink-install --event-handlers console_direct- "${skip[@]}" >/dev/null \
       || { log "colcon build failed: see ros2_ws/log/latest_build"; exit 1; }

@@ -112,3 +112,10 @@ def test_two_people_through_every_stage(two_people):
     assert np.abs(w1.rotations - w2.rotations).max() > 0.1     # a walker and a waver
     worlds = both[topics.bodies_topic('world', 'motion')]
     assert sorted({pid for m in worlds for pid, _ in motion_to_bodies(m)}) == [1, 2]
+    # /tf: every person's skeleton, frames body_<id> (in world) and body_<id>/<joint>
+    tf = both['/tf']
+    children = {t.child_frame_id: t.header.frame_id for m in tf for t in m.transforms}
+    assert children['body_1'] == children['body_2'] == 'world'
+    assert children['body_2/left_knee'] == 'body_2/left_hip'
+    assert children['body_1/left_hip'] == 'body_1'
+    assert len(tf) == 2 * FRAMES

@@ -24,7 +24,8 @@ setup(
         ],
         # the core finds the pipeline's parts through these groups (mocap_core.plugins)
         'mocap.nodes': ['keypoints = mocap_keypoints.node:KeypointsNode'],
-        'mocap.benches': ['keypoints = mocap_keypoints.bench:main'],
+        'mocap.benches': ['keypoints = mocap_keypoints.bench:main',
+                          'multipose = mocap_keypoints.people_bench:main'],
         # the node's detectors, for data generation (mocap data render)
         'mocap.detectors': ['blazepose = mocap_keypoints.detector:BlazePoseDetector'],
     },

@@ -104,9 +104,11 @@ def video_frame_indices(stamps: np.ndarray, first_stamp: int, fps: float) -> np.
 
 def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path] = None,
                  panel: Optional[int] = None, sheet_frames: int = 5) -> int:
-    """Write ``out`` (MP4): each frame of the world stage as the video frame with its keypoints
-    beside side and front views of the world skeleton; and optionally ``sheet`` (PNG), a few
-    such frames stacked. Returns the number of frames written."""
+    """Write ``out`` (MP4): each keypoint frame as the video frame with its keypoints beside
+    side and front views of the world skeleton (empty views, labelled, where the world stage
+    has no pose for it: before a person got an id, or while nobody is seen); and optionally
+    ``sheet`` (PNG), a few frames with a skeleton stacked. Returns the number of frames
+    written."""
     import cv2
 
     world = run.stages['world']
@@ -124,8 +126,9 @@ def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path]
         raise ValueError(f'no frames in {video}')
     h, w = frames[0].shape[:2]
     panel = panel or h
-    index = video_frame_indices(world.stamps, run.keypoint_stamps[0], fps)
+    index = video_frame_indices(run.keypoint_stamps, run.keypoint_stamps[0], fps)
     kp_by_stamp = {int(s): k for s, k in zip(run.keypoint_stamps, run.keypoints)}
+    world_at = {int(s): n for n, s in enumerate(world.stamps)}
     # view axes from the body's facing at the first frame (hips: left - right)
     j = world.joints
     left = j[0, JOINT_NAMES.index('left_hip')] - j[0, JOINT_NAMES.index('right_hip')]
@@ -142,8 +145,8 @@ def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path]
     weight = run.body_mass * 9.81 if np.isfinite(run.body_mass) else 700.0
     writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*'mp4v'), fps,
                              (w + 2 * panel, h))
-    composed = []
-    for n, (stamp, i) in enumerate(zip(world.stamps, index)):
+    composed, written = [], 0
+    for stamp, i in zip(run.keypoint_stamps, index):
         if not 0 <= i < len(frames):
             continue
         left_img = frames[i].copy()
@@ -152,18 +155,28 @@ def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path]
             draw_keypoints(left_img, kp)
         cv2.putText(left_img, f'frame {i}  t = {i / fps:.2f} s', (8, 20),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
-        forces = grf_by_stamp.get(int(stamp))
-        views = [v.draw(j[n], world.contact_points[n], forces, weight) for v in (side, front)]
+        n = world_at.get(int(stamp))
+        if n is not None:
+            forces = grf_by_stamp.get(int(stamp))
+            views = [v.draw(j[n], world.contact_points[n], forces, weight)
+                     for v in (side, front)]
+        else:
+            blank = np.full((panel, panel, 3), 40, np.uint8)
+            cv2.putText(blank, 'no world pose for this frame', (8, 20),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.5, (200, 200, 200), 1, cv2.LINE_AA)
+            views = [blank, blank]
         if panel != h:
             views = [cv2.resize(v, (panel, h)) for v in views]
         frame = np.hstack([left_img] + views)
         writer.write(frame)
-        composed.append(frame)
+        written += 1
+        if n is not None:
+            composed.append(frame)
     writer.release()
     if sheet is not None and composed:
         pick = np.linspace(0, len(composed) - 1, min(sheet_frames, len(composed))).round()
         cv2.imwrite(str(sheet), np.vstack([composed[int(k)] for k in pick]))
-    return len(composed)
+    return written
 
 
 def plot_run(run: PipelineRun, out_dir: Path) -> Dict[str, Path]:

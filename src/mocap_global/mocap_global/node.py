@@ -542,6 +542,8 @@ class GMRNode(Node):
             self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
             return
         stamp = rc.stamp_to_ns(msg.header.stamp)
+        if stamp < self.main_last_ns - int(self.p['max_gap_s'] * 1e9):
+            self.main_last_ns = -1                # a new stream (a bag played again)
         names = list(self.model.cfg.joint_names)
         for pid, pose in bodies:
             if list(pose.joint_names) != names:

@@ -21,11 +21,10 @@ from typing import Dict, Protocol, runtime_checkable
 
 import numpy as np
 
-from mocap_core.skeleton import BLAZEPOSE_TO_LAYOUT, NUM_KEYPOINTS
+from mocap_core.skeleton import NUM_KEYPOINTS
 
+from .blazepose import NUM_BLAZEPOSE_LANDMARKS, blazepose_to_layout  # noqa: F401 (re-export)
 from .sources import check_image
-
-NUM_BLAZEPOSE_LANDMARKS = 33
 
 
 @runtime_checkable
@@ -43,26 +42,6 @@ class Detector(Protocol):
 
     def close(self) -> None:
         """Release the model."""
-
-
-def blazepose_to_layout(landmarks: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(33, 4) BlazePose landmarks ``(x, y, visibility, presence)`` with x, y normalised to the
-    image (presence NaN where the model has none) -> (23, 3) layout keypoints in pixels.
-
-    Confidence = visibility x presence (or visibility where presence is NaN), clipped to
-    [0, 1]; layout points without a BlazePose landmark, and landmarks with non-finite values,
-    get (0, 0, 0).
-    """
-    lm = np.asarray(landmarks, dtype=np.float64)
-    if lm.shape != (NUM_BLAZEPOSE_LANDMARKS, 4):
-        raise ValueError(f'expected ({NUM_BLAZEPOSE_LANDMARKS}, 4) landmarks, got {lm.shape}')
-    conf = np.where(np.isnan(lm[:, 3]), lm[:, 2], lm[:, 2] * lm[:, 3])
-    pts = np.stack([lm[:, 0] * width, lm[:, 1] * height, np.clip(conf, 0.0, 1.0)], axis=-1)
-    out = np.zeros((NUM_KEYPOINTS, 3))
-    for k, src in enumerate(BLAZEPOSE_TO_LAYOUT):
-        if src >= 0 and np.all(np.isfinite(pts[src])):
-            out[k] = pts[src]
-    return out
 
 
 class BlazePoseDetector:

@@ -46,7 +46,7 @@ import numpy as np
 from mocap_core.skeleton import NUM_KEYPOINTS
 from mocap_core.tracking import box_iou, keypoint_box, oks
 
-from .detector import blazepose_to_layout
+from .blazepose import blazepose_to_layout
 from .sources import check_image
 
 #: Where the built ``.task`` bundle is cached.

@@ -208,6 +208,12 @@ class LifterNode(Node):
         self.people.person = int(self.p['person'])
         with self.diag.processing():
             step = self.people.push(rc.stamp_to_ns(msg.header.stamp), people, ids)
+        if step.restarted > 0:
+            self.get_logger().warn(f'keypoint stamps jumped back by {step.restarted:.1f} s (a '
+                                   'bag restarted?): starting a new stream')
+            self._emit(PeopleStep(steps=step.flushed, ended=step.ended))
+            step.ended = []
+            self.main_last_ns = -1
         if step.main is not None:
             self.main_id = step.main
         if not step.steps:

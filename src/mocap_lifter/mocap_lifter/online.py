@@ -377,11 +377,17 @@ class PeopleStep:
             new stream began); their last frames are in ``steps``.
         main: the id of the main person of the message (the row ``person`` of the cloud,
             the one tracked longest), or None when that row holds nobody.
+        restarted: > 0 when the stamps jumped back by that many seconds (by ``max_gap_s`` or
+            more): every stream ended and a new stream began.
+        flushed: on a restart, the last frames of the streams that ended (stamps of the old
+            stream: to publish before ``steps``).
     """
 
     steps: Dict[int, StreamStep] = field(default_factory=dict)
     ended: List[int] = field(default_factory=list)
     main: Optional[int] = None
+    restarted: float = 0.0        # > 0: the stamps jumped back this far (s): a new stream
+    flushed: Dict[int, StreamStep] = field(default_factory=dict)   # the old stream's last
 
 
 class PeopleStreams:
@@ -441,10 +447,15 @@ class PeopleStreams:
         out = PeopleStep()
         if self.person < len(rid) and rid[self.person] > 0:
             out.main = int(rid[self.person])
-        if self._last_ns is not None and stamp_ns < self._last_ns - int(self.max_gap_s * 1e9):
+        if self._last_ns is not None and stamp_ns <= self._last_ns - int(self.max_gap_s * 1e9):
             # a new stream (a bag looped): every person's stream ends; ids start again
+            out.restarted = (self._last_ns - int(stamp_ns)) * 1e-9
+            flushed = PeopleStep()
             for pid in list(self.streams):
-                self._end(pid, out)
+                self._end(pid, flushed)
+            out.flushed, out.ended = flushed.steps, flushed.ended
+            self.intrinsics.restart()
+            self._last_ns = int(stamp_ns)
         self._last_ns = int(stamp_ns) if self._last_ns is None else max(self._last_ns,
                                                                         int(stamp_ns))
         rows = {}

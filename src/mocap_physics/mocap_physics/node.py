@@ -395,6 +395,8 @@ class PhysicsNode(Node):
     def on_bodies_motion(self, msg: MultiDOFJointTrajectory) -> None:
         self.diag.input.tick()
         stamp = stamp_to_ns(msg.header.stamp)
+        if stamp < self.main_last_ns - 10**9:
+            self.main_last_ns = -1                # a new stream (a bag played again)
         if not self.bodies_mode:
             self.bodies_mode = True
             # the main person comes again with the combined input: what the single-person
