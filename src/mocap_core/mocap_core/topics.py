@@ -118,4 +118,8 @@ ALL = [KEYPOINTS, CAMERA_INFO, CAMERA_MOTION, SKELETON_URDF, DIAGNOSTICS, LIFTER
        PHYSICS_GRF_LEFT, PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH,
        WORLD_FLOOR] + [
     stage_topic(stage, leaf) for stage in STAGES
-    for leaf in ('motion', 'joints3d', 'joint_states', 'markers')]
+    for leaf in ('motion', 'joints3d', 'joint_states', 'markers')] + [
+    BODIES_TRACKED, '/tf', bodies_topic('lifter', 'contacts')] + [
+    bodies_topic(stage, leaf) for stage in STAGES for leaf in ('motion', 'joints3d', 'markers')]
+#: (The per-person topics /humans/bodies/body_<id>/... come and go with the people: record them
+#: with ``ros2 bag record -a`` or by regular expression, ``-e '/humans/bodies/.*'``.)
