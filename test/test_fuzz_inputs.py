@@ -72,11 +72,16 @@ def _finite_outputs(outputs, injected=()) -> None:
     bad messages, which the graph records too)."""
     from mocap_core.ros_conversions import motion_to_pose
 
+    from mocap_core.ros_conversions import motion_to_bodies
+
     skip = {id(m) for m in injected}
     for topic, msg in outputs:
         if id(msg) in skip:
             continue
-        if topic.endswith('/motion'):
+        if topic.endswith('/bodies/motion'):
+            for _, pose in motion_to_bodies(msg):
+                assert np.all(np.isfinite(pose.joint_positions())), topic
+        elif topic.endswith('/motion'):
             pose = motion_to_pose(msg)
             assert np.all(np.isfinite(pose.joint_positions())), topic
         if topic.endswith('/joint_states'):
@@ -143,6 +148,15 @@ def test_lifter_survives_malformed_keypoints_and_camera_info(pipeline, valid):
     assert len(stamps) >= 55
 
 
+def _as_bodies(msg, person_id: int = 1):
+    """A copy of a one-person motion or contacts message as the several-people input: every
+    name prefixed ``body_<id>/`` (a malformed message stays malformed)."""
+    m = copy.deepcopy(msg)
+    names = m.joint_names if hasattr(m, 'joint_names') else m.name
+    names[:] = [f'body_{person_id}/{n}' for n in names]
+    return m
+
+
 def _bad_motions(good):
     from mocap_core.skeleton import JOINT_NAMES
 
@@ -203,7 +217,9 @@ def test_physics_and_gmr_survive_malformed_motion_and_contacts(pipeline, valid, 
     t = _feed(graph, clouds[:40], infos[:40], 1_700_000_000_000_000_000)
     motion = next(m for topic, m in outputs if topic == '/mocap/lifter/motion')
     contacts = next(m for topic, m in outputs if topic == '/mocap/lifter/contacts')
-    topic = '/mocap/lifter/motion' if target == 'physics' else '/mocap/physics/motion'
+    # the node follows every person from the combined input (names prefixed body_<id>/)
+    topic = ('/mocap/lifter/bodies/motion' if target == 'physics'
+             else '/mocap/physics/bodies/motion')
     if target == 'gmr':
         motion = next(m for tp, m in outputs if tp == '/mocap/physics/motion')
     node = nodes[target]
@@ -212,13 +228,16 @@ def test_physics_and_gmr_survive_malformed_motion_and_contacts(pipeline, valid, 
     cases = _bad_motions(motion)
     injected = []
     for k, (_name, bad) in enumerate(cases):
-        injected.append(_stamped(bad, t + k))
+        injected.append(_stamped(_as_bodies(bad), t + k))
         graph.publish(topic, injected[-1])
         if target == 'physics':
-            injected.append(_stamped(_bad_contacts(contacts)[k % 4][1], t + k))
-            graph.publish('/mocap/lifter/contacts', injected[-1])
-    injected.append(_stamped(motion, t - 500_000_000))            # backwards, dropped
+            injected.append(_stamped(_as_bodies(_bad_contacts(contacts)[k % 4][1]), t + k))
+            graph.publish('/mocap/lifter/bodies/contacts', injected[-1])
+    injected.append(_stamped(_as_bodies(motion), t - 500_000_000))    # backwards, dropped
     graph.publish(topic, injected[-1])
+    unprefixed = _stamped(motion, t + len(cases))                     # no body_<id>/ prefix
+    injected.append(unprefixed)
+    graph.publish(topic, unprefixed)
     n_world = sum(1 for tp, _ in outputs if tp == '/mocap/world/motion')
     _feed(graph, clouds[40:60], infos[40:60], t + 1_000_000_000)  # valid again, after a gap
     graph.flush()

@@ -119,3 +119,48 @@ def test_two_people_through_every_stage(two_people):
     assert children['body_2/left_knee'] == 'body_2/left_hip'
     assert children['body_1/left_hip'] == 'body_1'
     assert len(tf) == 2 * FRAMES
+
+
+def test_mocap_process_and_bvh_export_of_two_people(two_people, tmp_path):
+    """`mocap process` on a keypoint bag with two people: every stage's per-person and
+    combined topics land in the output bag; `mocap export bvh --per-person` writes one file
+    per person."""
+    import subprocess
+    import sys
+
+    from mocap_core import topics
+    from mocap_core.bag_io import BagReader, BagWriter
+    from mocap_core.ros_conversions import keypoints_to_cloud, make_header
+
+    a, b, info = two_people
+    bag = tmp_path / 'two'
+    with BagWriter(bag) as w:
+        for k in range(FRAMES):
+            stamp = T0 + k * DT
+            info.header.stamp.sec, info.header.stamp.nanosec = divmod(stamp, 10**9)
+            w.write_msg(topics.CAMERA_INFO, stamp, info)
+            w.write_msg(topics.KEYPOINTS, stamp, keypoints_to_cloud(
+                np.stack([b[k], a[k]]), make_header(stamp, info.header.frame_id), ids=[2, 1]))
+
+    def mocap(*args):
+        res = subprocess.run([sys.executable, '-m', 'mocap_core.cli.mocap', *map(str, args)],
+                             capture_output=True, text=True, timeout=600)
+        assert res.returncode == 0, res.stdout + res.stderr
+        return res.stdout
+
+    out = tmp_path / 'out'
+    mocap('process', bag, '-o', out, '--no-progress')
+    with BagReader(out) as r:
+        counts = {t: i.count for t, i in r.topics.items()}
+    for pid in (1, 2):
+        for stage in ('lifter', 'physics', 'world'):
+            assert counts[topics.body_topic(pid, stage, 'motion')] == FRAMES, (pid, stage)
+    for stage in ('lifter', 'physics', 'world'):
+        assert counts[topics.bodies_topic(stage, 'motion')] >= FRAMES
+        assert counts[topics.stage_topic(stage, 'motion')] == FRAMES     # the main person
+    assert counts['/tf'] == 2 * FRAMES
+    text = mocap('export', 'bvh', out, '-o', tmp_path / 'walk.bvh', '--per-person',
+                 '--topic', topics.WORLD_MOTION, '--frame', 'world')
+    for pid in (1, 2):
+        bvh = (tmp_path / f'walk_body_{pid}.bvh').read_text()
+        assert f'Frames: {FRAMES}' in bvh, text

@@ -38,6 +38,7 @@ def load_checkpoint(path: Union[str, Path], map_location: Any = 'cpu',
             plain data, is not a dictionary or lacks a required key.
     """
     import pickle
+    import warnings
 
     import torch
 
@@ -45,7 +46,11 @@ def load_checkpoint(path: Union[str, Path], map_location: Any = 'cpu',
     if not path.is_file():
         raise WeightsError(f'weights file not found: {path}')
     try:
-        state = torch.load(str(path), map_location=map_location, weights_only=True)
+        with warnings.catch_warnings():
+            # random bytes may look like a pickle of another protocol: torch warns on stderr
+            # before it refuses the file; the refusal below is the one line that is said
+            warnings.simplefilter('ignore', UserWarning)
+            state = torch.load(str(path), map_location=map_location, weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises many types for a damaged file
         text = ' '.join(_ANSI.sub('', str(exc)).split())
         if isinstance(exc, pickle.UnpicklingError) and 'WeightsUnpickler error:' in text:

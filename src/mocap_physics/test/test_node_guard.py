@@ -35,7 +35,9 @@ def _motion(stamp_ns: int):
 def test_every_callback_is_guarded(wired):
     _, node, _, _ = wired
     subs = [s for s in node.subscriptions if s.topic_name != '/parameter_events']
-    assert {s.topic_name for s in subs} == {'/mocap/lifter/motion', '/mocap/lifter/contacts'}
+    assert {s.topic_name for s in subs} == {'/mocap/lifter/motion', '/mocap/lifter/contacts',
+                                            '/mocap/lifter/bodies/motion',
+                                            '/mocap/lifter/bodies/contacts'}
     assert all(getattr(s.callback, 'guarded', False) for s in subs)
     own_timers = [t for t in node.timers if t.callback != node.diag.publish]
     assert len(own_timers) == 1

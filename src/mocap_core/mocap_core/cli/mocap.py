@@ -199,11 +199,36 @@ def cmd_plot_keypoints(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_export_bvh(args: argparse.Namespace) -> int:
-    """Write the motion topic of a bag as a BVH file."""
-    from ..data.bvh_writer import write_bvh
-    from ..ros_conversions import motion_to_pose
+def _bodies_topic(topic: str) -> str:
+    """The combined several-people topic beside a stage's motion topic
+    (``/mocap/<stage>/motion`` -> ``/mocap/<stage>/bodies/motion``)."""
+    head, _, leaf = topic.rstrip('/').rpartition('/')
+    return f'{head}/bodies/{leaf}'
 
+
+def cmd_export_bvh(args: argparse.Namespace) -> int:
+    """Write the motion topic of a bag as a BVH file (``--per-person``: one file per person
+    of the stage's combined topic)."""
+    from ..data.bvh_writer import write_bvh
+    from ..ros_conversions import motion_to_bodies, motion_to_pose
+
+    if args.per_person:
+        topic = args.bodies_topic or _bodies_topic(args.topic)
+        stamps, frames = read_topic(args.bag, topic, motion_to_bodies, 'several-people motion')
+        by_id = {}
+        for stamp, bodies in zip(stamps, frames):
+            for pid, pose in bodies:
+                by_id.setdefault(pid, {})[stamp] = pose
+        out = Path(args.output)
+        for pid, series in sorted(by_id.items()):
+            ts = sorted(series)
+            poses = [series[t] for t in ts]
+            fps = args.fps or (1e9 / float(np.median(np.diff(ts))) if len(ts) > 1 else 30.0)
+            path = out.with_name(f'{out.stem}_body_{pid}{out.suffix or ".bvh"}')
+            write_bvh(path, poses[-1].skeleton, np.stack([p.rotations for p in poses]),
+                      np.stack([p.root_position for p in poses]), fps, frame=args.frame)
+            print(f'wrote {path}: person {pid}, {len(poses)} frames at {fps:.2f} fps')
+        return 0
     stamps, poses = read_topic(args.bag, args.topic, motion_to_pose, 'motion')
     fps = args.fps or (1e9 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 30.0)
     # one skeleton for the file: the last estimate (the lifter holds it after a while)
@@ -340,6 +365,10 @@ def build_parser() -> argparse.ArgumentParser:
     pb.add_argument('--frame', choices=('camera', 'world'), default='camera',
                     help="the topic's frame: camera optical frame or z-up world")
     pb.add_argument('--fps', type=float, help='frame rate (default: from the stamps)')
+    pb.add_argument('--per-person', action='store_true',
+                    help='one BVH per person (<output>_body_<id>.bvh) from the stage\'s '
+                    'combined topic (/mocap/<stage>/bodies/motion)')
+    pb.add_argument('--bodies-topic', help='the combined topic (default: beside --topic)')
     pb.set_defaults(func=cmd_export_bvh)
 
     # Training and evaluation commands live with their models, in the node packages, which
