@@ -7,7 +7,6 @@ loading never ran it.
 
 from __future__ import annotations
 
-import os
 import random
 from pathlib import Path
 from typing import Any, Dict, Union
