@@ -164,3 +164,11 @@ def test_mocap_process_and_bvh_export_of_two_people(two_people, tmp_path):
     for pid in (1, 2):
         bvh = (tmp_path / f'walk_body_{pid}.bvh').read_text()
         assert f'Frames: {FRAMES}' in bvh, text
+    # the report: a table of the persons, their paths in one colour each
+    mocap('report', out, '-o', tmp_path / 'report')
+    text = (tmp_path / 'report' / 'report.md').read_text()
+    assert '## Persons' in text
+    rows = [line for line in text.splitlines() if line.startswith('| 1 |')
+            or line.startswith('| 2 |')]
+    assert len(rows) == 2 and all(f'| {FRAMES} |' in r for r in rows), rows
+    assert (tmp_path / 'report' / 'root_trajectory.png').stat().st_size > 1000

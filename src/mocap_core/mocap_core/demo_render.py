@@ -27,17 +27,32 @@ def _side_colour(name: str):
     return _BLUE if name.startswith('left') else _ORANGE if name.startswith('right') else _GREY
 
 
-def draw_keypoints(image: np.ndarray, kp: np.ndarray, threshold: float = 0.3) -> np.ndarray:
-    """Draw (23, 3) keypoints (u, v, confidence) on a BGR image (in place; returned)."""
+def _bgr(person_id: int) -> tuple:
+    """The person's colour (:func:`~mocap_core.ros_conversions.person_color`) as OpenCV BGR."""
+    from .ros_conversions import person_color
+    r, g, b, _ = person_color(int(person_id))
+    return (int(255 * b), int(255 * g), int(255 * r))
+
+
+def draw_keypoints(image: np.ndarray, kp: np.ndarray, color: Optional[tuple] = None,
+                   label: str = '', threshold: float = 0.3) -> np.ndarray:
+    """Draw (23, 3) keypoints (u, v, confidence) on a BGR image (in place; returned): bones
+    coloured by side, or all in ``color`` (BGR, e.g. one per person) with ``label`` above
+    the highest point."""
     import cv2
 
     for a, b in KEYPOINT_EDGES:
         if kp[a, 2] >= threshold and kp[b, 2] >= threshold:
             cv2.line(image, (int(kp[a, 0]), int(kp[a, 1])), (int(kp[b, 0]), int(kp[b, 1])),
-                     _side_colour(KEYPOINT_NAMES[b]), 2, cv2.LINE_AA)
+                     color or _side_colour(KEYPOINT_NAMES[b]), 2, cv2.LINE_AA)
     for u, v, c in kp:
         if c >= threshold:
             cv2.circle(image, (int(u), int(v)), 3, (255, 255, 255), -1, cv2.LINE_AA)
+    seen = kp[:, 2] >= threshold
+    if label and np.any(seen):
+        top = int(np.argmin(np.where(seen, kp[:, 1], np.inf)))
+        cv2.putText(image, label, (int(kp[top, 0]) - 15, int(kp[top, 1]) - 10),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, color or (255, 255, 255), 1, cv2.LINE_AA)
     return image
 
 
@@ -129,6 +144,7 @@ def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path]
     index = video_frame_indices(run.keypoint_stamps, run.keypoint_stamps[0], fps)
     kp_by_stamp = {int(s): k for s, k in zip(run.keypoint_stamps, run.keypoints)}
     world_at = {int(s): n for n, s in enumerate(world.stamps)}
+    people_by_stamp = {int(s): p for s, p in zip(run.keypoint_stamps, run.people_keypoints)}
     # view axes from the body's facing at the first frame (hips: left - right)
     j = world.joints
     left = j[0, JOINT_NAMES.index('left_hip')] - j[0, JOINT_NAMES.index('right_hip')]
@@ -150,9 +166,15 @@ def render_video(run: PipelineRun, video: Path, out: Path, sheet: Optional[Path]
         if not 0 <= i < len(frames):
             continue
         left_img = frames[i].copy()
-        kp = kp_by_stamp.get(int(stamp))
-        if kp is not None:
-            draw_keypoints(left_img, kp)
+        people = people_by_stamp.get(int(stamp))
+        if people is not None and len(run.person_ids) > 1:
+            for rows_kp, pid in zip(*people):       # every person, one colour per id
+                if pid > 0:
+                    draw_keypoints(left_img, rows_kp, _bgr(pid), label=f'id {int(pid)}')
+        else:
+            kp = kp_by_stamp.get(int(stamp))
+            if kp is not None:
+                draw_keypoints(left_img, kp)
         cv2.putText(left_img, f'frame {i}  t = {i / fps:.2f} s', (8, 20),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
         n = world_at.get(int(stamp))
@@ -195,6 +217,11 @@ def plot_run(run: PipelineRun, out_dir: Path) -> Dict[str, Path]:
     if world is not None:
         t = (world.stamps - t0) * 1e-9
         fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+        if len(run.world_people) > 1:
+            from .ros_conversions import person_color
+            for pid, (_, root) in run.world_people.items():
+                ax[0].plot(root[:, 0], root[:, 1], '-', color=person_color(pid)[:3],
+                           label=f'person {pid}')
         ax[0].plot(world.root[:, 0], world.root[:, 1], '-', color='tab:blue')
         ax[0].plot(world.root[0, 0], world.root[0, 1], 'o', color='tab:green', label='start')
         ax[0].plot(world.root[-1, 0], world.root[-1, 1], 's', color='tab:red', label='end')
@@ -341,6 +368,17 @@ def report_markdown(run: PipelineRun, plaus: Dict[str, Dict[str, float]],
                      'achieved end to end)')
     lines.append(f'- body mass (URDF): {_fmt(run.body_mass)} kg')
     lines += [f'- {x}' for x in notes]
+    if len(run.person_ids) > 1:
+        lines += ['', '## Persons', '',
+                  'One colour per id in the video and the root trajectory plot; the other '
+                  'figures are the main person\'s (the one tracked longest).', '',
+                  '| id | keypoint frames | world frames | world path (m) |', '|---|---|---|---|']
+        for pid in run.person_ids:
+            kf = sum(1 for _, ids in run.people_keypoints if pid in ids)
+            stamps, root = run.world_people.get(pid, (np.zeros(0), np.zeros((0, 3))))
+            path = float(np.sum(np.linalg.norm(np.diff(root[:, :2], axis=0), axis=1))) \
+                if len(root) > 1 else 0.0
+            lines.append(f'| {pid} | {kf} | {len(stamps)} | {path:.2f} |')
     lines += ['', '## Per node (final /diagnostics)', '',
               '| node | frames in | frames out | dropped | errors | processing median (ms) | '
               'p95 (ms) |', '|---|---|---|---|---|---|---|']

@@ -57,6 +57,18 @@ class PipelineRun:
     gt_joints: Optional[np.ndarray] = None      # (N, J, 3) camera frame
     gt_contacts: Optional[np.ndarray] = None    # (N, 4) 0/1
     diagnostics: Dict[str, Dict[str, str]] = field(default_factory=dict)
+    #: several people: every person's keypoint rows per keypoint frame, ``(rows (P, 23, 3),
+    #: ids (P,))`` (ids 1.. in row order for a cloud without ids)
+    people_keypoints: List[tuple] = field(default_factory=list)
+    #: several people: ``{id: (stamps (N,), root (N, 3) m)}`` of the world stage's combined
+    #: motion (empty without it)
+    world_people: Dict[int, tuple] = field(default_factory=dict)
+
+    @property
+    def person_ids(self) -> List[int]:
+        """Every id of the run (several people), in order."""
+        ids = {int(i) for _, row_ids in self.people_keypoints for i in row_ids if i > 0}
+        return sorted(ids | set(self.world_people))
 
 
 def _read(bag: Path, wanted: Dict[str, Callable[[Any], Any]]) -> Dict[str, list]:
@@ -95,7 +107,10 @@ def load_run(bag: Path | str) -> PipelineRun:
         return {s.name: {kv.key: kv.value for kv in s.values} for s in msg.status}
 
     wanted: Dict[str, Callable[[Any], Any]] = {
-        T.KEYPOINTS: stamped(lambda m: rc.cloud_to_keypoints(m)[0]),
+        T.KEYPOINTS: stamped(lambda m: (rc.cloud_to_keypoints(m), rc.cloud_to_ids(m))),
+        T.bodies_topic('world', 'motion'): stamped(lambda m: [
+            (pid, np.asarray(pose.root_position, float))
+            for pid, pose in rc.motion_to_bodies(m)]),
         T.LIFTER_CONTACTS: stamped(rc.msg_to_contacts),
         T.PHYSICS_GRF_LEFT: stamped(lambda m: rc.msg_to_wrench(m)[0]),
         T.PHYSICS_GRF_RIGHT: stamped(lambda m: rc.msg_to_wrench(m)[0]),
@@ -114,8 +129,22 @@ def load_run(bag: Path | str) -> PipelineRun:
         entries = sorted(entries, key=lambda e: e[0])
         return np.array([e[0] for e in entries], dtype=np.int64), [e[1] for e in entries]
 
-    st, kp = arrays(raw[T.KEYPOINTS])
+    st, clouds = arrays(raw[T.KEYPOINTS])
+    kp = [rows[0] for rows, _ in clouds]
     run = PipelineRun(st, np.stack(kp) if kp else np.zeros((0, 23, 3)))
+    for rows, ids in clouds:
+        if ids is None:
+            seen = np.any(rows[..., 2] > 0, axis=-1)
+            ids = np.where(seen, np.arange(1, len(rows) + 1), 0)
+        run.people_keypoints.append((rows, np.asarray(ids)))
+    by_id: Dict[int, list] = {}
+    for stamp, bodies, _ in raw[T.bodies_topic('world', 'motion')]:
+        for pid, root in bodies:
+            by_id.setdefault(pid, []).append((stamp, root))
+    for pid, entries in sorted(by_id.items()):
+        entries.sort(key=lambda e: e[0])
+        run.world_people[pid] = (np.array([e[0] for e in entries], dtype=np.int64),
+                                 np.stack([e[1] for e in entries]))
     for stage in STAGES:
         entries = sorted(raw[f'/mocap/{stage}/motion'], key=lambda e: e[0])
         if not entries:

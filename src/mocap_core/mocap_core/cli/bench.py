@@ -203,8 +203,8 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
             wait_for(name, text)
         time.sleep(3.0)                                   # discovery between the processes
         start('keypoints', {'path': str(video), 'realtime': True,
-                                               'loop': True, 'fps': 30.0,
-                                               'wait_for_subscribers': 2})
+                            'loop': True, 'fps': 30.0,
+                            'wait_for_subscribers': 2, **config.get('keypoints', {})})
         wait_for('keypoints', 'detector')
         for name, p in procs.items():
             s = _proc_stats(p.pid)
@@ -335,20 +335,24 @@ def _git_commit() -> str:
 
 
 def write_report(res: Dict, out: Path) -> None:
-    off = res['offline']
+    off = res.get('offline')
     lines = [
         '# Pipeline benchmark', '',
+        f"Video of the live runs: `{res.get('video', '')}`.", '',
         f"{res['date']}, commit `{res['commit']}`, {res['machine']}. Command: "
         '`mocap bench pipeline` (see `mocap_core/cli/bench.py`).', '',
-        '## Offline: `mocap process`, keypoints -> world motion', '',
-        f"Bag `{off['bag']}` {off['times']} times in a row (a 2 s gap between the takes; "
-        f"{off['frames']} frames), {len(off['fps_passes'])} passes: "
-        f"**{off['fps_median']:.1f} frames/s** (median; passes: "
-        + ', '.join(f'{v:.1f}' for v in off['fps_passes']) + '). Goal: >= 100 frames/s. '
-        'Lifter and GMR run 16 frames per network pass offline (`chunk`).', '',
-        '| node | processing per input message, mean (ms) | p95 (ms) |', '|---|---|---|']
-    for n, v in sorted(off['node_ms'].items()):
-        lines.append(f"| {n} | {v['mean']:.2f} | {v['p95']:.2f} |")
+    ]
+    if off is not None:
+        lines += [
+            '## Offline: `mocap process`, keypoints -> world motion', '',
+            f"Bag `{off['bag']}` {off['times']} times in a row (a 2 s gap between the takes; "
+            f"{off['frames']} frames), {len(off['fps_passes'])} passes: "
+            f"**{off['fps_median']:.1f} frames/s** (median; passes: "
+            + ', '.join(f'{v:.1f}' for v in off['fps_passes']) + '). Goal: >= 100 frames/s. '
+            'Lifter and GMR run 16 frames per network pass offline (`chunk`).', '',
+            '| node | processing per input message, mean (ms) | p95 (ms) |', '|---|---|---|']
+        for n, v in sorted(off['node_ms'].items()):
+            lines.append(f"| {n} | {v['mean']:.2f} | {v['p95']:.2f} |")
     for live in res['live']:
         c = live['config']
         lines += ['', f"## Live, {c['name']}: lifter {c['lifter_mode']}, GMR look-ahead "
@@ -393,12 +397,20 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_DOMAIN_ID')})
     res = {'date': datetime.date.today().isoformat(), 'commit': _git_commit(),
            'machine': f'{platform.machine()}, {os.cpu_count()} CPU cores (shared)'}
-    print('offline (mocap process) ...', flush=True)
-    res['offline'] = bench_offline(Path(args.bag), args.repeat, work)
+    res['video'] = str(args.video)
+    if args.repeat > 0:
+        print('offline (mocap process) ...', flush=True)
+        res['offline'] = bench_offline(Path(args.bag), args.repeat, work)
     res['live'] = []
     configs = [{'name': 'defaults', 'lifter_mode': 'windowed', 'lookahead': 15},
                {'name': 'low latency', 'lifter_mode': 'causal', 'lookahead': 0}]
-    for c in configs[:args.configs]:
+    configs = configs[:args.configs]
+    if args.single_person_baseline:
+        # today's one-person keypoint stage beside the several-people default, same run
+        configs.insert(0, {'name': 'defaults, max_persons 1 (single-person detector)',
+                           'lifter_mode': 'windowed', 'lookahead': 15,
+                           'keypoints': {'max_persons': 1}})
+    for c in configs:
         print(f"live, {c['name']} ({args.seconds:.0f} s) ...", flush=True)
         res['live'].append(bench_live(c, args.seconds, Path(args.video), work, env))
     out = Path(args.output)
@@ -418,7 +430,10 @@ def add_parser(sub) -> None:
     pp.add_argument('--bag', default=str(ROOT / 'bags' / 'gt_cmu_walk_12_02'))
     pp.add_argument('--video', default=str(ROOT / 'data' / 'video_example' /
                                            'taiji_640x360.mp4'))
-    pp.add_argument('--repeat', type=int, default=3, help='offline passes')
+    pp.add_argument('--repeat', type=int, default=3, help='offline passes (0: none)')
+    pp.add_argument('--single-person-baseline', action='store_true',
+                    help='also run the live defaults with the single-person keypoint stage '
+                    '(max_persons 1), first, for a side-by-side comparison')
     pp.add_argument('--seconds', type=float, default=20.0, help='live run per configuration')
     pp.add_argument('--configs', type=int, default=2, choices=(0, 1, 2),
                     help='live configurations to run (defaults, then low latency)')
