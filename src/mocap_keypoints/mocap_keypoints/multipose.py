@@ -18,7 +18,9 @@ the BlazePose way, per person:
   long side (overlapping by at least a third). The detector sees its input at 224 x 224, so
   in a wide image a person a third of the image high is ~50 px to it and often missed; in a
   square tile the same person is twice that. Each region is scanned every
-  ``detection_interval`` x (number of regions) frames.
+  ``detection_interval`` x (number of regions) frames; while whole rounds find nobody new
+  the interval doubles, up to ``max_detection_interval``, and it drops back as soon as someone
+  new is found or a window ends.
 * **A window per person**: every person found that no window already follows gets a square
   window on the image (``window_scale`` x the person's box, at least ``min_window_px``) and
   its own VIDEO-mode landmarker for one pose. The window stays put while the person stays in
@@ -106,8 +108,10 @@ class BlazePoseMultiDetector:
 
     Args:
         max_persons: the most people followed at once.
-        detection_interval: run the whole-image person detection every this many frames
-            (1: every frame); also whenever no window follows anybody.
+        detection_interval: look for new people every this many frames (1: every frame);
+            also whenever no window follows anybody; never while ``max_persons`` are followed.
+        max_detection_interval: while whole rounds of regions find nobody new, the interval
+            doubles up to this.
         min_person_px: people whose box of seen keypoints is lower than this are ignored.
         window_scale: window side / the person's box side (height or width, the larger).
         min_window_px: the smallest window side.
@@ -118,7 +122,8 @@ class BlazePoseMultiDetector:
     name = 'mediapipe_blazepose_full_multi'
 
     def __init__(self, max_persons: int = 4, detection_interval: int = 5,
-                 min_person_px: float = 48.0, window_scale: float = 1.6,
+                 max_detection_interval: int = 15,
+                 min_person_px: float = 48.0, window_scale: float = 2.0,
                  min_window_px: int = 128, max_missed: int = 8,
                  min_detection_confidence: float = 0.5,
                  min_tracking_confidence: float = 0.5) -> None:
@@ -141,6 +146,11 @@ class BlazePoseMultiDetector:
         self.window_scale = float(window_scale)
         self.min_window_px = int(min_window_px)
         self.max_missed = int(max_missed)
+        #: a window moves when the person comes within this fraction of its side of an edge,
+        #: and is remade when the person's size changes by more than ``resize_ratio``
+        self.recentre_margin = 0.05
+        self.resize_ratio = 1.6
+        self.recentred = 0
         self._det_conf = float(min_detection_confidence)
         self._trk_conf = float(min_tracking_confidence)
         self._finder = vision.PoseLandmarker.create_from_options(vision.PoseLandmarkerOptions(
@@ -148,7 +158,11 @@ class BlazePoseMultiDetector:
             num_poses=self.max_persons, min_pose_detection_confidence=self._det_conf,
             min_pose_presence_confidence=self._det_conf))
         self._windows: List[_Window] = []
+        self.max_detection_interval = max(int(max_detection_interval), self.detection_interval)
         self._frame = 0
+        self._since_find = 0
+        self._interval = self.detection_interval
+        self._quiet = 0
         self._ts_ms = 0
         self._closed = False
         #: counters for diagnostics
@@ -176,9 +190,12 @@ class BlazePoseMultiDetector:
             people.append(kp)
             self._recentre(win, kp, w, h)
         self._drop_duplicate_windows(people)
-        if not self._windows or self._frame % self.detection_interval == 0:
-            found = self._find(rgb)
-            for kp in found:
+        self._since_find += 1
+        if not self._windows or (self._since_find >= self._interval and
+                                 len(self._windows) < self.max_persons):
+            self._since_find = 0
+            opened = 0
+            for kp in self._find(rgb):
                 box = keypoint_box(kp, 0.3)
                 if box is None or box[2] < self.min_person_px:
                     continue
@@ -188,6 +205,8 @@ class BlazePoseMultiDetector:
                     break
                 people.append(kp)
                 self._open(kp, w, h)
+                opened += 1
+            self._back_off(opened, len(self.regions(w, h)))
         self._frame += 1
         people = [p for p in people if (b := keypoint_box(p, 0.3)) is not None and
                   b[2] >= self.min_person_px]
@@ -199,6 +218,21 @@ class BlazePoseMultiDetector:
         for win in list(self._windows):
             self._end(win)
         self._frame = 0
+        self._since_find = 0
+        self._interval = self.detection_interval
+        self._quiet = 0
+
+    def _back_off(self, opened: int, regions: int) -> None:
+        """After a detection: someone new resets the interval to ``detection_interval``; a
+        whole round of regions with nobody new doubles it, up to ``max_detection_interval``
+        (a scene that stays the same costs little; a window that ends resets it too)."""
+        if opened:
+            self._interval, self._quiet = self.detection_interval, 0
+            return
+        self._quiet += 1
+        if self._quiet >= regions:
+            self._quiet = 0
+            self._interval = min(2 * self._interval, self.max_detection_interval)
 
     def close(self) -> None:
         if self._closed:
@@ -282,6 +316,7 @@ class BlazePoseMultiDetector:
     def _end(self, win: _Window) -> None:
         win.landmarker.close()
         self._windows.remove(win)
+        self._interval, self._quiet = self.detection_interval, 0   # look again soon
 
     def _track(self, win: _Window, rgb: np.ndarray) -> Optional[np.ndarray]:
         """Run the window's landmarker on its crop (borders outside the image are black);
@@ -309,13 +344,14 @@ class BlazePoseMultiDetector:
         if box is None:
             return
         x0, y0, side = self._window_for(kp, w, h)
-        margin = 0.1 * win.side
+        margin = self.recentre_margin * win.side
         inside = (box[0] - box[3] / 2 >= win.x0 + margin and
                   box[0] + box[3] / 2 <= win.x0 + win.side - margin and
                   box[1] - box[2] / 2 >= win.y0 + margin and
                   box[1] + box[2] / 2 <= win.y0 + win.side - margin)
-        if inside and 0.75 <= side / win.side <= 1.33:
+        if inside and 1.0 / self.resize_ratio <= side / win.side <= self.resize_ratio:
             return
+        self.recentred += 1
         win.landmarker.close()
         win.landmarker = self._new_landmarker()
         win.x0, win.y0, win.side = x0, y0, side
