@@ -68,6 +68,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers
+from mocap_core.publishing import publish_if_heard
 from mocap_core.tf import TfBroadcaster, pose_to_transforms
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import guarded
@@ -679,16 +680,7 @@ class GMRNode(Node):
             if pid is None or (pid == self.main_id and f.stamp_ns > self.main_last_ns):
                 if pid is not None:
                     self.main_last_ns = f.stamp_ns
-                self.pub['motion'].publish(rc.pose_to_motion(pose, header))
-                self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(),
-                                                                   header))
-                self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
-                self.pub['odom'].publish(odom)
-                self.pub['path'].publish(person.path)
-                self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='world'))
-                self.pub['floor'].publish(rc.transform_stamped(
-                    header, self.input_frame or 'input', f.input_rotation,
-                    f.input_translation))
+                self._publish_main(f, pose, header, odom, person.path)
             self.diag.output.tick()
         if pid is not None:
             self._publish_combined(pid, good)
@@ -706,6 +698,21 @@ class GMRNode(Node):
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
                 self.diag.set_value('unfused_frames', online.unanchored_frames)
         self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
+
+    def _publish_main(self, f: WorldFrame, pose, header, odom: Odometry,
+                      path: PathMsg) -> None:
+        """The main person's world frame on the single-person topics: the motion always, the
+        others only while someone listens (mocap_core.publishing)."""
+        pub = self.pub
+        pub['motion'].publish(rc.pose_to_motion(pose, header))
+        publish_if_heard(pub['joints3d'],
+                         lambda: rc.positions_to_cloud(pose.joint_positions(), header))
+        publish_if_heard(pub['joint_states'], lambda: rc.pose_to_joint_state(pose, header))
+        publish_if_heard(pub['odom'], lambda: odom)
+        publish_if_heard(pub['path'], lambda: path)
+        publish_if_heard(pub['markers'], lambda: rc.pose_to_markers(pose, header, ns='world'))
+        publish_if_heard(pub['floor'], lambda: rc.transform_stamped(
+            header, self.input_frame or 'input', f.input_rotation, f.input_translation))
 
     def _publish_body(self, pid: int, pose, header, odom: Odometry, path: PathMsg) -> None:
         """One person's world frame on their own topics (built only for subscribers)."""

@@ -40,6 +40,7 @@ from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.bodies import BodyPublishers
+from mocap_core.publishing import publish_if_heard
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS, input_qos
@@ -355,11 +356,13 @@ class LifterNode(Node):
                 skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
             self.published_lengths = lengths
         self.pub['motion'].publish(rc.pose_to_motion(pose, header))
-        self.pub['joints3d'].publish(rc.positions_to_cloud(pose.joint_positions(), header))
-        self.pub['joint_states'].publish(rc.pose_to_joint_state(pose, header))
-        self.pub['contacts'].publish(rc.contacts_to_msg(frame.contacts, header))
-        self.pub['markers'].publish(rc.pose_to_markers(pose, header, ns='lifter',
-                                                       contacts=frame.contacts))
+        # the others only while someone listens (mocap_core.publishing)
+        publish_if_heard(self.pub['joints3d'],
+                         lambda: rc.positions_to_cloud(pose.joint_positions(), header))
+        publish_if_heard(self.pub['joint_states'], lambda: rc.pose_to_joint_state(pose, header))
+        publish_if_heard(self.pub['contacts'], lambda: rc.contacts_to_msg(frame.contacts, header))
+        publish_if_heard(self.pub['markers'], lambda: rc.pose_to_markers(
+            pose, header, ns='lifter', contacts=frame.contacts))
         self.diag.output.tick()
         self.diag.set_value('skeleton', 'held' if frame.skeleton_fixed else 'estimating')
         self.diag.set_value('root_depth_m', f'{frame.depth:.2f}')

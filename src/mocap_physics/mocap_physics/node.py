@@ -78,6 +78,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import topics
 from mocap_core.topics import body_name
 from mocap_core.bodies import BodyPublishers
+from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
@@ -512,37 +513,49 @@ class PhysicsNode(Node):
                     contacts=frame.result.contact_active.astype(float)))
 
     def _publish_frame(self, frame: PhysicsFrame) -> None:
+        """The main person's (or the single input's) frame on the single-person topics: the
+        motion always, the others only while someone listens (mocap_core.publishing)."""
         res = frame.result
         header = make_header(frame.stamp_ns, frame.frame_id)
         pose = res.pose
         self.pub_motion.publish(pose_to_motion(pose, header))
-        self.pub_joints.publish(positions_to_cloud(pose.joint_positions(), header))
-        efforts = revolute_efforts(pose.revolute_angles(), res.joint_torques.reshape(-1, 3))
-        self.pub_states.publish(pose_to_joint_state(pose, header, efforts))
+        publish_if_heard(self.pub_joints,
+                         lambda: positions_to_cloud(pose.joint_positions(), header))
+        publish_if_heard(self.pub_states, lambda: pose_to_joint_state(
+            pose, header, revolute_efforts(pose.revolute_angles(),
+                                           res.joint_torques.reshape(-1, 3))))
         for foot, pub in self.pub_grf.items():
             w = res.feet[foot]
-            pub.publish(wrench_to_msg(w.force, w.moment, header))
-        com = PointStamped(header=header)
-        com.point.x, com.point.y, com.point.z = (float(c) for c in res.center_of_mass)
-        self.pub_com.publish(com)
+            publish_if_heard(pub, lambda w=w: wrench_to_msg(w.force, w.moment, header))
+
+        def com() -> PointStamped:
+            msg = PointStamped(header=header)
+            msg.point.x, msg.point.y, msg.point.z = (float(c) for c in res.center_of_mass)
+            return msg
+        publish_if_heard(self.pub_com, com)
         if self.pub_markers is not None:
-            source = self.persons.get(self.main_id, self.online) if self.bodies_mode else \
-                self.online
-            names = source.cycle.model.contact_names
-            # every contact point always has its arrow (ids 10-13 stay the same; zero
-            # length without force)
-            forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
-            markers = pose_to_markers(
-                pose, header, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
-                contacts=res.contact_active.astype(float), forces=forces)
-            cps = pose.contact_positions()
-            loaded = [cps[n] for i, n in enumerate(names) if res.contact_forces[i, 2] > 1e-6]
-            markers.markers.append(friction_cone_marker(header, np.array(loaded),
-                                                        self.params.friction))
-            self.pub_markers.publish(markers)
+            publish_if_heard(self.pub_markers, lambda: self._markers(frame, header))
         if self.pub_floor is not None and frame.floor is not None:
-            self.pub_floor.publish(floor_transform_msg(
+            publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
                 make_header(frame.stamp_ns, frame.input_frame), frame.floor, frame.frame_id))
+
+    def _markers(self, frame: PhysicsFrame, header) -> MarkerArray:
+        res = frame.result
+        pose = res.pose
+        source = self.persons.get(self.main_id, self.online) if self.bodies_mode else \
+            self.online
+        names = source.cycle.model.contact_names
+        # every contact point always has its arrow (ids 10-13 stay the same; zero length
+        # without force)
+        forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
+        markers = pose_to_markers(
+            pose, header, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
+            contacts=res.contact_active.astype(float), forces=forces)
+        cps = pose.contact_positions()
+        loaded = [cps[n] for i, n in enumerate(names) if res.contact_forces[i, 2] > 1e-6]
+        markers.markers.append(friction_cone_marker(header, np.array(loaded),
+                                                    self.params.friction))
+        return markers
 
     def refresh_diagnostics(self) -> None:
         # several people: the main person's state (the counters below are theirs)
