@@ -97,7 +97,8 @@ if [ "${FORCE:-0}" = 1 ] || [ ! -f ros2_ws/install/setup.bash ] || [ "$(cat "$st
     # ... found through the ament index the pip-installed ROS keeps in the venv (typesupports)
     export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
     rm -rf build install log
-    colcon --log-base log build --symlink-install --event-handlers console_direct- "${skip[@]}" >/dev/null \
+    colcon --log-base log build --symlink-install --event-handlers console_direct- console_stderr- \
+      "${skip[@]}" --cmake-args -Wno-dev -Wno-deprecated >/dev/null \
       || { log "colcon build failed: see ros2_ws/log/latest_build"; exit 1; }
   )
   echo "$pkg_hash" > "$stamp"
