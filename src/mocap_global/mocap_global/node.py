@@ -18,6 +18,16 @@ frame, e.g. the physics floor frame, in ``frame_id``; with a floor input a turn 
 shift along the floor, so that the physics floor and the world floor are one plane) and
 ``/diagnostics``.
 
+Several people (docs/multi_person.md): ``bodies_motion_topic`` (default
+``/mocap/physics/bodies/motion``, names prefixed ``body_<id>/``) carries every person; once it
+delivers, each person gets their own world pose (ended ``person_timeout_s`` after last seen)
+and ``motion_topic`` is ignored. Each person's output goes to ``/humans/bodies/body_<id>/world/
+{motion,joints3d,joint_states,odom,path}``, every person to ``/mocap/world/bodies/{motion,
+joints3d,markers}``, the main person (the smallest id present) to the single-person topics
+above, and, with ``publish_tf``, every person's skeleton to ``/tf`` (frames ``body_<id>`` in
+``frame_id`` and ``body_<id>/<joint>``). Every output but the motion and ``/diagnostics`` is
+built only while it has a subscriber.
+
 One floor for all outputs: when the input is in a floor frame (the physics output, z up,
 floor z = 0; ``vertical`` 'auto' decides by the input's frame_id), the root's
 height and tilt are the input's and GMR gives the heading and the horizontal path, so the

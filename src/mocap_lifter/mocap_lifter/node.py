@@ -10,6 +10,16 @@ probabilities), ``/mocap/lifter/markers`` (MarkerArray), ``/mocap/skeleton/urdf`
 transient local; re-published when the skeleton estimate changes by more than
 ``skeleton_tolerance``) and ``/diagnostics``.
 
+Several people (docs/multi_person.md): the cloud's rows are persons with an ``id`` field (a
+cloud without it: persons 1, 2, ... in row order). Each id gets its own lifting state
+(:class:`mocap_lifter.online.PeopleStreams`), ended ``person_timeout_s`` after the person was
+last seen. Each person's frames go to ``/humans/bodies/body_<id>/lifter/{motion,joints3d,
+joint_states,contacts}`` and ``/humans/bodies/body_<id>/urdf``; every person of a frame to
+``/mocap/lifter/bodies/{motion,contacts,joints3d,markers}`` (names prefixed ``body_<id>/``, the
+main person first); the single-person topics above carry the person of row ``person`` (row 0:
+the one tracked longest). Every output but the motion and ``/diagnostics`` is built only while
+it has a subscriber.
+
 Without a calibrated ``/mocap/camera_info`` the keypoints are lifted with approximate
 intrinsics fixed once per stream (:mod:`mocap_lifter.intrinsics`: the image size of an
 uncalibrated camera_info, else an estimate from the keypoints of the first frames); the

@@ -34,6 +34,16 @@ Publishes, stamped with the input's stamp, in the floor frame (z up, floor z = 0
   * ``/diagnostics``: processing time, rates, solver status and time, residual root force
     over body weight, counters of fallbacks, solver failures, re-initialisations, time jumps.
 
+Several people (docs/multi_person.md): ``bodies_motion_topic`` and ``bodies_contacts_topic``
+(default ``/mocap/lifter/bodies/...``, names prefixed ``body_<id>/``) carry every person; once
+they deliver, each person is simulated on their own (own contacts matching, floor estimate and
+state, ended ``person_timeout_s`` after last seen) and ``motion_topic`` is ignored. Each
+person's output goes to ``/humans/bodies/body_<id>/physics/{motion,joints3d,joint_states,
+grf/left,grf/right}``, every person to ``/mocap/physics/bodies/{motion,joints3d,markers}``,
+and the main person (the smallest id present: the one tracked longest) to the single-person
+topics above. Every output but the motion and ``/diagnostics`` is built only while it has a
+subscriber.
+
 Floor frame (``floor_source``, :mod:`mocap_physics.floor`): the dynamics and the outputs are
 in a floor frame (z up, floor z = 0, x = the camera's viewing direction on the floor, origin
 below the camera): p_floor = R p_camera + (0, 0, camera height).
