@@ -31,6 +31,10 @@ SYSTEM_TOPICS = frozenset({'/rosout', '/parameter_events'})
 RecordFn = Callable[[str, Any, Any], None]
 
 
+def _ignore(*_args: Any) -> None:
+    """The DDS callback of a wired subscription in a live graph (see InProcessGraph.seal)."""
+
+
 class DeliveryError(RuntimeError):
     """A subscription callback raised: which node and topic, and the original error."""
 
@@ -46,9 +50,16 @@ class InProcessGraph:
     """
 
     def __init__(self, record: Optional[RecordFn] = None,
-                 on_error: Optional[Callable[[str, str, BaseException], None]] = None) -> None:
+                 on_error: Optional[Callable[[str, str, BaseException], None]] = None,
+                 live: bool = False) -> None:
         self.record = record
         self.on_error = on_error
+        #: live (``mocap run``): every message also leaves through DDS while a subscriber
+        #: outside the graph listens, and the wired subscriptions ignore what DDS delivers
+        #: from a wired publisher (they get it from the graph); see :meth:`seal`
+        self.live = live
+        self._pub_topics: set = set()
+        self._dds_callbacks: List[Tuple[Any, Callable[[Any], None]]] = []
         self.nodes: List[Any] = []
         self._subscribers: DefaultDict[str, List[Tuple[str, Callable[[Any], None]]]] = \
             collections.defaultdict(list)
@@ -74,8 +85,19 @@ class InProcessGraph:
         for sub in node.subscriptions:
             if sub.topic_name not in SYSTEM_TOPICS:
                 self._subscribers[sub.topic_name].append((name, sub.callback))
+                self._dds_callbacks.append((sub, sub.callback))
         self.nodes.append(node)
         return node
+
+    def seal(self) -> None:
+        """Live graphs, after every node is added: a wired subscription on a topic that a
+        wired node publishes ignores DDS deliveries (the graph already delivered the message);
+        on other topics (a camera, a bag played beside) it receives from DDS as usual."""
+        for sub, callback in self._dds_callbacks:
+            if sub.topic_name in self._pub_topics:
+                sub.callback = _ignore
+            else:
+                sub.callback = callback
 
     def subscribers(self, topic: str) -> List[str]:
         """Names of the wired nodes subscribed to ``topic``."""
@@ -88,9 +110,27 @@ class InProcessGraph:
         topic = pub.topic_name
         if topic in SYSTEM_TOPICS:
             return
-        pub.publish = self._publisher(topic, pub.qos_profile)
+        self._pub_topics.add(topic)
+        inner = self._publisher(topic, pub.qos_profile)
+        if not self.live:
+            pub.publish = inner
+            pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + (
+                1 if self.record is not None else 0)
+            return
+        dds_publish, dds_count = pub.publish, pub.get_subscription_count
+
+        def outside() -> int:
+            # DDS matches the wired subscriptions of this process too: they are not outside
+            return max(0, dds_count() - len(self._subscribers.get(topic, ())))
+
+        def publish(msg: Any) -> None:
+            inner(msg)
+            if outside() > 0:
+                dds_publish(msg)
+
+        pub.publish = publish
         pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + (
-            1 if self.record is not None else 0)
+            1 if self.record is not None else 0) + outside()
 
     def _publisher(self, topic: str, qos: Any) -> Callable[[Any], None]:
         def publish(msg: Any) -> None:

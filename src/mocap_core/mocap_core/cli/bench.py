@@ -195,17 +195,34 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
     stats: Dict[str, Dict[str, float]] = {}
     cpu0: Dict[str, float] = {}
     try:
-        start('lifter', {'mode': config['lifter_mode']})
-        start('physics', {})
-        start('gmr', {'lookahead': config['lookahead']})
-        for name, text in (('lifter', 'lifter ready'), ('physics', 'physics on'),
-                           ('gmr', 'gmr ready')):
-            wait_for(name, text)
-        time.sleep(3.0)                                   # discovery between the processes
-        start('keypoints', {'path': str(video), 'realtime': True,
-                            'loop': True, 'fps': 30.0,
-                            'wait_for_subscribers': 2, **config.get('keypoints', {})})
-        wait_for('keypoints', 'detector')
+        if config.get('composed'):
+            # the four nodes in one process (mocap run); the listener is the subscriber the
+            # keypoint node waits for beside the lifter
+            kp = {'realtime': True, 'fps': 30.0, 'wait_for_subscribers': 2,
+                  **config.get('keypoints', {})}
+            cmd = [sys.executable, '-m', 'mocap_core.cli.mocap', 'run', '--video', str(video),
+                   '--loop', '--param', f"lifter.mode={config['lifter_mode']}",
+                   '--param', f"gmr.lookahead={config['lookahead']}"]
+            for k, v in kp.items():
+                cmd += ['--param', f'keypoints.{k}={v}']
+            logs['composed'] = work / f"{config['name']}_composed.log"
+            with logs['composed'].open('wb') as f:
+                procs['composed'] = subprocess.Popen(cmd, env=env, stdout=f,
+                                                     stderr=subprocess.STDOUT,
+                                                     stdin=subprocess.DEVNULL)
+            wait_for('composed', 'detector')
+        else:
+            start('lifter', {'mode': config['lifter_mode']})
+            start('physics', {})
+            start('gmr', {'lookahead': config['lookahead']})
+            for name, text in (('lifter', 'lifter ready'), ('physics', 'physics on'),
+                               ('gmr', 'gmr ready')):
+                wait_for(name, text)
+            time.sleep(3.0)                               # discovery between the processes
+            start('keypoints', {'path': str(video), 'realtime': True,
+                                'loop': True, 'fps': 30.0,
+                                'wait_for_subscribers': 2, **config.get('keypoints', {})})
+            wait_for('keypoints', 'detector')
         for name, p in procs.items():
             s = _proc_stats(p.pid)
             cpu0[name] = s['cpu_s'] if s else 0.0
@@ -217,8 +234,9 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
                 if s:
                     stats[name] = s
         elapsed = time.monotonic() - t0
-        procs['keypoints'].send_signal(signal.SIGINT)
-        procs['keypoints'].wait(15)
+        first = 'composed' if 'composed' in procs else 'keypoints'
+        procs[first].send_signal(signal.SIGINT)
+        procs[first].wait(15)
         time.sleep(2.0)
     finally:
         _stop(procs.values())
@@ -357,7 +375,9 @@ def write_report(res: Dict, out: Path) -> None:
         c = live['config']
         lines += ['', f"## Live, {c['name']}: lifter {c['lifter_mode']}, GMR look-ahead "
                   f"{c['lookahead']} frames", '',
-                  f"Four `ros2 run` processes, the video looped at 30 fps for "
+                  ('The four nodes in one process (`mocap run`)' if c.get('composed') else
+                   'Four `ros2 run` processes') + ', the video looped at 30 fps for '
+                  f"
                   f"{live['seconds']:.0f} s; latency = arrival time - image stamp, after a "
                   f"2 s warm-up. Look-ahead: {live['lookahead_frames']} frames = "
                   f"{live['lookahead_budget_ms']:.0f} ms at the rate the keypoints arrived.",
@@ -405,6 +425,10 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
     configs = [{'name': 'defaults', 'lifter_mode': 'windowed', 'lookahead': 15},
                {'name': 'low latency', 'lifter_mode': 'causal', 'lookahead': 0}]
     configs = configs[:args.configs]
+    if args.composed:
+        # the same configurations with the four nodes in one process (mocap run)
+        configs += [dict(c, name=c['name'] + ', composed (mocap run)', composed=True)
+                    for c in configs]
     if args.single_person_baseline:
         # today's one-person keypoint stage beside the several-people default, same run
         configs.insert(0, {'name': 'defaults, max_persons 1 (single-person detector)',
@@ -431,6 +455,9 @@ def add_parser(sub) -> None:
     pp.add_argument('--video', default=str(ROOT / 'data' / 'video_example' /
                                            'taiji_640x360.mp4'))
     pp.add_argument('--repeat', type=int, default=3, help='offline passes (0: none)')
+    pp.add_argument('--composed', action='store_true',
+                    help='also run each live configuration as one process (mocap run), '
+                    'after the separate processes, in the same run')
     pp.add_argument('--single-person-baseline', action='store_true',
                     help='also run the live defaults with the single-person keypoint stage '
                     '(max_persons 1), first, for a side-by-side comparison')

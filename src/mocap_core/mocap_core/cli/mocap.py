@@ -342,6 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .process import add_parser as add_process_parser
     add_process_parser(sub)
+    from .run import add_parser as add_run_parser
+    add_run_parser(sub)
 
     from .bench import add_parser as add_bench_parser
     add_bench_parser(sub)

@@ -1,0 +1,152 @@
+"""``mocap run``: the four nodes live in one process (the composed mode).
+
+The keypoint, lifter, physics and GMR node classes (the ones ``ros2 run`` starts, found through
+the ``mocap.nodes`` entry points) run in one process, spun by one executor, and hand their
+messages to each other through :class:`mocap_core.inprocess.InProcessGraph` in live mode:
+in order, without serialising them and without DDS between the stages. Every topic still
+leaves through DDS while a subscriber outside the process listens (RViz, ``ros2 topic echo``,
+``ros2 bag record``), and a node builds a message only while someone listens
+(:mod:`mocap_core.publishing`).
+
+Usage::
+
+    mocap run --video clip.mp4                     # a video file, played at its rate
+    mocap run --camera 0                           # a camera
+    mocap run --image-topic /camera/image_raw      # images from a topic
+    mocap run --video clip.mp4 --param lifter.mode=causal --param gmr.lookahead=0
+    mocap run --camera 0 -- --ros-args -r /mocap/world/motion:=/person/motion
+
+Node parameters: ``--param NODE.NAME=VALUE`` (NODE = keypoints, lifter, physics, gmr), or the
+usual ``--ros-args -p NODE:NAME:=VALUE`` after ``--``; ``--ros-args`` remappings apply to every
+node. A file source ends the run when it ends (the frames waiting for look-ahead are emitted
+first); Ctrl-C ends any run. Exit status: 0, 2 for a bad argument or a node that cannot start.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any, Dict, List, Optional
+
+from .. import plugins
+
+
+class RunError(RuntimeError):
+    """A bad argument or a node that cannot start (one line)."""
+
+
+def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
+        max_seconds: float = 0.0) -> int:
+    """Run the composed pipeline until the source ends, Ctrl-C or ``max_seconds`` (0: no
+    limit). Returns the exit status."""
+    import time
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    from ..guard import record_failure
+    from ..inprocess import InProcessGraph
+    from .process import _overrides
+
+    context = Context()
+    rclpy.init(args=['--ros-args', *(ros_args or [])] if ros_args else None, context=context)
+    nodes: Dict[str, Any] = {}
+    executor = SingleThreadedExecutor(context=context)
+
+    def on_error(node: str, topic: str, exc: BaseException) -> None:
+        target = nodes.get(node)
+        if target is not None:
+            record_failure(target, f'{topic} message', exc)
+
+    graph = InProcessGraph(on_error=on_error, live=True)
+    try:
+        for name in plugins.PIPELINE:
+            try:
+                cls = plugins.load_node_class(name)
+                nodes[name] = graph.add(cls(context=context,
+                                            parameter_overrides=_overrides(params.get(name,
+                                                                                      {}))))
+            except Exception as exc:  # noqa: BLE001 - a bad parameter, missing weights, ...
+                raise RunError(f'cannot start the {name} node: {type(exc).__name__}: '
+                               f'{exc}') from None
+        graph.seal()
+        for node in nodes.values():
+            executor.add_node(node)
+        source = nodes['keypoints']
+        t0 = time.monotonic()
+        while context.ok() and not getattr(source, 'done', False):
+            if max_seconds and time.monotonic() - t0 > max_seconds:
+                break
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                raise
+            except Exception as exc:  # noqa: BLE001 - the failing-callback policy
+                record_failure(source, 'callback', exc)
+        drain = getattr(source, '_drain', None)
+        if drain is not None:
+            drain()
+        graph.flush()               # the frames still waiting for look-ahead
+        for _ in range(5):          # let the last messages leave
+            executor.spin_once(timeout_sec=0.05)
+        summary = getattr(source, 'summary', None)
+        if summary is not None:
+            source.get_logger().info(f'finished: {summary()}')
+        return 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        for node in nodes.values():
+            shutdown = getattr(node, 'shutdown', None)
+            if shutdown is not None:
+                shutdown()
+            executor.remove_node(node)
+            node.destroy_node()
+        context.try_shutdown()
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser('run', help='the four nodes live in one process (composed mode)',
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    src = p.add_mutually_exclusive_group()
+    src.add_argument('--video', help='a video file (played at its frame rate)')
+    src.add_argument('--camera', help='an OpenCV camera index, /dev/videoN or a stream URL')
+    src.add_argument('--image-topic', help='sensor_msgs/Image (or .../compressed) topic')
+    p.add_argument('--loop', action='store_true', help='video: play it again at the end')
+    p.add_argument('--param', action='append', default=[], metavar='NODE.NAME=VALUE',
+                   help='node parameter (repeatable)')
+    p.add_argument('--seconds', type=float, default=0.0, help='stop after this long (0: no '
+                   'limit)')
+    p.add_argument('ros_args', nargs=argparse.REMAINDER,
+                   help='after --: --ros-args ... for every node (remappings, parameters)')
+    p.set_defaults(func=cmd_run)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .process import ProcessError, parse_params
+
+    try:
+        params = parse_params(args.param)
+    except ProcessError as exc:
+        print(f'mocap run: error: {exc}', file=sys.stderr)
+        return 2
+    kp = params.setdefault('keypoints', {})
+    if args.video:
+        kp.setdefault('source', 'video')
+        kp.setdefault('path', args.video)
+        kp.setdefault('loop', bool(args.loop))
+    elif args.camera:
+        kp.setdefault('source', 'camera')
+        kp.setdefault('device', args.camera)
+    elif args.image_topic:
+        kp.setdefault('source', 'topic')
+        kp.setdefault('image_topic', args.image_topic)
+    extra = [a for a in args.ros_args if a != '--']
+    if extra and extra[0] == '--ros-args':
+        extra = extra[1:]
+    try:
+        return run(params, extra, args.seconds)
+    except RunError as exc:
+        print(f'mocap run: error: {exc}', file=sys.stderr)
+        return 2
