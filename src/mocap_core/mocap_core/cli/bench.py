@@ -377,7 +377,6 @@ def write_report(res: Dict, out: Path) -> None:
                   f"{c['lookahead']} frames", '',
                   ('The four nodes in one process (`mocap run`)' if c.get('composed') else
                    'Four `ros2 run` processes') + ', the video looped at 30 fps for '
-                  f"
                   f"{live['seconds']:.0f} s; latency = arrival time - image stamp, after a "
                   f"2 s warm-up. Look-ahead: {live['lookahead_frames']} frames = "
                   f"{live['lookahead_budget_ms']:.0f} ms at the rate the keypoints arrived.",
