@@ -6,6 +6,8 @@
 #   scripts/live.sh video FILE             # a video file at its frame rate
 #   scripts/live.sh bag BAG                # ros2 bag play of a bag with images or keypoints
 #   scripts/live.sh none                   # lifter, physics, gmr only (feed them yourself)
+#   scripts/live.sh composed video FILE    # the four nodes in one process (mocap run);
+#   scripts/live.sh composed camera [DEV]  #   also for a camera
 #
 # Environment: RECORD=folder also records every pipeline topic with `ros2 bag record`;
 # LIFTER_MODE=causal|windowed, LIFTER_MODEL=motionet|vtm, GAINS=fixed|learned,
@@ -23,6 +25,27 @@ mkdir -p "$logs"
 pids=()
 stop() { for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; done; wait || true; }
 trap stop EXIT INT TERM
+
+if [[ "$kind" == composed ]]; then
+  # one process: mocap run (messages handed over in process; DDS for outside subscribers)
+  src="${2:-camera}"
+  case "$src" in
+    video)  run_src=(--video "${3:?usage: scripts/live.sh composed video FILE}") ;;
+    camera) run_src=(--camera "${3:-0}") ;;
+    *) echo "usage: scripts/live.sh composed video FILE | composed camera [DEVICE]" >&2; exit 2 ;;
+  esac
+  if [[ -n "${RECORD:-}" ]]; then
+    ros2 bag record -o "$RECORD" -a > "$logs/record.log" 2>&1 &
+    pids+=("$!")
+    echo "[live] recording every topic to $RECORD"
+  fi
+  exec_args=("${run_src[@]}" --param "lifter.mode=${LIFTER_MODE:-windowed}"
+             --param "lifter.model=${LIFTER_MODEL:-motionet}"
+             --param "physics.gains_mode=${GAINS:-fixed}"
+             --param "gmr.static_camera=${STATIC_CAMERA:-false}")
+  mocap run "${exec_args[@]}"
+  exit $?
+fi
 
 if [[ -n "${RECORD:-}" ]]; then
   topics=(/mocap/keypoints2d /mocap/camera_info /mocap/camera/motion /mocap/skeleton/urdf

@@ -203,6 +203,10 @@ class _LockedRateMeter(RateMeter):
             return super().rate(now)
 
 
+#: Detected frames waiting for the executor beyond which the oldest are dropped (counted).
+MAX_WAITING_RESULTS = 2
+
+
 def main(args: Optional[List[str]] = None) -> int:
     if help_requested(sys.argv[1:] if args is None else list(args), __doc__, PARAMETERS):
         return 0
@@ -375,6 +379,11 @@ class KeypointsNode(Node):
         self.diag.set_value('intrinsics', 'none yet')
         self.detector_stats = LatencyStats()
         self.results: Deque[tuple] = collections.deque()
+        self.behind = 0       # detected frames dropped because the executor fell behind
+        # paced by the world (a camera, a topic, a file played at its rate): frames may drop;
+        # a file read as fast as possible (realtime false) or a synchronous topic never drops
+        self._live_pace = (self.kind == 'camera' or (self.kind == 'topic' and not p['synchronous'])
+                           or (self.kind not in ('camera', 'topic') and p['realtime']))
         self.guard = self.create_guard_condition(guarded(self, self._drain, 'results'))
         self.worker = LatestWorker(self.processor.process, self._on_result).start()
         self.feeder: Optional[SourceFeeder] = None
@@ -610,6 +619,16 @@ class KeypointsNode(Node):
 
     def _drain(self) -> None:
         while self.results:
+            if len(self.results) > MAX_WAITING_RESULTS and self._live_pace:
+                # the executor falls behind the detector (in one process with the other
+                # stages, mocap run, they share it): the oldest results go, counted, as a
+                # camera's frames would; never a growing queue
+                self.results.popleft()
+                self.diag.dropped += 1
+                self.behind += 1
+                self.get_logger().warn(f'falling behind: {self.behind} detected frames dropped '
+                                       'before publishing so far', throttle_duration_sec=5.0)
+                continue
             frame, result, error, seconds = self.results.popleft()
             self._handle(frame, result, error, seconds)
         self._count_worker_drops()
