@@ -203,6 +203,15 @@ class _LockedRateMeter(RateMeter):
             return super().rate(now)
 
 
+def _within(fn, seconds: float) -> bool:
+    """Run ``fn()`` in a daemon thread and wait at most ``seconds``; whether it finished (a
+    shutdown never hangs on a model that does not let go)."""
+    t = threading.Thread(target=fn, name='close', daemon=True)
+    t.start()
+    t.join(seconds)
+    return not t.is_alive()
+
+
 #: Detected frames waiting for the executor beyond which the oldest are dropped (counted).
 MAX_WAITING_RESULTS = 2
 
@@ -763,7 +772,14 @@ class KeypointsNode(Node):
         if self.source is not None:
             self.source.close()
         if self.detector is not None:
-            self.detector.close()
+            if self.worker.running:
+                # a detection still in progress: closing the models under it could block;
+                # the process ends without (the detector thread is a daemon)
+                print('[keypoints] the detector did not stop within 5 s; not closing it',
+                      file=sys.stderr)
+            elif not _within(self.detector.close, 5.0):
+                print('[keypoints] closing the detector took more than 5 s; going on',
+                      file=sys.stderr)
         if self._annotated_node is not None:
             context = self._annotated_node.context
             self._annotated_node.destroy_node()

@@ -84,6 +84,11 @@ class LatestWorker(Generic[T, R]):
             return self._cond.wait_for(lambda: self._slot is _EMPTY and not self._busy,
                                        timeout)
 
+    @property
+    def running(self) -> bool:
+        """Whether the thread is still alive (e.g. after :meth:`stop` timed out)."""
+        return self._thread.is_alive()
+
     def stop(self, timeout: float = 5.0) -> None:
         """Stop after the item in progress (a waiting item is discarded)."""
         with self._cond:
