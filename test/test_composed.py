@@ -43,3 +43,29 @@ def test_composed_run_publishes_to_outside_subscribers(processes, peer):
     assert np.all(np.diff(stamps) > 0)
     assert set(stamps) <= set(kp_stamps) or len(kp_stamps) < 96
     assert len(joints) >= 60                     # built because this test subscribes
+
+
+def test_composed_run_takes_remappings_and_node_parameters(processes, peer):
+    """`-- --ros-args -r ...` remaps for every node of the process (the stages still find each
+    other), and a node's parameter set with --ros-args -p NODE:NAME:=VALUE reaches it."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import PointCloud2
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+    reliable = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE)
+    world = peer.subscribe(MultiDOFJointTrajectory, '/person/world', reliable)
+    lifted = peer.subscribe(MultiDOFJointTrajectory, '/person/lifted', reliable)
+    peer.subscribe(PointCloud2, '/mocap/keypoints2d',
+                   QoSProfile(depth=500, reliability=ReliabilityPolicy.BEST_EFFORT))
+    proc, log = processes.start(
+        [sys.executable, '-m', 'mocap_core.cli.mocap', 'run', '--video', str(CLIP),
+         '--param', 'keypoints.realtime=false', '--param', 'keypoints.wait_for_subscribers=2',
+         '--param', 'keypoints.wait_timeout_s=60.0', '--',
+         '--ros-args', '-r', '/mocap/world/motion:=/person/world',
+         '-r', '/mocap/lifter/motion:=/person/lifted', '-p', 'lifter:mode:=causal'],
+        'mocap_run_remapped')
+    peer.spin_until_exit(proc, timeout=180)
+    text = log.read_text()
+    assert proc.returncode == 0, text
+    assert len(world) >= 60 and len(lifted) >= 60, (len(world), len(lifted), text[-2000:])
+    assert '(causal' in text                     # the lifter's start line names its mode
