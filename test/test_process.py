@@ -373,3 +373,30 @@ def test_process_person_leaving_without_camera_info(tmp_path):
     for stage in ('lifter', 'physics', 'world'):
         assert len(run.stages[stage].stamps) == 50, stage
         assert np.all(np.isfinite(run.stages[stage].joints)), stage
+
+
+def test_process_batch_jobs_isolation_and_resume(tmp_path):
+    """Several inputs with --jobs 2: a bad input is reported and skipped, the others finish,
+    a summary table is written; a rerun skips what is done."""
+    import json
+
+    junk = tmp_path / 'junk.mcap'
+    junk.write_bytes(b'not a bag at all' * 10)
+    listing = tmp_path / 'inputs.txt'
+    listing.write_text(f'{GT_BAG}\n# a comment\n{ROOT / "bags" / "gt_bandai_wave_normal"}\n')
+    out = tmp_path / 'batch'
+    res = _mocap('process', f'@{listing}', junk, '-o', out, '--jobs', '2', '--no-progress')
+    assert res.returncode == 1, res.stdout + res.stderr          # one input failed
+    summary = json.loads((out / 'summary.json').read_text())
+    status = {Path(j['input']).name: j['status'] for j in summary['inputs']}
+    assert status == {'gt_cmu_walk_12_02': 'done', 'gt_bandai_wave_normal': 'done',
+                      'junk.mcap': 'failed'}, summary
+    failed = next(j for j in summary['inputs'] if j['status'] == 'failed')
+    assert failed['error'], failed
+    assert _stamps(out / 'gt_cmu_walk_12_02' / 'bag', '/mocap/world/motion')
+    table = (out / 'summary.md').read_text()
+    assert 'junk.mcap | failed |' in table and '2 processed, 0 skipped, 1 failed' in table
+    res = _mocap('process', f'@{listing}', '-o', out, '--no-progress')
+    assert res.returncode == 0, res.stdout + res.stderr
+    again = json.loads((out / 'summary.json').read_text())
+    assert {j['status'] for j in again['inputs']} == {'skipped (done before)'}

@@ -361,8 +361,12 @@ def _run_video(node, graph, recorder, writer, record_images: bool, progress: boo
 def add_parser(sub) -> None:
     p = sub.add_parser('process', help='run the whole pipeline offline on a bag or a video',
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument('input', help='rosbag2 folder (MCAP), .mcap file or video file')
-    p.add_argument('-o', '--output', required=True, help='output bag folder')
+    p.add_argument('input', nargs='+', help='rosbag2 folder (MCAP), .mcap file or video file; '
+                   'several, a folder of them or @list.txt: a batch (mocap_core.cli.batch)')
+    p.add_argument('-o', '--output', required=True, help='output bag folder (a batch: the '
+                   'folder of one output folder per input)')
+    p.add_argument('--jobs', type=int, default=1, help='batch: inputs processed at once, each '
+                   'in its own process (default 1)')
     p.add_argument('--start', default='auto', choices=('auto',) + STAGES,
                    help='first stage (default: from the input topics)')
     p.add_argument('--image-topic', default='', help='image topic of the input bag')
@@ -378,9 +382,42 @@ def add_parser(sub) -> None:
     p.set_defaults(func=cmd_process)
 
 
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from .batch import expand_inputs, run_batch, summary_table, write_summary
+
+    try:
+        inputs = expand_inputs(args.input)
+        parse_params(args.param)
+    except (FileNotFoundError, ProcessError) as exc:
+        print(f'mocap process: error: {exc}', file=sys.stderr)
+        return 2
+    if not inputs:
+        print('mocap process: error: no bag or video among the inputs', file=sys.stderr)
+        return 2
+    extra = []
+    if args.start != 'auto':
+        extra += ['--start', args.start]
+    if args.image_topic:
+        extra += ['--image-topic', args.image_topic]
+    t0 = time.monotonic()
+    batch = run_batch(inputs, Path(args.output), args.jobs, args.param,
+                      progress=not args.no_progress, extra=extra)
+    wall = time.monotonic() - t0
+    write_summary(batch, Path(args.output), wall)
+    print(summary_table(batch, wall))
+    return 1 if any(j.status == 'failed' for j in batch) else 0
+
+
 def cmd_process(args: argparse.Namespace) -> int:
     import json
 
+    from .batch import _is_bag
+
+    first = Path(args.input[0])
+    if (len(args.input) > 1 or args.input[0].startswith('@') or args.jobs > 1 or
+            (first.is_dir() and not _is_bag(first))):
+        return _cmd_batch(args)
+    args.input = args.input[0]
     try:
         params = parse_params(args.param)
         summary = process(Path(args.input), Path(args.output), start=args.start,
