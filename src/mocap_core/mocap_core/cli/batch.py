@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import List, Optional, Sequence
 
-from .process import VIDEO_SUFFIXES
+from .inputs import VIDEO_SUFFIXES, is_bag
 
 DONE = 'done.json'
 
@@ -39,11 +39,6 @@ class Job:
     error: str = ''
 
 
-def _is_bag(path: Path) -> bool:
-    return (path.is_dir() and ((path / 'metadata.yaml').exists() or
-                               any(path.glob('*.mcap')))) or path.suffix == '.mcap'
-
-
 def expand_inputs(items: Sequence[str]) -> List[Path]:
     """Files, folders and ``@list`` files -> the inputs, in a stable order (no duplicates).
     Raises FileNotFoundError for a path that does not exist."""
@@ -56,11 +51,11 @@ def expand_inputs(items: Sequence[str]) -> List[Path]:
         p = Path(item)
         if not p.exists():
             raise FileNotFoundError(f'{p} does not exist')
-        if _is_bag(p) or p.is_file():
+        if is_bag(p) or p.is_file():
             out.append(p)
             continue
         for child in sorted(p.iterdir()):
-            if _is_bag(child) or child.suffix.lower() in VIDEO_SUFFIXES:
+            if is_bag(child) or child.suffix.lower() in VIDEO_SUFFIXES:
                 out.append(child)
     seen, unique = set(), []
     for p in out:

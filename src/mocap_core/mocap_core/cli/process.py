@@ -36,11 +36,11 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
 
 from .. import topics as T
+from .inputs import VIDEO_SUFFIXES, is_bag
 from ..plugins import PIPELINE as NODES
 from ..plugins import PluginError, load_node_class
 
 STAGES = ('images', 'keypoints', 'lifter', 'physics')
-VIDEO_SUFFIXES = {'.mp4', '.avi', '.mov', '.mkv', '.webm', '.m4v', '.mpg', '.mpeg'}
 IMAGE_TYPES = {'sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage'}
 #: Topics each stage's node produces (an input bag's copy of them is not kept).
 PRODUCED = {
@@ -411,11 +411,9 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 def cmd_process(args: argparse.Namespace) -> int:
     import json
 
-    from .batch import _is_bag
-
     first = Path(args.input[0])
     if (len(args.input) > 1 or args.input[0].startswith('@') or args.jobs > 1 or
-            (first.is_dir() and not _is_bag(first))):
+            (first.is_dir() and not is_bag(first))):
         return _cmd_batch(args)
     args.input = args.input[0]
     try:
