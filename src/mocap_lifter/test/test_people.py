@@ -176,6 +176,20 @@ def test_node_publishes_each_person_and_all_together(two_people):
         assert np.abs(p1.root_position - p2.root_position).max() > 0.1
         values = {kv.key: kv.value for kv in node.diag.status().values}
         assert values['persons'] == '2' and values['person_ids'] == '1 2'
+        assert node.bodies.ids == [1, 2]
+        # person 2 leaves: after person_timeout_s (1 s) their stream ends and their topics go
+        before = len(by_topic[topics.body_topic(2, 'lifter', 'motion')])
+        recorded.clear()
+        for k in range(40, 80):
+            graph.publish(topics.KEYPOINTS, keypoints_to_cloud(
+                a[k % len(a)][None], make_header(T0 + k * DT, 'c'), ids=[1]))
+        graph.flush()
+        assert node.bodies.ids == [1]
+        values = {kv.key: kv.value for kv in node.diag.status().values}
+        assert values['persons'] == '1' and values['person_ids'] == '1'
+        later = [m for t, m in recorded if t == topics.body_topic(2, 'lifter', 'motion')]
+        # person 2's frames up to 1 s after they were last seen (frame 39), then nothing
+        assert before + len(later) == 40 + 30
     finally:
         node.destroy_node()
         context.try_shutdown()
