@@ -128,9 +128,10 @@ PARAMETERS = (
     ParamSpec('max_persons', 4, 'Most persons followed and published at once (the cloud has '
               'one row per person, an id field, the longest tracked person in row 0)',
               min_value=1, max_value=16, read_only=True),
-    ParamSpec('detection_interval', 5, 'blazepose_multi: look for new people in the whole '
-              'image every this many frames (between, each person is tracked in its own '
-              'window)', min_value=1, max_value=1000, read_only=True),
+    ParamSpec('detection_interval', 5, 'blazepose_multi: look for new people every this '
+              'many frames, in regions of the image taken in turn (between, each person is '
+              'tracked in their own window); while nobody new appears the interval doubles, up '
+              'to 3x this', min_value=1, max_value=1000, read_only=True),
     ParamSpec('min_person_height_px', 48.0, 'Persons whose seen keypoints span fewer pixels '
               'in height are ignored', min_value=0.0, read_only=True),
     ParamSpec('id_after_frames', 0, 'A new person gets an id (and is published) after being '
@@ -328,6 +329,7 @@ class KeypointsNode(Node):
                 detector = create_detector(
                     name, max_persons=p['max_persons'],
                     detection_interval=p['detection_interval'] if p['tracking'] else 1,
+                    max_detection_interval=3 * p['detection_interval'] if p['tracking'] else 1,
                     min_person_px=p['min_person_height_px'],
                     min_detection_confidence=p['min_detection_confidence'],
                     min_tracking_confidence=p['min_tracking_confidence'])
