@@ -78,8 +78,13 @@ def test_physics_killed_and_restarted_mid_stream(processes, ros2_cmd, ros_env):
             assert 'Traceback' not in text, text
         # the loop makes the stamps jump back: the stages say so and go on
         assert 'jumped back' in lifter_log.read_text()
-        # GMR saw its input stop and resume: the accumulation restarted, and it said so
-        assert 'restarted' in gmr_log.read_text(), gmr_log.read_text()[-3000:]
+        # GMR saw its input stop and resume, and said so. Where in the looped bag the restarted
+        # physics picks up decides how (it depends on how long the restart took): stamps after
+        # a gap restart the accumulation, stamps more than max_gap_s back start a new stream
+        # ('a bag restarted?'), stamps within max_gap_s of the last are dropped until they
+        # advance (seen once under a CPU hog)
+        text = gmr_log.read_text()
+        assert 'restarted' in text or 'did not advance' in text, text[-3000:]
     finally:
         counter.close()
 
