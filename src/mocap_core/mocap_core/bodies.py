@@ -5,12 +5,15 @@ REP-155's layout ``/humans/bodies/body_<id>/<stage>/<name>`` (:func:`mocap_core.
 body_topic`). Publishers are created on a person's first frame and destroyed when the person
 is gone. A message is built only when its topic has a subscriber (the builder is a callable),
 so a person nobody listens to costs a dictionary lookup per topic and frame; the URDF is
-transient-local and always published (it changes rarely).
+transient-local and always published (it changes rarely). :class:`CombinedPublishers` owns a
+stage's combined topics (every person of a frame in one message).
 """
 
 from __future__ import annotations
 
-from typing import Callable, Dict, Tuple
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple
+
+import numpy as np
 
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry, Path
@@ -96,3 +99,48 @@ class BodyPublishers:
     def remove_all(self) -> None:
         for pid in self.ids:
             self.remove(pid)
+
+
+class CombinedPublishers:
+    """One stage's combined topics, every person of a frame in one message
+    (``/mocap/<stage>/bodies/{motion,joints3d,markers}``, and ``contacts`` with
+    ``with_contacts``); each built only while it has a subscriber.
+
+    Args:
+        node: the rclpy node that owns the publishers.
+        stage: ``lifter``, ``physics`` or ``world`` (also the markers' namespace prefix).
+        with_contacts: also ``/mocap/<stage>/bodies/contacts`` (the lifter's probabilities).
+    """
+
+    def __init__(self, node, stage: str, with_contacts: bool = False) -> None:
+        names = ['motion', 'joints3d', 'markers'] + (['contacts'] if with_contacts else [])
+        self.stage = stage
+        self.pubs = {name: node.create_publisher(BODY_TOPIC_TYPES[name],
+                                                 topics.bodies_topic(stage, name), STREAM_QOS)
+                     for name in names}
+
+    def publish(self, header, bodies: Sequence[Tuple[int, Any, Optional[np.ndarray]]]) -> None:
+        """``bodies``: ``(id, Pose, contacts or None)`` of every person of the frame stamped
+        ``header``, the main person first; contacts are (4,) probabilities or states (the
+        markers colour the contact points by them)."""
+        from . import ros_conversions as rc
+        from .publishing import publish_if_heard
+
+        pubs = self.pubs
+        publish_if_heard(pubs['motion'], lambda: rc.bodies_to_motion(
+            [(pid, pose) for pid, pose, _ in bodies], header))
+        if 'contacts' in pubs:
+            publish_if_heard(pubs['contacts'], lambda: rc.bodies_contacts_to_msg(
+                [(pid, c) for pid, _, c in bodies], header))
+        publish_if_heard(pubs['joints3d'], lambda: rc.bodies_to_cloud(
+            np.stack([pose.joint_positions() for _, pose, _ in bodies]),
+            [pid for pid, _, _ in bodies], header))
+
+        def markers() -> MarkerArray:
+            arr = MarkerArray()
+            for pid, pose, contacts in bodies:
+                arr.markers.extend(rc.pose_to_markers(
+                    pose, header, ns=f'{self.stage}/{topics.body_name(pid)}',
+                    color=rc.person_color(pid), contacts=contacts).markers)
+            return arr
+        publish_if_heard(pubs['markers'], markers)

@@ -77,7 +77,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
-from mocap_core.bodies import BodyPublishers
+from mocap_core.bodies import BodyPublishers, CombinedPublishers
 from mocap_core.publishing import publish_if_heard
 from mocap_core.tf import TfBroadcaster, pose_to_transforms
 from mocap_core.diagnostics import NodeDiagnostics
@@ -274,13 +274,8 @@ class GMRNode(Node):
             'path': self.create_publisher(PathMsg, topics.WORLD_PATH, STREAM_QOS),
             'markers': self.create_publisher(MarkerArray, topics.WORLD_MARKERS, STREAM_QOS),
             'floor': self.create_publisher(TransformStamped, topics.WORLD_FLOOR, STREAM_QOS),
-            'bodies_motion': self.create_publisher(
-                MultiDOFJointTrajectory, topics.bodies_topic('world', 'motion'), STREAM_QOS),
-            'bodies_joints3d': self.create_publisher(
-                PointCloud2, topics.bodies_topic('world', 'joints3d'), STREAM_QOS),
-            'bodies_markers': self.create_publisher(
-                MarkerArray, topics.bodies_topic('world', 'markers'), STREAM_QOS),
         }
+        self.combined = CombinedPublishers(self, 'world')
         self.input_frame = ''
         if p['camera_mode'] not in ('auto', 'static', 'moving'):
             raise ValueError(f"camera_mode must be auto, static or moving, got "
@@ -737,16 +732,8 @@ class GMRNode(Node):
         """Combined world messages of person ``pid``'s frames (one per frame: the persons'
         world frames become ready at their own times)."""
         for f in frames:
-            header = rc.make_header(f.stamp_ns, self.output_frame)
-            if self.pub['bodies_motion'].get_subscription_count() > 0:
-                self.pub['bodies_motion'].publish(rc.bodies_to_motion([(pid, f.pose)], header))
-            if self.pub['bodies_joints3d'].get_subscription_count() > 0:
-                self.pub['bodies_joints3d'].publish(rc.bodies_to_cloud(
-                    f.pose.joint_positions()[None], [pid], header))
-            if self.pub['bodies_markers'].get_subscription_count() > 0:
-                self.pub['bodies_markers'].publish(rc.pose_to_markers(
-                    f.pose, header, ns=f'world/{topics.body_name(pid)}',
-                    color=rc.person_color(pid)))
+            self.combined.publish(rc.make_header(f.stamp_ns, self.output_frame),
+                                  [(pid, f.pose, None)])
 
     def _report_nonfinite(self, count: int) -> None:
         """Diagnostics and a rate-limited warning for frames whose network output was not

@@ -49,7 +49,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.diagnostics import NodeDiagnostics
-from mocap_core.bodies import BodyPublishers
+from mocap_core.bodies import BodyPublishers, CombinedPublishers
 from mocap_core.publishing import publish_if_heard
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
@@ -166,15 +166,8 @@ class LifterNode(Node):
             'contacts': self.create_publisher(JointState, topics.LIFTER_CONTACTS, STREAM_QOS),
             'markers': self.create_publisher(MarkerArray, topics.LIFTER_MARKERS, STREAM_QOS),
             'urdf': self.create_publisher(String, topics.SKELETON_URDF, LATCHED_QOS),
-            'bodies_joints3d': self.create_publisher(
-                PointCloud2, topics.bodies_topic('lifter', 'joints3d'), STREAM_QOS),
-            'bodies_markers': self.create_publisher(
-                MarkerArray, topics.bodies_topic('lifter', 'markers'), STREAM_QOS),
-            'bodies_motion': self.create_publisher(
-                MultiDOFJointTrajectory, topics.bodies_topic('lifter', 'motion'), STREAM_QOS),
-            'bodies_contacts': self.create_publisher(
-                JointState, topics.bodies_topic('lifter', 'contacts'), STREAM_QOS),
         }
+        self.combined = CombinedPublishers(self, 'lifter', with_contacts=True)
         self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
         self.diag.set_value('model', f'{arch} ({mode})')
         self.diag.set_value('latency_frames', lifter.latency)
@@ -322,24 +315,8 @@ class LifterNode(Node):
         """All persons of one stamp (main person first): the lossless motion and contacts
         (the physics stage's input), a joints cloud with an id field and the markers, one
         namespace and colour per person."""
-        header = rc.make_header(stamp, self.frame_id)
-        if self.pub['bodies_motion'].get_subscription_count() > 0:
-            self.pub['bodies_motion'].publish(rc.bodies_to_motion(
-                [(pid, f.pose) for pid, f in frames], header))
-        if self.pub['bodies_contacts'].get_subscription_count() > 0:
-            self.pub['bodies_contacts'].publish(rc.bodies_contacts_to_msg(
-                [(pid, f.contacts) for pid, f in frames], header))
-        if self.pub['bodies_joints3d'].get_subscription_count() > 0:
-            self.pub['bodies_joints3d'].publish(rc.bodies_to_cloud(
-                np.stack([f.pose.joint_positions() for _, f in frames]),
-                [pid for pid, _ in frames], header))
-        if self.pub['bodies_markers'].get_subscription_count() > 0:
-            arr = MarkerArray()
-            for pid, f in frames:
-                arr.markers.extend(rc.pose_to_markers(
-                    f.pose, header, ns=f'lifter/{topics.body_name(pid)}',
-                    color=rc.person_color(pid), contacts=f.contacts).markers)
-            self.pub['bodies_markers'].publish(arr)
+        self.combined.publish(rc.make_header(stamp, self.frame_id),
+                              [(pid, f.pose, f.contacts) for pid, f in frames])
 
     def _report_intrinsics(self) -> None:
         """Diagnostics (and one log line per change) of the intrinsics in use."""

@@ -86,16 +86,14 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from mocap_core import topics
-from mocap_core.topics import body_name
-from mocap_core.bodies import BodyPublishers
+from mocap_core.bodies import BodyPublishers, CombinedPublishers
 from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
-from mocap_core.ros_conversions import (MessageError, bodies_to_cloud, bodies_to_motion,
-                                        make_header, motion_to_bodies, motion_to_pose,
-                                        msg_to_bodies_contacts, person_color,
+from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bodies,
+                                        motion_to_pose, msg_to_bodies_contacts,
                                         msg_to_contacts, pose_to_joint_state, pose_to_markers,
                                         pose_to_motion, positions_to_cloud, stamp_to_ns,
                                         wrench_to_msg)
@@ -289,10 +287,7 @@ class PhysicsNode(Node):
         self.pub_markers = (self.create_publisher(MarkerArray, topics.PHYSICS_MARKERS,
                                                   STREAM_QOS)
                             if p['publish_markers'] else None)
-        self.pub_bodies = {
-            name: self.create_publisher(kind, topics.bodies_topic('physics', name), STREAM_QOS)
-            for name, kind in (('motion', MultiDOFJointTrajectory), ('joints3d', PointCloud2),
-                               ('markers', MarkerArray))}
+        self.combined = CombinedPublishers(self, 'physics')
         self.diag.set_value('gains', 'fixed' if not learned else f'learned ({weights})')
         self.diag.set_value('model', 'none yet (waiting for the first motion)')
         qos = input_qos(STREAM_QOS, p['queue_depth'])
@@ -394,6 +389,12 @@ class PhysicsNode(Node):
                 self._publish(online.add_contacts(stamp, probs), pid)
             else:                                  # contacts before the person's first motion
                 self._person(pid).add_contacts(stamp, probs)
+
+    @property
+    def _main_online(self) -> OnlinePhysics:
+        """The main person's streaming state (the single-person input's without several
+        people)."""
+        return self.persons.get(self.main_id, self.online) if self.bodies_mode else self.online
 
     def _person(self, pid: int) -> OnlinePhysics:
         online = self.persons.get(pid)
@@ -508,19 +509,9 @@ class PhysicsNode(Node):
             b.publish(pid, f'grf/{foot}', lambda w=w: wrench_to_msg(w.force, w.moment, header))
 
     def _publish_combined(self, pid: int, frames: List[PhysicsFrame]) -> None:
-        pubs = self.pub_bodies
         for frame in frames:
-            header = make_header(frame.stamp_ns, frame.frame_id)
-            pose = frame.result.pose
-            if pubs['motion'].get_subscription_count() > 0:
-                pubs['motion'].publish(bodies_to_motion([(pid, pose)], header))
-            if pubs['joints3d'].get_subscription_count() > 0:
-                pubs['joints3d'].publish(bodies_to_cloud(pose.joint_positions()[None], [pid],
-                                                         header))
-            if pubs['markers'].get_subscription_count() > 0:
-                pubs['markers'].publish(pose_to_markers(
-                    pose, header, ns=f'physics/{body_name(pid)}', color=person_color(pid),
-                    contacts=frame.result.contact_active.astype(float)))
+            self.combined.publish(make_header(frame.stamp_ns, frame.frame_id), [
+                (pid, frame.result.pose, frame.result.contact_active.astype(float))])
 
     def _publish_frame(self, frame: PhysicsFrame) -> None:
         """The main person's (or the single input's) frame on the single-person topics: the
@@ -552,9 +543,7 @@ class PhysicsNode(Node):
     def _markers(self, frame: PhysicsFrame, header) -> MarkerArray:
         res = frame.result
         pose = res.pose
-        source = self.persons.get(self.main_id, self.online) if self.bodies_mode else \
-            self.online
-        names = source.cycle.model.contact_names
+        names = self._main_online.cycle.model.contact_names
         # every contact point always has its arrow (ids 10-13 stay the same; zero length
         # without force)
         forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
@@ -568,9 +557,7 @@ class PhysicsNode(Node):
         return markers
 
     def refresh_diagnostics(self) -> None:
-        # several people: the main person's state (the counters below are theirs)
-        online = self.persons.get(self.main_id, self.online) if self.bodies_mode else \
-            self.online
+        online = self._main_online       # several people: the counters below are theirs
         self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
         self.diag.set_value('person_ids', ' '.join(map(str, sorted(self.persons))) or 'none')
         st = online.cycle.stats
