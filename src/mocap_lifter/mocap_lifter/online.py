@@ -8,6 +8,14 @@ frame, runs the network over the buffer and returns one lifted frame:
 * ``windowed`` mode: the output for the frame ``latency`` frames back, which sees ``latency``
   future frames (better accuracy, bounded delay of latency / fps seconds).
 
+With ``chunk = 1`` (live), MotioNet runs frame by frame through
+:class:`mocap_lifter.streaming.StreamingEncoder`, which keeps every layer's columns and
+computes one new column per layer and frame: the same output as a pass over the whole
+context window (to float32 rounding) for a small part of its time. It is used when it is
+exact: the default look-ahead (half the receptive field) or the causal network, and no
+keypoint smoothing; otherwise, and for flushes (whose last frames lack their future), the
+window pass runs as before.
+
 ``chunk`` > 1 (offline processing) waits for that many frames more and lifts them in one
 network pass: the same outputs (MotioNet is purely convolutional, every output's receptive
 field lies inside the pass; VTM lifts each frame from the window it would get frame by frame,
@@ -39,13 +47,14 @@ import torch
 
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.pose import Pose
-from mocap_core.skeleton import NUM_KEYPOINTS, Skeleton
+from mocap_core.skeleton import NUM_JOINTS, NUM_KEYPOINTS, Skeleton
 from mocap_core.streams import StampOrder
 
 from .features import (average_quaternions, lifter_features, mirror_features,
                        smooth_keypoints, unmirror_rotations)
 from .intrinsics import StreamIntrinsics
-from .model import MotioNet
+from .model import NUM_CONTACTS, MotioNet
+from .streaming import StreamingEncoder
 
 
 @dataclass
@@ -76,12 +85,14 @@ class OnlineLifter:
         flip: test-time flip augmentation (MotioNet): the mirrored keypoints are lifted in
             the same pass and the mirrored-back rotations, root and contacts averaged in
             (twice the network time; 42.8 -> 39.9 mm MPJPE on the validation split).
+        streaming: lift frame by frame with :class:`~mocap_lifter.streaming.StreamingEncoder`
+            where that is exact (module docstring); False: always the window pass.
     """
 
     def __init__(self, model: MotioNet, mode: str = 'causal', latency: Optional[int] = None,
                  skeleton_frames: int = 90, max_gap_s: float = 1.0,
                  device: str = 'cpu', chunk: int = 1, flip: bool = False,
-                 smooth: float = 0.0) -> None:
+                 smooth: float = 0.0, streaming: bool = True) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -104,7 +115,18 @@ class OnlineLifter:
         if smooth < 0:
             raise ValueError(f'smooth must be >= 0, got {smooth}')
         self.smooth = float(smooth)
+        self._stream: Optional[StreamingEncoder] = None
+        if streaming and self.chunk == 1 and self.smooth == 0 and device == 'cpu' \
+                and context_frames is None and isinstance(model, MotioNet):
+            enc = StreamingEncoder(model, rows=2 if self.flip else 1)
+            if enc.lag == self.latency:
+                self._stream = enc
         self.reset()
+
+    @property
+    def streaming(self) -> bool:
+        """Whether frames are lifted by the streaming encoder (module docstring)."""
+        return self._stream is not None
 
     def reset(self) -> None:
         """Forget the buffer and the skeleton."""
@@ -119,6 +141,8 @@ class OnlineLifter:
         # chunk > 1: the skeleton estimate after each push (frames_seen -> lengths), so that
         # every frame gets the skeleton it would have got frame by frame
         self._lengths_at: Dict[int, torch.Tensor] = {}
+        if self._stream is not None:
+            self._stream.reset()
 
     def push(self, stamp_ns: int, keypoints: np.ndarray, intrinsics: CameraIntrinsics,
              ) -> Tuple[List[LiftedFrame], str]:
@@ -148,6 +172,7 @@ class OnlineLifter:
         self._kp.append(kp)
         self._stamps.append(int(stamp_ns))
         self.frames_seen += 1
+        streamed = self._stream_push() if self._stream is not None else None
         if self.chunk > 1 and self.lengths is None and self.pending() > self.latency:
             # where frame-by-frame lifting would emit a frame (and update the skeleton)
             with torch.no_grad():
@@ -156,7 +181,8 @@ class OnlineLifter:
             if self.frames_seen >= self.skeleton_frames:
                 self.lengths = lengths
         if self.pending() >= self.latency + self.chunk:
-            frames.extend(self._infer([-self.pending() + j for j in range(self.chunk)]))
+            frames.extend(self._infer([-self.pending() + j for j in range(self.chunk)],
+                                      streamed))
         return frames, event
 
     def pending(self) -> int:
@@ -169,10 +195,30 @@ class OnlineLifter:
         n = self.pending()
         return self._infer([-n + j for j in range(n)]) if n else []
 
+    def _stream_push(self) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Give the streaming encoder the newest frame (with the window's features, see
+        :meth:`StreamingEncoder.push`). Returns (rows, out) raw E_Q output, (rows, 2)
+        canonical root keypoint and (rows,) scale of frame ``latency`` frames back, or None
+        while the segment is shorter than that."""
+        feats, root_2d, scale = self._features_np()
+        n = min(len(feats), self.context)
+        f, r = feats[-n:][None], root_2d[-n:][None]
+        if self.flip:
+            fm, rm = mirror_features(f, r)
+            f, r = np.concatenate([f, fm]), np.concatenate([r, rm])
+        y = self._stream.push(f)
+        if y is None:
+            return None
+        k = -1 - self._stream.lag
+        return y, r[:, k], np.full(len(r), scale[k])
+
     @torch.no_grad()
-    def _infer(self, indices: List[int]) -> List[LiftedFrame]:
+    def _infer(self, indices: List[int], streamed=None) -> List[LiftedFrame]:
         """Lift the buffered frames at ``indices`` (negative, from the end, ascending) in one
-        network pass over the context they need."""
+        network pass over the context they need (``streamed``: the output of
+        :meth:`_stream_push` for ``indices == [-1 - latency]``, used instead of the pass)."""
+        if streamed is not None and len(indices) == 1 and indices[0] == -1 - self.latency:
+            return self._emit_streamed(indices[0], *streamed)
         x, r, sc = self._features()
         fixed = self.lengths is not None
         if self.chunk > 1:
@@ -232,13 +278,49 @@ class OnlineLifter:
                                       contacts[k], fixed_i, float(depth[k])))
         return frames
 
-    def _features(self):
-        """Network inputs over the buffer: features (1, T, C), root keypoint (1, T, 2),
-        scale (1, T)."""
+    def _emit_streamed(self, index: int, y: np.ndarray, root_2d: np.ndarray,
+                       scale: np.ndarray) -> List[LiftedFrame]:
+        """The frame at ``index`` from the streaming encoder's raw output (rows, out): the
+        same post-processing as :meth:`MotioNet.forward` and :meth:`_infer`."""
+        x = None
+        if self.lengths is None:
+            x, r, _ = self._features()
+            lengths = self._estimate_lengths(x, r)
+            if self.frames_seen >= self.skeleton_frames:
+                self.lengths = lengths
+            fixed = False
+        else:
+            lengths, fixed = self.lengths, True
+        nj = NUM_JOINTS
+        y = y.astype(np.float64)
+        q = y[:, :nj * 4].reshape(-1, nj, 4)
+        q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-6)
+        depth = np.exp(np.clip(y[:, nj * 4], -5.0, 5.0)) / np.maximum(scale, 1e-4)
+        root = np.concatenate([root_2d * depth[:, None], depth[:, None]], axis=1)
+        contacts = 1.0 / (1.0 + np.exp(-y[:, nj * 4 + 1:nj * 4 + 1 + NUM_CONTACTS]))
+        rot, rt, ct, dp = q[0], root[0], contacts[0], depth[0]
+        if self.flip:
+            rot = average_quaternions(rot, unmirror_rotations(q[1]))
+            rt = 0.5 * (rt + root[1] * [-1.0, 1.0, 1.0])
+            ct = 0.5 * (ct + contacts[1][[2, 3, 0, 1]])
+            dp = 0.5 * (dp + depth[1])
+        stamp = self._stamps[index]
+        self._last_emitted = stamp
+        skeleton = Skeleton.from_group_lengths(lengths[0].cpu().numpy().astype(np.float64))
+        return [LiftedFrame(stamp, Pose(skeleton, rot, rt), ct, fixed, float(dp))]
+
+    def _features_np(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Features over the buffer: (T, C) float32, root keypoint (T, 2), scale (T,)."""
         kp = np.stack(self._kp)
         if self.smooth > 0:
             kp = smooth_keypoints(kp, self.smooth)
         feats, root_2d, scale, _ = lifter_features(kp, self._intr)
+        return feats, root_2d, scale
+
+    def _features(self):
+        """Network inputs over the buffer: features (1, T, C), root keypoint (1, T, 2),
+        scale (1, T)."""
+        feats, root_2d, scale = self._features_np()
         return (torch.as_tensor(feats[None], device=self.device),
                 torch.as_tensor(root_2d[None].astype(np.float32), device=self.device),
                 torch.as_tensor(scale[None].astype(np.float32), device=self.device))
