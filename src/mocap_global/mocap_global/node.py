@@ -87,7 +87,7 @@ from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
 
 from .model import TTA_MODES, with_tta
-from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame
+from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame, prepare_outputs
 from .weights import default_weights, load_weights
 
 @dataclass
@@ -550,19 +550,14 @@ class GMRNode(Node):
         stamp = rc.stamp_to_ns(msg.header.stamp)
         if stamp < self.main_last_ns - int(self.p['max_gap_s'] * 1e9):
             self.main_last_ns = -1                # a new stream (a bag played again)
-        names = list(self.model.cfg.joint_names)
-        for pid, pose in bodies:
-            if list(pose.joint_names) != names:
-                pose = self._pose(rc.pose_to_motion(pose, msg.header))
-                if pose is None:
-                    continue
-            person = self.persons.get(pid)
-            if person is None:
-                person = self.persons[pid] = _Person()
-                self.get_logger().info(f'person {pid}: new')
-                self.main_id = min(self.persons)
-            person.seen_ns = stamp
-            self._push(pid, person, stamp, pose, msg.header.frame_id)
+        with self.diag.processing():     # every person's frame, timed as one message
+            batch = self._add_everyone(bodies, stamp, msg.header)
+            # one network pass for everybody whose frame is ready, then each one's frames
+            prepare_outputs([person.online for _, person, _ in batch])
+            ready = [(pid, person, frames + person.online.take(), event, gap)
+                     for pid, person, (frames, event, gap) in batch]
+        for pid, person, frames, event, gap in ready:
+            self._finish(pid, person, frames, event, gap)
         timeout = int(self.p['person_timeout_s'] * 1e9)
         for pid in [q for q, pr in self.persons.items()
                     if stamp - pr.seen_ns > timeout or pr.seen_ns - stamp > max(timeout, 10**9)]:
@@ -573,10 +568,42 @@ class GMRNode(Node):
             self.bodies.remove(pid)
             self.get_logger().info(f'person {pid} gone: their topics are removed')
 
+    def _add_everyone(self, bodies, stamp: int, header) -> list:
+        """:meth:`_add` each person's pose (new people get a state); returns
+        ``(id, state, what _add returned)`` of the frames taken."""
+        names = list(self.model.cfg.joint_names)
+        batch = []
+        for pid, pose in bodies:
+            if list(pose.joint_names) != names:
+                pose = self._pose(rc.pose_to_motion(pose, header))
+                if pose is None:
+                    continue
+            person = self.persons.get(pid)
+            if person is None:
+                person = self.persons[pid] = _Person()
+                self.get_logger().info(f'person {pid}: new')
+                self.main_id = min(self.persons)
+            person.seen_ns = stamp
+            added = self._add(pid, person, stamp, pose, header.frame_id)
+            if added is not None:
+                batch.append((pid, person, added))
+        return batch
+
     def _push(self, pid: Optional[int], person: _Person, stamp: int, pose,
               frame_id: str) -> None:
         """Check the stamp, push to the person's :class:`OnlineGMR`, publish the frames
         that became ready."""
+        with self.diag.processing():
+            added = self._add(pid, person, stamp, pose, frame_id)
+            if added is not None:
+                frames, event, gap = added
+                frames = frames + person.online.take()
+        if added is not None:
+            self._finish(pid, person, frames, event, gap)
+
+    def _add(self, pid: Optional[int], person: _Person, stamp: int, pose, frame_id: str):
+        """Check the stamp and add the frame to the person's :class:`OnlineGMR` (without
+        emitting). Returns (frames a restart ended, event, gap s) or None if dropped."""
         if person.last_stamp - stamp > self.p['max_gap_s'] * 1e9:
             # a new stream (e.g. a bag played again): the accumulation restarts below
             self.get_logger().warn(
@@ -587,7 +614,7 @@ class GMRNode(Node):
             self.diag.dropped += 1
             self.get_logger().warn('motion stamp did not advance; frame dropped',
                                    throttle_duration_sec=2.0)
-            return
+            return None
         if person.online is None:
             person.online = self._make_online(frame_id)
         gap = (stamp - person.last_stamp) * 1e-9 if person.last_stamp >= 0 else 0.0
@@ -595,13 +622,17 @@ class GMRNode(Node):
         if pid is None or pid == self.main_id:
             self._check_rate(gap)
         try:
-            with self.diag.processing():
-                frames, event = person.online.push(
-                    stamp, pose, self._anchor(stamp, 'optical' not in self.input_frame))
+            frames, event = person.online.add(
+                stamp, pose, self._anchor(stamp, 'optical' not in self.input_frame))
         except ValueError as exc:
             self.diag.errors += 1
             self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
-            return
+            return None
+        return frames, event, gap
+
+    def _finish(self, pid: Optional[int], person: _Person, frames, event: str,
+                gap: float) -> None:
+        """After :meth:`_add` and the emission: restarts, the first-frame log, publish."""
         self.diag.error(None)
         self.last_input = time.monotonic()
         if event:

@@ -14,7 +14,7 @@ from mocap_core.skeleton import NUM_JOINTS, Skeleton
 
 from mocap_global import features as F
 from mocap_global.model import GMR, GMRConfig, TTA_MODES, reverse_padded, with_tta
-from mocap_global.online import OnlineGMR, StaticCameraFusion
+from mocap_global.online import OnlineGMR, StaticCameraFusion, prepare_outputs
 from mocap_global.se3 import (accumulate, align_yaw_translation, compose_steps, invert_motion,
                               relative_motion, time_reverse_motion, tilt_rotation, up_in_body)
 from mocap_global.training import metrics as M
@@ -377,6 +377,36 @@ def test_online_pure_accumulation_matches_the_network_motions():
                       out['translation'][0, :-1].double().numpy())
     np.testing.assert_allclose(np.stack([f.pose.root_position for f in frames]), T, atol=1e-6)
     np.testing.assert_allclose(R0, tilt_rotation(out['up'][0, 0].double().numpy()), atol=1e-6)
+
+
+def test_several_people_in_one_network_pass_give_each_ones_own_frames():
+    """add / prepare_outputs / take for three people (one joins later, so windows differ in
+    length) = push each on their own; one pass per window length."""
+    model = _small_model()
+    streams = [_poses(60, seed=s) for s in range(3)]
+    starts = [0, 0, 9]
+    alone = [OnlineGMR(model, lookahead=5) for _ in streams]
+    together = [OnlineGMR(model, lookahead=5) for _ in streams]
+    out_alone = [[] for _ in streams]
+    out_together = [[] for _ in streams]
+    passes = []
+    for i in range(60):
+        stamp = i * 33_333_333
+        active = [k for k in range(3) if i >= starts[k]]
+        for k in active:
+            out_alone[k] += alone[k].push(stamp, streams[k][i])[0]
+            out_together[k] += together[k].add(stamp, streams[k][i])[0]
+        passes.append(prepare_outputs([together[k] for k in active]))
+        assert prepare_outputs([together[k] for k in active]) == 0     # cached
+        for k in active:
+            out_together[k] += together[k].take()
+    # windows of 24 frames: until person 3's window is full there are two lengths
+    assert passes[:5] == [0] * 5 and passes[5] == 1 and passes[20] == 2 and passes[-1] == 1
+    for a, b in zip(out_alone, out_together):
+        assert [f.stamp_ns for f in a] == [f.stamp_ns for f in b] and len(a) > 40
+        for fa, fb in zip(a, b):
+            np.testing.assert_allclose(fa.pose.root_position, fb.pose.root_position, atol=1e-5)
+            np.testing.assert_allclose(fa.pose.rotations, fb.pose.rotations, atol=1e-5)
 
 
 def test_static_camera_fusion_removes_drift():

@@ -629,7 +629,12 @@ class KeypointsNode(Node):
         self.guard.trigger()
 
     def _drain(self) -> None:
-        while self.results:
+        # only the results that are here now: a detector faster than the executor (in one
+        # process with the other stages) must not keep this callback from returning, or
+        # timers, other callbacks and Ctrl-C would wait for ever
+        for _ in range(len(self.results)):
+            if not self.results:
+                break
             if len(self.results) > MAX_WAITING_RESULTS and self._live_pace:
                 # the executor falls behind the detector (in one process with the other
                 # stages, mocap run, they share it): the oldest results go, counted, as a

@@ -45,14 +45,23 @@ from .model import MotioNet, _FusionBlock, _TemporalConv
 
 
 @dataclass
-class _Layer:
-    """One layer as a matrix over stacked input taps: ``y[c] = act(W @ [x[c + o] for o in
-    offsets] + b)`` per branch, branches summed, plus the input column (``residual``)."""
+class _Branch:
+    """One temporal convolution of a layer as a matrix over stacked input columns: ``y[c] =
+    act(W @ [x[c + o] for o in offsets[j0:j1]] + b)``."""
 
-    weight: np.ndarray            # (branches * C_out, taps * C_in) float32
-    bias: np.ndarray              # (branches * C_out,)
+    weight: torch.Tensor          # (C_out, (j1 - j0) * C_in) float32, batch norm folded in
+    bias: torch.Tensor            # (C_out,)
+    j0: int                       # its taps: the layer's offsets[j0:j1]
+    j1: int
+
+
+@dataclass
+class _Layer:
+    """Parallel temporal convolutions over one input, summed, plus the input column
+    (``residual``). Every branch's taps are a contiguous range of ``offsets``."""
+
+    branches: List[_Branch]
     offsets: Tuple[int, ...]      # input column offsets of the taps (ascending)
-    branches: int
     slope: Optional[float]        # LeakyReLU slope; None: no activation (the shrink)
     residual: bool
 
@@ -85,24 +94,26 @@ def _slope(conv: _TemporalConv) -> float:
 
 
 def _layer(convs: List[_TemporalConv], residual: bool) -> _Layer:
-    """Parallel temporal convolutions (one input, summed outputs) as one tap matrix."""
+    """Parallel temporal convolutions (one input, summed outputs) as tap matrices."""
     parts = []
     for conv in convs:
         w, b, pad = _folded(conv)
         d = conv.conv.dilation[0]
         parts.append((w, b, [k * d - pad for k in range(w.shape[2])]))
     offsets = sorted({o for _, _, offs in parts for o in offs})
-    c_out, c_in = parts[0][0].shape[:2]
-    weight = np.zeros((len(parts) * c_out, len(offsets) * c_in))
-    for i, (w, _, offs) in enumerate(parts):
-        for k, o in enumerate(offs):
-            j = offsets.index(o)
-            weight[i * c_out:(i + 1) * c_out, j * c_in:(j + 1) * c_in] = w[:, :, k]
+    branches = []
+    for w, b, offs in parts:
+        j0 = offsets.index(offs[0])
+        if offsets[j0:j0 + len(offs)] != offs:
+            raise ValueError('a branch whose taps are not contiguous among the layer\'s')
+        # (C_out, C_in, K) -> (C_out, K * C_in): tap-major, as the input columns are stacked
+        mat = np.ascontiguousarray(w.transpose(0, 2, 1).reshape(w.shape[0], -1))
+        branches.append(_Branch(torch.from_numpy(mat.astype(np.float32)),
+                                torch.from_numpy(b.astype(np.float32)), j0, j0 + len(offs)))
     slopes = {_slope(c) for c in convs}
     if len(slopes) != 1:
         raise ValueError('branches with different activations')
-    return _Layer(weight.astype(np.float32), np.concatenate([b for _, b, _ in parts])
-                  .astype(np.float32), tuple(offsets), len(parts), slopes.pop(), residual)
+    return _Layer(branches, tuple(offsets), slopes.pop(), residual)
 
 
 class StreamingEncoder:
@@ -127,8 +138,8 @@ class StreamingEncoder:
                 raise TypeError(f'unexpected block {type(block).__name__}')
             layers.append(_layer(list(block.branches), residual=True))
         shrink = enc.shrink
-        layers.append(_Layer(shrink.weight.detach().numpy()[:, :, 0].astype(np.float32),
-                             shrink.bias.detach().numpy().astype(np.float32), (0,), 1, None,
+        layers.append(_Layer([_Branch(shrink.weight.detach()[:, :, 0].float().contiguous(),
+                                      shrink.bias.detach().float(), 0, 1)], (0,), None,
                              False))
         self.layers = layers
         self.mean = model.feature_mean.detach().numpy().astype(np.float32)
@@ -214,22 +225,29 @@ class StreamingEncoder:
 
     def _compute(self, lay: _Layer, src, lo: int, hi: int) -> np.ndarray:
         """Columns ``lo..hi`` of a layer from its input columns (``src(j)``: (rows, C) or
-        None for a column before the segment, which is zero)."""
+        None for a column before the segment, which is zero). Returns (rows, C_out, ncol).
+
+        The products run in torch, not NumPy: torch keeps to the node's thread setting
+        (``torch.set_num_threads``), while NumPy's BLAS would start threads of its own whose
+        spinning costs more CPU than the product."""
         ncol = hi - lo + 1
-        c_in = lay.weight.shape[1] // len(lay.offsets)
-        x = np.zeros((self.rows, len(lay.offsets) * c_in, ncol), dtype=np.float32)
+        c_in = lay.branches[0].weight.shape[1] // (lay.branches[0].j1 - lay.branches[0].j0)
+        # input columns stacked tap-major: (taps * C_in, rows * ncol)
+        x = np.zeros((len(lay.offsets), c_in, self.rows, ncol), dtype=np.float32)
         for k, o in enumerate(lay.offsets):
             for c in range(ncol):
                 j = lo + c + o
                 col = src(j) if j >= 0 else None
                 if col is not None:
-                    x[:, k * c_in:(k + 1) * c_in, c] = col
-        y = np.matmul(lay.weight, x) + lay.bias[:, None]
-        if lay.slope is not None:
-            y = np.where(y >= 0, y, lay.slope * y)
-        c_out = y.shape[1] // lay.branches
-        y = y.reshape(self.rows, lay.branches, c_out, ncol).sum(axis=1)
+                    x[k, :, :, c] = col.T
+        xt = torch.from_numpy(x.reshape(len(lay.offsets) * c_in, self.rows * ncol))
+        y = None
+        for br in lay.branches:
+            z = torch.addmm(br.bias[:, None], br.weight, xt[br.j0 * c_in:br.j1 * c_in])
+            if lay.slope is not None:
+                z = torch.nn.functional.leaky_relu(z, lay.slope)
+            y = z if y is None else y + z
         if lay.residual:
             k0 = lay.offsets.index(0)
-            y = y + x[:, k0 * c_in:(k0 + 1) * c_in]
-        return y
+            y = y + xt[k0 * c_in:(k0 + 1) * c_in]
+        return y.numpy().reshape(-1, self.rows, ncol).transpose(1, 0, 2)
