@@ -176,6 +176,9 @@ def test_process_ground_truth_bag_every_topic_same_stamps_accurate(gt_run):
     # the final status is refreshed although timers do not run offline
     assert 'DoF' in run.diagnostics['physics: physics']['model'], run.diagnostics
     assert run.diagnostics['physics: physics']['dynamics'] == 'whole_body', run.diagnostics
+    # offline: 16 frames per pass over the context window (live: the streaming encoder)
+    assert run.diagnostics['lifter: lifter']['inference'].startswith('window pass'), \
+        run.diagnostics
     assert 'processed 168 frames' in res.stdout
 
 

@@ -171,6 +171,10 @@ class LifterNode(Node):
         self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
         self.diag.set_value('model', f'{arch} ({mode})')
         self.diag.set_value('latency_frames', lifter.latency)
+        # frame by frame through the streaming encoder where exact (default look-ahead, no
+        # smoothing, chunk 1), otherwise a network pass over the context window per frame
+        self.diag.set_value('inference', 'streaming (one new column per layer and frame)'
+                            if lifter.streaming else f'window pass ({lifter.context} frames)')
         self._report_intrinsics()
         self.frame_id = 'camera_optical_frame'
         self.last_input = time.monotonic()

@@ -136,6 +136,7 @@ class OnlineLifter:
         self._stamps: Deque[int] = collections.deque(maxlen=size)
         self._intr: Optional[CameraIntrinsics] = None
         self.lengths: Optional[torch.Tensor] = None
+        self._held_skeleton: Optional[Tuple[torch.Tensor, Skeleton]] = None
         self.frames_seen = 0
         self._last_emitted = -1
         # chunk > 1: the skeleton estimate after each push (frames_seen -> lengths), so that
@@ -306,7 +307,13 @@ class OnlineLifter:
             dp = 0.5 * (dp + depth[1])
         stamp = self._stamps[index]
         self._last_emitted = stamp
-        skeleton = Skeleton.from_group_lengths(lengths[0].cpu().numpy().astype(np.float64))
+        cached = self._held_skeleton
+        if fixed and cached is not None and cached[0] is lengths:
+            skeleton = cached[1]                      # the held skeleton, built once
+        else:
+            skeleton = Skeleton.from_group_lengths(lengths[0].cpu().numpy().astype(np.float64))
+            if fixed:
+                self._held_skeleton = (lengths, skeleton)
         return [LiftedFrame(stamp, Pose(skeleton, rot, rt), ct, fixed, float(dp))]
 
     def _features_np(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -97,6 +97,7 @@ def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds,
     assert stamps == [T0 + k * DT for k in range(50)]
     values = _values(node)
     assert values['persons'] == '0' and values['person_ids'] == 'none'
+    assert values['inference'].startswith('streaming'), values    # live defaults
     assert values['errors'] == '0' and values['frames_dropped'] == '0'
     assert 'last_error' not in values
     assert values['intrinsics'].startswith('approximate ') and \
