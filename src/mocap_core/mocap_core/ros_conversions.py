@@ -279,6 +279,18 @@ def pose_to_motion(pose: Pose, header: Header) -> MultiDOFJointTrajectory:
     return msg
 
 
+def _point_transforms(msg: MultiDOFJointTrajectory) -> list:
+    """The transforms of the message's first point; MessageError for no point or a count
+    that is not the number of joint names."""
+    if len(msg.points) == 0:
+        raise MessageError('MultiDOFJointTrajectory has no point')
+    transforms = msg.points[0].transforms
+    if len(transforms) != len(msg.joint_names):
+        raise MessageError(f'MultiDOFJointTrajectory has {len(msg.joint_names)} joint names '
+                           f'but {len(transforms)} transforms')
+    return transforms
+
+
 def motion_to_pose(msg: MultiDOFJointTrajectory,
                    joint_names: Sequence[str] = JOINT_NAMES) -> Pose:
     """MultiDOFJointTrajectory -> Pose with joints in the order of ``joint_names``.
@@ -286,12 +298,7 @@ def motion_to_pose(msg: MultiDOFJointTrajectory,
     The message may list the joints in any order; extra joints are ignored. Raises
     MessageError for no point, a size mismatch, a missing joint, NaN or a zero quaternion.
     """
-    if len(msg.points) == 0:
-        raise MessageError('MultiDOFJointTrajectory has no point')
-    transforms = msg.points[0].transforms
-    if len(transforms) != len(msg.joint_names):
-        raise MessageError(f'MultiDOFJointTrajectory has {len(msg.joint_names)} joint names '
-                           f'but {len(transforms)} transforms')
+    transforms = _point_transforms(msg)
     index = {n: i for i, n in enumerate(msg.joint_names)}
     missing = [n for n in joint_names if n not in index]
     if missing:
@@ -427,12 +434,7 @@ def bodies_to_motion(bodies: Sequence[Tuple[int, Pose]], header: Header
 def motion_to_bodies(msg: MultiDOFJointTrajectory) -> List[Tuple[int, Pose]]:
     """The inverse of :func:`bodies_to_motion`: ``[(id, Pose)]`` in the message's order.
     Raises MessageError for a name without a ``body_<id>/`` prefix or a malformed body."""
-    if len(msg.points) == 0:
-        raise MessageError('MultiDOFJointTrajectory has no point')
-    transforms = msg.points[0].transforms
-    if len(transforms) != len(msg.joint_names):
-        raise MessageError(f'MultiDOFJointTrajectory has {len(msg.joint_names)} joint names '
-                           f'but {len(transforms)} transforms')
+    transforms = _point_transforms(msg)
     out = []
     for pid, idx in _split_bodies(msg.joint_names).items():
         one = MultiDOFJointTrajectory()
