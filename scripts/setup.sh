@@ -16,7 +16,7 @@ log() { printf '[setup] %s\n' "$*"; }
 hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
 
 # 1. The virtual environment, reinstalled only when the lock files change.
-req_hash="$(hash_of requirements/lock.txt requirements/mediapipe.txt requirements/render.txt requirements/tf2.txt)"
+req_hash="$(hash_of requirements/lock.txt requirements/mediapipe.txt requirements/render.txt requirements/tf2.txt requirements/ray.txt)"
 if [ "${FORCE:-0}" = 1 ] || [ ! -x "$venv/bin/python" ] || [ "$(cat "$venv/.lock-hash" 2>/dev/null)" != "$req_hash" ]; then
   log "creating $venv with $("$python_bin" --version 2>&1)"
   [ -x "$venv/bin/python" ] || "$python_bin" -m venv "$venv"
@@ -26,6 +26,7 @@ if [ "${FORCE:-0}" = 1 ] || [ ! -x "$venv/bin/python" ] || [ "$(cat "$venv/.lock
   "$venv/bin/python" -m pip install --quiet --no-deps -r requirements/mediapipe.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
   "$venv/bin/python" -m pip install --quiet --no-deps -r requirements/render.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
   "$venv/bin/python" -m pip install --quiet --no-deps -r requirements/tf2.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
+  "$venv/bin/python" -m pip install --quiet --no-deps -r requirements/ray.txt 2>&1 | { grep -v "is ignored: it is neither" || true; }
   echo "$req_hash" > "$venv/.lock-hash"
 else
   log "venv up to date"

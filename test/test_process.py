@@ -4,6 +4,7 @@ plausibility, determinism and bad input."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -403,3 +404,55 @@ def test_process_batch_jobs_isolation_and_resume(tmp_path):
     assert res.returncode == 0, res.stdout + res.stderr
     again = json.loads((out / 'summary.json').read_text())
     assert {j['status'] for j in again['inputs']} == {'skipped (done before)'}
+
+
+def test_process_batch_on_a_ray_cluster(tmp_path):
+    """The same batch as Ray tasks on a local cluster started here (as a second machine
+    would join it): the bad input fails alone, the others finish and hold the pipeline's
+    output; the cluster is stopped at the end."""
+    import json
+    import shutil
+    import socket
+    import tempfile
+
+    pytest.importorskip('ray')
+    ray_cmd = shutil.which('ray', path=str(Path(sys.executable).parent)) or shutil.which('ray')
+    assert ray_cmd, 'ray is installed but its command is not on the PATH'
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        port = s.getsockname()[1]
+    env = dict(os.environ, RAY_USAGE_STATS_ENABLED='0')
+    # a short temp dir: Ray's socket paths must fit in 107 characters
+    temp = tempfile.mkdtemp(prefix='ray', dir='/tmp')
+    start = subprocess.run([ray_cmd, 'start', '--head', f'--port={port}', '--num-cpus=2',
+                            '--node-ip-address=127.0.0.1', '--include-dashboard=false',
+                            '--disable-usage-stats', '--object-store-memory=100000000',
+                            f'--temp-dir={temp}'],
+                           capture_output=True, text=True, timeout=180, env=env)
+    assert start.returncode == 0, start.stdout + start.stderr
+    try:
+        junk = tmp_path / 'junk.mcap'
+        junk.write_bytes(b'not a bag at all' * 10)
+        out = tmp_path / 'batch'
+        res = _mocap('process', GT_BAG, junk, '-o', out, '--backend', 'ray',
+                     '--ray-address', f'127.0.0.1:{port}', '--no-progress', env=env)
+        assert res.returncode == 1, res.stdout + res.stderr        # one input failed
+        assert 'as Ray tasks on a cluster of 1 node(s), 2 CPUs' in res.stderr, res.stderr
+        summary = json.loads((out / 'summary.json').read_text())
+        status = {Path(j['input']).name: j['status'] for j in summary['inputs']}
+        assert status == {'gt_cmu_walk_12_02': 'done', 'junk.mcap': 'failed'}, summary
+        assert len(_stamps(out / 'gt_cmu_walk_12_02' / 'bag', '/mocap/world/motion')) == 168
+    finally:
+        subprocess.run([ray_cmd, 'stop', '--force'], capture_output=True, timeout=120,
+                       env=env)
+        shutil.rmtree(temp, ignore_errors=True)
+
+
+def test_process_batch_ray_backend_errors(tmp_path):
+    """No cluster at the address: a clear error, exit status 2."""
+    pytest.importorskip('ray')
+    res = _mocap('process', GT_BAG, '-o', tmp_path / 'b', '--backend', 'ray',
+                 '--ray-address', '127.0.0.1:9', '--no-progress')
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert 'mocap process: error: no Ray cluster at 127.0.0.1:9' in res.stderr, res.stderr
+

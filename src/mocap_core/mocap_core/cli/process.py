@@ -367,6 +367,12 @@ def add_parser(sub) -> None:
                    'folder of one output folder per input)')
     p.add_argument('--jobs', type=int, default=1, help='batch: inputs processed at once, each '
                    'in its own process (default 1)')
+    p.add_argument('--backend', default='local', choices=('local', 'ray'),
+                   help='batch: local (--jobs child processes on this machine) or ray (one '
+                   'Ray task per input on a Ray cluster; docs in mocap_core.cli.batch)')
+    p.add_argument('--ray-address', default=None,
+                   help="backend ray: the cluster to join ('auto', host:port; default: "
+                   'start one on this machine for the run)')
     p.add_argument('--start', default='auto', choices=('auto',) + STAGES,
                    help='first stage (default: from the input topics)')
     p.add_argument('--image-topic', default='', help='image topic of the input bag')
@@ -400,8 +406,13 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     if args.image_topic:
         extra += ['--image-topic', args.image_topic]
     t0 = time.monotonic()
-    batch = run_batch(inputs, Path(args.output), args.jobs, args.param,
-                      progress=not args.no_progress, extra=extra)
+    try:
+        batch = run_batch(inputs, Path(args.output), args.jobs, args.param,
+                          progress=not args.no_progress, extra=extra, backend=args.backend,
+                          address=args.ray_address)
+    except (RuntimeError, ConnectionError) as exc:      # no Ray, or no cluster there
+        print(f'mocap process: error: {exc}', file=sys.stderr)
+        return 2
     wall = time.monotonic() - t0
     write_summary(batch, Path(args.output), wall)
     print(summary_table(batch, wall))
@@ -413,7 +424,7 @@ def cmd_process(args: argparse.Namespace) -> int:
 
     first = Path(args.input[0])
     if (len(args.input) > 1 or args.input[0].startswith('@') or args.jobs > 1 or
-            (first.is_dir() and not is_bag(first))):
+            args.backend != 'local' or (first.is_dir() and not is_bag(first))):
         return _cmd_batch(args)
     args.input = args.input[0]
     try:
