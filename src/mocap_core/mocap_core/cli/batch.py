@@ -156,6 +156,7 @@ def run_batch(inputs: Sequence[Path], out_dir: Path, jobs: int = 1,
         else:
             todo.append(job)
 
+    by_output = {job.output: job for job in batch}
     with tqdm(total=len(todo), desc='mocap process', unit='input', disable=not progress) as bar:
         results = (_on_ray(todo, params, extra, address) if backend == 'ray' else
                    _on_threads(todo, params, extra, jobs))
@@ -164,8 +165,7 @@ def run_batch(inputs: Sequence[Path], out_dir: Path, jobs: int = 1,
             if job.status == 'failed':
                 bar.write(f'failed: {job.input}: {job.error}')
             # a job that ran elsewhere comes back as a copy: keep its outcome in `batch`
-            mine = next(j for j in batch if j.output == job.output)
-            mine.__dict__.update(job.__dict__)
+            by_output[job.output].__dict__.update(job.__dict__)
     return batch
 
 
