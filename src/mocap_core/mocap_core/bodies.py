@@ -123,24 +123,20 @@ class CombinedPublishers:
         """``bodies``: ``(id, Pose, contacts or None)`` of every person of the frame stamped
         ``header``, the main person first; contacts are (4,) probabilities or states (the
         markers colour the contact points by them)."""
+        from . import cdr
         from . import ros_conversions as rc
         from .publishing import publish_if_heard
 
         pubs = self.pubs
-        publish_if_heard(pubs['motion'], lambda: rc.bodies_to_motion(
+        publish_if_heard(pubs['motion'], lambda: cdr.bodies_to_motion(
             [(pid, pose) for pid, pose, _ in bodies], header))
         if 'contacts' in pubs:
-            publish_if_heard(pubs['contacts'], lambda: rc.bodies_contacts_to_msg(
+            publish_if_heard(pubs['contacts'], lambda: cdr.bodies_contacts_to_msg(
                 [(pid, c) for pid, _, c in bodies], header))
-        publish_if_heard(pubs['joints3d'], lambda: rc.bodies_to_cloud(
+        publish_if_heard(pubs['joints3d'], lambda: cdr.bodies_to_cloud(
             np.stack([pose.joint_positions() for _, pose, _ in bodies]),
             [pid for pid, _, _ in bodies], header))
-
-        def markers() -> MarkerArray:
-            arr = MarkerArray()
-            for pid, pose, contacts in bodies:
-                arr.markers.extend(rc.pose_to_markers(
-                    pose, header, ns=f'{self.stage}/{topics.body_name(pid)}',
-                    color=rc.person_color(pid), contacts=contacts).markers)
-            return arr
-        publish_if_heard(pubs['markers'], markers)
+        publish_if_heard(pubs['markers'], lambda: cdr.marker_array(
+            [spec for pid, pose, contacts in bodies for spec in rc.pose_marker_specs(
+                pose, ns=f'{self.stage}/{topics.body_name(pid)}', color=rc.person_color(pid),
+                contacts=contacts)], header))

@@ -12,6 +12,11 @@ The publishers and subscriptions stay real rclpy entities (the ROS graph sees th
 ``count_publishers``); only delivery is short-circuited. Every published message can also be
 handed to a ``record`` callback (e.g. to write the output bag).
 
+A node may publish serialised bytes (``Publisher.publish`` accepts them; the stages do for
+their per-frame outputs, :mod:`mocap_core.cdr`): the graph carries them as a
+:class:`SerializedMessage`, deserialised once, and only when a wired subscriber or a
+``record`` callback that does not take them raw (``record_raw=False``) needs the message.
+
 Usage::
 
     graph = InProcessGraph(record=lambda topic, msg, qos: ...)
@@ -35,6 +40,28 @@ def _ignore(*_args: Any) -> None:
     """The DDS callback of a wired subscription in a live graph (see InProcessGraph.seal)."""
 
 
+class SerializedMessage:
+    """CDR bytes published on a topic, with the publisher's message class; :meth:`message`
+    deserialises them (once)."""
+
+    __slots__ = ('data', 'msg_type', '_message')
+
+    def __init__(self, data: bytes, msg_type: type) -> None:
+        self.data = bytes(data)
+        self.msg_type = msg_type
+        self._message = None
+
+    def message(self) -> Any:
+        if self._message is None:
+            from rclpy.serialization import deserialize_message
+            self._message = deserialize_message(self.data, self.msg_type)
+        return self._message
+
+
+def _message(msg: Any) -> Any:
+    return msg.message() if isinstance(msg, SerializedMessage) else msg
+
+
 class DeliveryError(RuntimeError):
     """A subscription callback raised: which node and topic, and the original error."""
 
@@ -47,12 +74,16 @@ class InProcessGraph:
             node (``qos`` = the publisher's rclpy QoSProfile), before it is delivered.
         on_error: called as ``on_error(node_name, topic, exception)`` when a callback raises;
             the message still reaches the other subscribers. Default: raise DeliveryError.
+        record_raw: ``record`` takes what was published as it is: a message, or a
+            :class:`SerializedMessage` where a node published bytes. Otherwise it always
+            gets a message.
     """
 
     def __init__(self, record: Optional[RecordFn] = None,
                  on_error: Optional[Callable[[str, str, BaseException], None]] = None,
-                 live: bool = False) -> None:
+                 live: bool = False, record_raw: bool = False) -> None:
         self.record = record
+        self.record_raw = record_raw
         self.on_error = on_error
         #: live (``mocap run``): every message also leaves through DDS while a subscriber
         #: outside the graph listens, and the wired subscriptions ignore what DDS delivers
@@ -111,7 +142,7 @@ class InProcessGraph:
         if topic in SYSTEM_TOPICS:
             return
         self._pub_topics.add(topic)
-        inner = self._publisher(topic, pub.qos_profile)
+        inner = self._publisher(topic, pub.qos_profile, pub.msg_type)
         if not self.live:
             pub.publish = inner
             pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + (
@@ -132,16 +163,19 @@ class InProcessGraph:
         pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + (
             1 if self.record is not None else 0) + outside()
 
-    def _publisher(self, topic: str, qos: Any) -> Callable[[Any], None]:
+    def _publisher(self, topic: str, qos: Any, msg_type: type) -> Callable[[Any], None]:
         def publish(msg: Any) -> None:
+            if isinstance(msg, (bytes, bytearray, memoryview)):
+                msg = SerializedMessage(msg, msg_type)
             self.publish(topic, msg, qos)
         return publish
 
     def publish(self, topic: str, msg: Any, qos: Any = None) -> None:
-        """Record ``msg`` and deliver it (and everything published in response) before
-        returning; re-entrant calls from callbacks only enqueue."""
+        """Record ``msg`` (a message or a :class:`SerializedMessage`) and deliver it (and
+        everything published in response) before returning; re-entrant calls from callbacks
+        only enqueue."""
         if self.record is not None:
-            self.record(topic, msg, qos)
+            self.record(topic, msg if self.record_raw else _message(msg), qos)
         self.published[topic] += 1
         self._queue.append((topic, msg))
         if self._delivering:
@@ -152,7 +186,7 @@ class InProcessGraph:
                 t, m = self._queue.popleft()
                 for name, callback in self._subscribers.get(t, ()):
                     try:
-                        callback(m)
+                        callback(_message(m))
                     except Exception as exc:  # noqa: BLE001 - reported with its context
                         if self.on_error is None:
                             raise DeliveryError(f'{name} failed on {t}: '

@@ -25,6 +25,7 @@ Topic contracts implemented here:
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -192,15 +193,21 @@ def bodies_to_cloud(positions: np.ndarray, ids: Sequence[int], header: Header) -
     """(B, J, 3) joint positions (m) of B persons and their (B,) ids -> PointCloud2 with one
     row per person, float32 fields ``x, y, z, id`` (the combined ``/mocap/<stage>/bodies/
     joints3d``). B may be 0 (a cloud of height 0)."""
+    return array_to_cloud(bodies_cloud_values(positions, ids),
+                          POSITION_FIELDS + (KEYPOINT_ID_FIELD,), header)
+
+
+def bodies_cloud_values(positions: np.ndarray, ids: Sequence[int]) -> np.ndarray:
+    """(B, J, 4) x, y, z, id of :func:`bodies_to_cloud`; MessageError for bad shapes or
+    ids."""
     pos = np.asarray(positions, dtype=np.float64)
     if pos.ndim != 3 or pos.shape[-1] != 3:
         raise MessageError(f'positions must have shape (B, J, 3), got {pos.shape}')
     idv = np.asarray(ids, dtype=np.float64).reshape(-1)
     if len(idv) != len(pos) or np.any(idv <= 0) or np.any(idv != np.round(idv)):
         raise MessageError(f'ids must be {len(pos)} positive integers, got {ids!r}')
-    vals = np.concatenate([pos, np.broadcast_to(idv[:, None, None], pos.shape[:2] + (1,))],
+    return np.concatenate([pos, np.broadcast_to(idv[:, None, None], pos.shape[:2] + (1,))],
                           axis=-1)
-    return array_to_cloud(vals, POSITION_FIELDS + (KEYPOINT_ID_FIELD,), header)
 
 
 def cloud_to_bodies(msg: PointCloud2) -> Tuple[np.ndarray, np.ndarray]:
@@ -657,6 +664,74 @@ def _points(xyz: Iterable[np.ndarray]) -> list:
     return [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in xyz]
 
 
+@dataclass
+class MarkerSpec:
+    """What a visualization_msgs/Marker of the pipeline holds (pose: identity; every other
+    field its default): built as a message by :func:`marker_array`, serialised directly by
+    :func:`mocap_core.cdr.marker_array`.
+
+    Attributes:
+        ns, id, type, action: as in visualization_msgs/Marker.
+        scale: (3,) as Marker.scale (m).
+        color: (4,) RGBA in [0, 1].
+        points: (n, 3) points (m) in the header's frame.
+        colors: (n, 4) per-point RGBA, or (0, 4).
+    """
+
+    ns: str
+    id: int
+    type: int
+    action: int = Marker.ADD
+    scale: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    color: Tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    colors: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+
+
+def marker_array(specs: Sequence[MarkerSpec], header: Header) -> MarkerArray:
+    """MarkerArray of the markers ``specs``, all stamped ``header``."""
+    markers = []
+    for s in specs:
+        m = Marker(header=header, ns=s.ns, id=int(s.id), type=int(s.type),
+                   action=int(s.action))
+        m.pose.orientation.w = 1.0
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in s.scale)
+        m.color = _color(s.color)
+        m.points = _points(np.asarray(s.points, dtype=np.float64).reshape(-1, 3))
+        m.colors = [_color(c) for c in np.asarray(s.colors, dtype=np.float64).reshape(-1, 4)]
+        markers.append(m)
+    return MarkerArray(markers=markers)
+
+
+def pose_marker_specs(pose: Pose, ns: str = 'mocap',
+                      color: Sequence[float] = (0.2, 0.6, 1.0, 1.0),
+                      contacts: Optional[Sequence[float]] = None,
+                      forces: Optional[Dict[str, np.ndarray]] = None,
+                      newtons_per_metre: float = 1000.0) -> List[MarkerSpec]:
+    """The markers of :func:`pose_to_markers` (which see)."""
+    positions = pose.joint_positions()
+    color = tuple(float(c) for c in color)
+    bones = np.stack([positions[np.asarray(pose.skeleton.parents[1:])], positions[1:]], axis=1)
+    specs = [MarkerSpec(ns, 0, Marker.LINE_LIST, scale=(0.02, 0.0, 0.0), color=color,
+                        points=bones.reshape(-1, 3)),
+             MarkerSpec(ns, 1, Marker.SPHERE_LIST, scale=(0.04, 0.04, 0.04), color=color,
+                        points=positions)]
+    contact_pos = pose.contact_positions()
+    if contacts is not None:
+        probs = np.clip(np.asarray(contacts, dtype=np.float64).reshape(-1), 0.0, 1.0)
+        specs.append(MarkerSpec(
+            ns, 2, Marker.SPHERE_LIST, scale=(0.05, 0.05, 0.05),
+            points=np.array([contact_pos[n] for n in CONTACT_POINT_NAMES]),
+            colors=np.stack([probs, 1.0 - probs, np.zeros_like(probs),
+                             np.ones_like(probs)], axis=1)))
+    for k, (name, force) in enumerate(sorted((forces or {}).items())):
+        start = contact_pos[name]
+        specs.append(MarkerSpec(
+            ns, 10 + k, Marker.ARROW, scale=(0.02, 0.04, 0.06), color=(1.0, 0.3, 0.0, 1.0),
+            points=np.array([start, start + np.asarray(force) / newtons_per_metre])))
+    return specs
+
+
 def pose_to_markers(pose: Pose, header: Header, ns: str = 'mocap',
                     color: Sequence[float] = (0.2, 0.6, 1.0, 1.0),
                     contacts: Optional[Sequence[float]] = None,
@@ -669,37 +744,8 @@ def pose_to_markers(pose: Pose, header: Header, ns: str = 'mocap',
     given, ids 10+ ARROW per foot force when ``forces`` maps a contact point name to a force
     (3,) N (arrow length = force / ``newtons_per_metre``).
     """
-    positions = pose.joint_positions()
-    line = Marker(header=header, ns=ns, id=0, type=Marker.LINE_LIST, action=Marker.ADD)
-    line.pose.orientation.w = 1.0
-    line.scale.x = 0.02
-    line.color = _color(color)
-    line.points = _points(p for j in range(1, len(positions))
-                          for p in (positions[pose.skeleton.parents[j]], positions[j]))
-    joints = Marker(header=header, ns=ns, id=1, type=Marker.SPHERE_LIST, action=Marker.ADD)
-    joints.pose.orientation.w = 1.0
-    joints.scale.x = joints.scale.y = joints.scale.z = 0.04
-    joints.color = _color(color)
-    joints.points = _points(positions)
-    markers = [line, joints]
-    contact_pos = pose.contact_positions()
-    if contacts is not None:
-        probs = np.clip(np.asarray(contacts, dtype=np.float64).reshape(-1), 0.0, 1.0)
-        m = Marker(header=header, ns=ns, id=2, type=Marker.SPHERE_LIST, action=Marker.ADD)
-        m.pose.orientation.w = 1.0
-        m.scale.x = m.scale.y = m.scale.z = 0.05
-        m.points = _points(contact_pos[n] for n in CONTACT_POINT_NAMES)
-        m.colors = [_color((float(p), 1.0 - float(p), 0.0, 1.0)) for p in probs]
-        markers.append(m)
-    for k, (name, force) in enumerate(sorted((forces or {}).items())):
-        start = contact_pos[name]
-        arrow = Marker(header=header, ns=ns, id=10 + k, type=Marker.ARROW, action=Marker.ADD)
-        arrow.pose.orientation.w = 1.0
-        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.02, 0.04, 0.06
-        arrow.color = _color((1.0, 0.3, 0.0, 1.0))
-        arrow.points = _points([start, start + np.asarray(force) / newtons_per_metre])
-        markers.append(arrow)
-    return MarkerArray(markers=markers)
+    return marker_array(pose_marker_specs(pose, ns, color, contacts, forces,
+                                          newtons_per_metre), header)
 
 
 # ---------------------------------------------------------------------------------------------

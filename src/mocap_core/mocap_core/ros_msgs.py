@@ -15,12 +15,14 @@ import array
 import importlib
 import re
 import sys
+import struct
 from typing import Any
 
 __all__ = [
     'MessageTypeError',
     'deserialize',
     'get_message_class',
+    'header_stamp_ns',
     'message_to_dict',
     'message_to_yaml',
     'msgtype_of',
@@ -120,6 +122,17 @@ def stamp_to_ns(stamp: Any) -> int:
     if isinstance(stamp, dict):
         return int(stamp['sec']) * 1_000_000_000 + int(stamp['nanosec'])
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def header_stamp_ns(data: bytes, msg_type: type) -> int | None:
+    """The header stamp (ns) of a serialised message whose first field is a
+    ``std_msgs/Header`` (read from the CDR bytes: int32 sec, uint32 nanosec right after the
+    4-byte encapsulation header); None for other types."""
+    fields = msg_type.get_fields_and_field_types()
+    if next(iter(fields.items()), None) != ('header', 'std_msgs/Header'):
+        return None
+    sec, nanosec = struct.unpack_from('<iI', data, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def ns_to_stamp(ns: int) -> Any:

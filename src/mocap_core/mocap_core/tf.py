@@ -11,19 +11,21 @@ Frames of one person ``<id>`` (docs/design.md, "Several people"):
   any frame, and RViz's TF display draws each skeleton.
 
 :func:`pose_to_transforms` builds the ``geometry_msgs/TransformStamped`` list (no ROS node
-needed). :class:`TfBroadcaster` publishes them as ``tf2_msgs/TFMessage``; ``tf2_msgs`` has no
-wheel, the workspace builds it (``src/tf2_msgs``), and where it is missing the broadcaster
-says so once and stays silent.
+needed), :func:`pose_frames` the same as arrays. :class:`TfBroadcaster` publishes them as
+``tf2_msgs/TFMessage``; ``tf2_msgs`` has no wheel, the workspace builds it
+(``src/tf2_msgs``), and where it is missing the broadcaster says so once and stays silent.
 """
 
 from __future__ import annotations
 
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
+import numpy as np
 from geometry_msgs.msg import TransformStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
+from . import cdr
 from .pose import Pose
 from .ros_conversions import transform_stamped
 from .topics import body_name
@@ -41,20 +43,29 @@ def joint_frame(person_id: int, joint: str, root: str = 'pelvis') -> str:
     return body_name(person_id) if joint == root else f'{body_name(person_id)}/{joint}'
 
 
+def pose_frames(pose: Pose, header: Header, person_id: int
+                ) -> Tuple[List[str], List[str], np.ndarray]:
+    """The TF frames of one person's pose (module docstring) as arrays: the parent and child
+    frame ids (J,) and the (J, 7) transforms, translation x, y, z (m) and rotation x, y, z, w,
+    root first; ``header.frame_id`` is the frame the root pose is in."""
+    names = list(pose.joint_names)
+    parents = pose.skeleton.parents
+    children = [joint_frame(person_id, n, names[0]) for n in names]
+    frames = [header.frame_id] + [children[parents[j]] for j in range(1, len(names))]
+    transforms = np.empty((len(names), 7))
+    transforms[:, :3] = pose.skeleton.offsets
+    transforms[0, :3] = pose.root_position
+    transforms[:, 3:] = pose.rotations
+    return frames, children, transforms
+
+
 def pose_to_transforms(pose: Pose, header: Header, person_id: int) -> List[TransformStamped]:
     """The TF frames of one person's pose (module docstring); ``header.frame_id`` is the
     frame the root pose is in. Returns one transform per joint, root first."""
-    names = list(pose.joint_names)
-    parents = pose.skeleton.parents
-    offsets = pose.skeleton.offsets
-    out = [transform_stamped(header, joint_frame(person_id, names[0], names[0]),
-                             pose.rotations[0], pose.root_position)]
-    for j in range(1, len(names)):
-        h = Header(stamp=header.stamp, frame_id=joint_frame(person_id, names[parents[j]],
-                                                            names[0]))
-        out.append(transform_stamped(h, joint_frame(person_id, names[j], names[0]),
-                                     pose.rotations[j], offsets[j]))
-    return out
+    parents, children, transforms = pose_frames(pose, header, person_id)
+    return [transform_stamped(Header(stamp=header.stamp, frame_id=parent), child, tr[3:],
+                              tr[:3])
+            for parent, child, tr in zip(parents, children, transforms)]
 
 
 class TfBroadcaster:
@@ -88,6 +99,14 @@ class TfBroadcaster:
         if self._pub is None or not transforms:
             return
         self._pub.publish(self._msg(transforms=list(transforms)))
+        self.sent += 1
+
+    def send_pose(self, pose: Pose, header: Header, person_id: int) -> None:
+        """The frames of one person's pose (:func:`pose_frames`), serialised straight from
+        the arrays (:func:`mocap_core.cdr.tf_message`)."""
+        if self._pub is None:
+            return
+        self._pub.publish(cdr.tf_message(header.stamp, *pose_frames(pose, header, person_id)))
         self.sent += 1
 
     def subscribers(self) -> int:

@@ -78,8 +78,9 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers, CombinedPublishers
+from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
-from mocap_core.tf import TfBroadcaster, pose_to_transforms
+from mocap_core.tf import TfBroadcaster
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
@@ -96,7 +97,7 @@ class _Person:
 
     online: Optional[OnlineGMR] = None        # built at the person's first frame (frame_id)
     last_stamp: int = -1
-    path: PathMsg = field(default_factory=PathMsg)
+    path: cdr.PathTrail = field(default_factory=cdr.PathTrail)   # their /path
     said_waiting: bool = False
     seen_ns: int = 0                          # stamp of their last input frame
 
@@ -704,13 +705,14 @@ class GMRNode(Node):
             good.append(f)
             header = rc.make_header(f.stamp_ns, self.output_frame)
             if self.tf is not None and self.tf.subscribers() > 0:
-                self.tf.send(pose_to_transforms(pose, header, 1 if pid is None else pid))
-            odom = rc.root_to_odometry(pose.root_position, pose.rotations[0], header,
-                                       linear_velocity=f.linear_velocity,
-                                       angular_velocity=f.angular_velocity)
+                self.tf.send_pose(pose, header, 1 if pid is None else pid)
+            odom = cdr.root_to_odometry(pose.root_position, pose.rotations[0], header,
+                                        linear_velocity=f.linear_velocity,
+                                        angular_velocity=f.angular_velocity)
             if f.first:
-                person.path.poses = []           # a new segment: a new path
-            rc.append_to_path(person.path, odom, self.p['path_length'])
+                person.path.clear()              # a new segment: a new path
+            person.path.max_length = self.p['path_length']
+            person.path.append(header, pose.root_position, pose.rotations[0])
             if pid is not None:
                 self._publish_body(pid, pose, header, odom, person.path)
             if pid is None or (pid == self.main_id and f.stamp_ns > self.main_last_ns):
@@ -735,29 +737,30 @@ class GMRNode(Node):
                 self.diag.set_value('unfused_frames', online.unanchored_frames)
         self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
 
-    def _publish_main(self, f: WorldFrame, pose, header, odom: Odometry,
-                      path: PathMsg) -> None:
+    def _publish_main(self, f: WorldFrame, pose, header, odom: bytes,
+                      path: cdr.PathTrail) -> None:
         """The main person's world frame on the single-person topics: the motion always, the
         others only while someone listens (mocap_core.publishing)."""
         pub = self.pub
-        pub['motion'].publish(rc.pose_to_motion(pose, header))
+        pub['motion'].publish(cdr.pose_to_motion(pose, header))
         publish_if_heard(pub['joints3d'],
-                         lambda: rc.positions_to_cloud(pose.joint_positions(), header))
-        publish_if_heard(pub['joint_states'], lambda: rc.pose_to_joint_state(pose, header))
+                         lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
+        publish_if_heard(pub['joint_states'], lambda: cdr.pose_to_joint_state(pose, header))
         publish_if_heard(pub['odom'], lambda: odom)
-        publish_if_heard(pub['path'], lambda: path)
-        publish_if_heard(pub['markers'], lambda: rc.pose_to_markers(pose, header, ns='world'))
+        publish_if_heard(pub['path'], path.message)
+        publish_if_heard(pub['markers'], lambda: cdr.pose_to_markers(pose, header, ns='world'))
         publish_if_heard(pub['floor'], lambda: rc.transform_stamped(
             header, self.input_frame or 'input', f.input_rotation, f.input_translation))
 
-    def _publish_body(self, pid: int, pose, header, odom: Odometry, path: PathMsg) -> None:
+    def _publish_body(self, pid: int, pose, header, odom: bytes, path: cdr.PathTrail) -> None:
         """One person's world frame on their own topics (built only for subscribers)."""
         b = self.bodies
-        b.publish(pid, 'motion', lambda: rc.pose_to_motion(pose, header))
-        b.publish(pid, 'joints3d', lambda: rc.positions_to_cloud(pose.joint_positions(), header))
-        b.publish(pid, 'joint_states', lambda: rc.pose_to_joint_state(pose, header))
+        b.publish(pid, 'motion', lambda: cdr.pose_to_motion(pose, header))
+        b.publish(pid, 'joints3d',
+                  lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
+        b.publish(pid, 'joint_states', lambda: cdr.pose_to_joint_state(pose, header))
         b.publish(pid, 'odom', lambda: odom)
-        b.publish(pid, 'path', lambda: path)
+        b.publish(pid, 'path', path.message)
 
     def _publish_combined(self, pid: int, frames: Sequence[WorldFrame]) -> None:
         """Combined world messages of person ``pid``'s frames (one per frame: the persons'

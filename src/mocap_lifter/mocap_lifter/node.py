@@ -50,6 +50,7 @@ from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.bodies import BodyPublishers, CombinedPublishers
+from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.guard import guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
@@ -309,11 +310,11 @@ class LifterNode(Node):
             self.body_lengths[pid] = lengths
             self.bodies.urdf(pid, lambda: rc.urdf_to_msg(
                 skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
-        self.bodies.publish(pid, 'motion', lambda: rc.pose_to_motion(pose, header))
+        self.bodies.publish(pid, 'motion', lambda: cdr.pose_to_motion(pose, header))
         self.bodies.publish(pid, 'joints3d',
-                            lambda: rc.positions_to_cloud(pose.joint_positions(), header))
-        self.bodies.publish(pid, 'joint_states', lambda: rc.pose_to_joint_state(pose, header))
-        self.bodies.publish(pid, 'contacts', lambda: rc.contacts_to_msg(frame.contacts, header))
+                            lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
+        self.bodies.publish(pid, 'joint_states', lambda: cdr.pose_to_joint_state(pose, header))
+        self.bodies.publish(pid, 'contacts', lambda: cdr.contacts_to_msg(frame.contacts, header))
 
     def publish_combined(self, stamp: int, frames: List[Tuple[int, LiftedFrame]]) -> None:
         """All persons of one stamp (main person first): the lossless motion and contacts
@@ -346,13 +347,13 @@ class LifterNode(Node):
             self.pub['urdf'].publish(rc.urdf_to_msg(
                 skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
             self.published_lengths = lengths
-        self.pub['motion'].publish(rc.pose_to_motion(pose, header))
+        self.pub['motion'].publish(cdr.pose_to_motion(pose, header))
         # the others only while someone listens (mocap_core.publishing)
         publish_if_heard(self.pub['joints3d'],
-                         lambda: rc.positions_to_cloud(pose.joint_positions(), header))
-        publish_if_heard(self.pub['joint_states'], lambda: rc.pose_to_joint_state(pose, header))
-        publish_if_heard(self.pub['contacts'], lambda: rc.contacts_to_msg(frame.contacts, header))
-        publish_if_heard(self.pub['markers'], lambda: rc.pose_to_markers(
+                         lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
+        publish_if_heard(self.pub['joint_states'], lambda: cdr.pose_to_joint_state(pose, header))
+        publish_if_heard(self.pub['contacts'], lambda: cdr.contacts_to_msg(frame.contacts, header))
+        publish_if_heard(self.pub['markers'], lambda: cdr.pose_to_markers(
             pose, header, ns='lifter', contacts=frame.contacts))
         self.diag.output.tick()
         self.diag.set_value('skeleton', 'held' if frame.skeleton_fixed else 'estimating')

@@ -1,7 +1,7 @@
 """Markers and transform messages of the physics node (ROS message types, no rclpy).
 
 :func:`friction_cone_lines` gives the geometry (plain numpy, tested on its own);
-:func:`friction_cone_marker` wraps it in a visualization_msgs/Marker and
+:func:`friction_cone_spec` and :func:`friction_cone_marker` wrap it in a marker and
 :func:`floor_transform_msg` writes the floor frame as a geometry_msgs/TransformStamped.
 """
 
@@ -36,27 +36,29 @@ def friction_cone_lines(apexes: np.ndarray, friction: float, height: float = 0.1
     return np.array(out).reshape(-1, 3)
 
 
-def friction_cone_marker(header, apexes: np.ndarray, friction: float,
-                         color: Sequence[float] = (0.1, 0.8, 0.9, 0.8)):
-    """LINE_LIST Marker (ns :data:`CONE_NS`, id 0) of the friction cones at the contact
-    points that carry a force; a DELETE marker when there is none."""
-    from geometry_msgs.msg import Point
-    from std_msgs.msg import ColorRGBA
+def friction_cone_spec(apexes: np.ndarray, friction: float,
+                       color: Sequence[float] = (0.1, 0.8, 0.9, 0.8)):
+    """The LINE_LIST marker (ns :data:`CONE_NS`, id 0) of the friction cones at the contact
+    points that carry a force, as a :class:`mocap_core.ros_conversions.MarkerSpec`; a DELETE
+    marker when there is none."""
     from visualization_msgs.msg import Marker
 
-    m = Marker(header=header, ns=CONE_NS, id=0, type=Marker.LINE_LIST)
-    m.pose.orientation.w = 1.0
+    from mocap_core.ros_conversions import MarkerSpec
+
     apexes = np.asarray(apexes, dtype=float).reshape(-1, 3)
     if len(apexes) == 0:
-        m.action = Marker.DELETE
-        return m
-    m.action = Marker.ADD
-    m.scale.x = 0.005
-    m.color = ColorRGBA(r=float(color[0]), g=float(color[1]), b=float(color[2]),
-                        a=float(color[3]))
-    m.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
-                for p in friction_cone_lines(apexes, friction)]
-    return m
+        return MarkerSpec(CONE_NS, 0, Marker.LINE_LIST, action=Marker.DELETE)
+    return MarkerSpec(CONE_NS, 0, Marker.LINE_LIST, action=Marker.ADD, scale=(0.005, 0.0, 0.0),
+                      color=tuple(float(c) for c in color),
+                      points=friction_cone_lines(apexes, friction))
+
+
+def friction_cone_marker(header, apexes: np.ndarray, friction: float,
+                         color: Sequence[float] = (0.1, 0.8, 0.9, 0.8)):
+    """:func:`friction_cone_spec` as a visualization_msgs/Marker stamped ``header``."""
+    from mocap_core.ros_conversions import marker_array
+
+    return marker_array([friction_cone_spec(apexes, friction, color)], header).markers[0]
 
 
 def floor_transform_msg(header, floor, child_frame_id: str):

@@ -87,6 +87,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers, CombinedPublishers
+from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded
@@ -94,13 +95,12 @@ from mocap_core.parameters import ParamSpec, declare_parameters, help_requested,
 from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bodies,
                                         motion_to_pose, msg_to_bodies_contacts,
-                                        msg_to_contacts, pose_to_joint_state, pose_to_markers,
-                                        pose_to_motion, positions_to_cloud, stamp_to_ns,
+                                        msg_to_contacts, pose_marker_specs, stamp_to_ns,
                                         wrench_to_msg)
 
 from .cycle_params import PhysicsParams
 from .floor import FloorFrame, FloorTracker, FloorTrackerParams
-from .markers import floor_transform_msg, friction_cone_marker
+from .markers import floor_transform_msg, friction_cone_spec
 from .model import revolute_efforts
 from .online import FloorSource, Notice, OnlinePhysics, PhysicsFrame
 
@@ -499,9 +499,10 @@ class PhysicsNode(Node):
         header = make_header(frame.stamp_ns, frame.frame_id)
         pose = res.pose
         b = self.bodies
-        b.publish(pid, 'motion', lambda: pose_to_motion(pose, header))
-        b.publish(pid, 'joints3d', lambda: positions_to_cloud(pose.joint_positions(), header))
-        b.publish(pid, 'joint_states', lambda: pose_to_joint_state(
+        b.publish(pid, 'motion', lambda: cdr.pose_to_motion(pose, header))
+        b.publish(pid, 'joints3d',
+                  lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
+        b.publish(pid, 'joint_states', lambda: cdr.pose_to_joint_state(
             pose, header, revolute_efforts(pose.revolute_angles(),
                                            res.joint_torques.reshape(-1, 3))))
         for foot in ('left', 'right'):
@@ -519,10 +520,10 @@ class PhysicsNode(Node):
         res = frame.result
         header = make_header(frame.stamp_ns, frame.frame_id)
         pose = res.pose
-        self.pub_motion.publish(pose_to_motion(pose, header))
+        self.pub_motion.publish(cdr.pose_to_motion(pose, header))
         publish_if_heard(self.pub_joints,
-                         lambda: positions_to_cloud(pose.joint_positions(), header))
-        publish_if_heard(self.pub_states, lambda: pose_to_joint_state(
+                         lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
+        publish_if_heard(self.pub_states, lambda: cdr.pose_to_joint_state(
             pose, header, revolute_efforts(pose.revolute_angles(),
                                            res.joint_torques.reshape(-1, 3))))
         for foot, pub in self.pub_grf.items():
@@ -540,21 +541,21 @@ class PhysicsNode(Node):
             publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
                 make_header(frame.stamp_ns, frame.input_frame), frame.floor, frame.frame_id))
 
-    def _markers(self, frame: PhysicsFrame, header) -> MarkerArray:
+    def _markers(self, frame: PhysicsFrame, header) -> bytes:
+        """The stick figure with contacts and force arrows, and the friction cones
+        (serialised MarkerArray)."""
         res = frame.result
         pose = res.pose
         names = self._main_online.cycle.model.contact_names
         # every contact point always has its arrow (ids 10-13 stay the same; zero length
         # without force)
         forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
-        markers = pose_to_markers(
-            pose, header, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
-            contacts=res.contact_active.astype(float), forces=forces)
+        specs = pose_marker_specs(pose, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
+                                  contacts=res.contact_active.astype(float), forces=forces)
         cps = pose.contact_positions()
         loaded = [cps[n] for i, n in enumerate(names) if res.contact_forces[i, 2] > 1e-6]
-        markers.markers.append(friction_cone_marker(header, np.array(loaded),
-                                                    self.params.friction))
-        return markers
+        specs.append(friction_cone_spec(np.array(loaded), self.params.friction))
+        return cdr.marker_array(specs, header)
 
     def refresh_diagnostics(self) -> None:
         online = self._main_online       # several people: the counters below are theirs

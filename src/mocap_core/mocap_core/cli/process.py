@@ -167,15 +167,40 @@ class Recorder:
         self.exclude = set(exclude)
 
     def __call__(self, topic: str, msg: Any, qos: Any) -> None:
+        """``msg``: a message, or a SerializedMessage (the graph hands them on raw)."""
+        from ..inprocess import SerializedMessage
+        from ..ros_msgs import header_stamp_ns, msgtype_of
+
         if topic in self.exclude:
             return
-        header = getattr(msg, 'header', None)
-        stamp = getattr(header, 'stamp', None)
+        if isinstance(msg, SerializedMessage):
+            if topic not in self.writer.topics:
+                self.writer.add_topic(topic, msgtype_of(msg.msg_type), qos)
+            data = msg.data + bytes(-len(msg.data) % 4)     # as serialize() pads
+            stamp_ns = header_stamp_ns(msg.data, msg.msg_type)
+            if stamp_ns is None and _header_field(msg.msg_type) is not None:
+                stamp_ns = _stamp_ns(msg.message())
+        else:
+            data = None
+            stamp_ns = _stamp_ns(msg)
         ts = self.now_ns
-        if stamp is not None and topic != T.DIAGNOSTICS:
-            ts = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec) or self.now_ns
-        self.writer.write_msg(topic, ts, msg, qos)
+        if stamp_ns is not None and topic != T.DIAGNOSTICS:
+            ts = stamp_ns or self.now_ns
+        if data is None:
+            self.writer.write_msg(topic, ts, msg, qos)
+        else:
+            self.writer.write(topic, ts, data)
         self.counts[topic] = self.counts.get(topic, 0) + 1
+
+
+def _header_field(msg_type: type) -> Any:
+    return msg_type.get_fields_and_field_types().get('header')
+
+
+def _stamp_ns(msg: Any) -> Optional[int]:
+    """The header stamp of a message (ns), None for a message without a header."""
+    stamp = getattr(getattr(msg, 'header', None), 'stamp', None)
+    return None if stamp is None else int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic: str = '',
@@ -239,7 +264,7 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
             problems.append(text)
             log(f'  warning: {text}')
 
-        graph = InProcessGraph(record=recorder, on_error=on_error)
+        graph = InProcessGraph(record=recorder, on_error=on_error, record_raw=True)
         driver = rclpy.create_node('mocap_process', context=context)
         feeders = {}
         for t in plan.feed_topics:
