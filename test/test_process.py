@@ -246,6 +246,30 @@ def test_process_output_from_arrays_equals_the_built_messages(gt_run, tmp_path, 
             assert deserialize(da, msgtype) == deserialize(db, msgtype), topic
 
 
+def test_process_writes_only_the_topics_asked_for(gt_run, tmp_path):
+    """--topics: the bag holds the matching topics only, their messages the same as in a
+    full run (what is not asked for is not built, but the stages' results do not change);
+    a pattern that matches nothing is reported as a problem (exit status 1)."""
+    from mocap_core.bag_io import BagReader
+
+    out = tmp_path / 'world_only'
+    res = _mocap('process', GT_BAG, '-o', out, '--no-progress', '--topics', '/mocap/world/*',
+                 '/tf', '/no/such*')
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert '--topics /no/such* matched no topic' in res.stdout, res.stdout
+
+    def messages(bag):
+        with BagReader(bag) as reader:
+            return {t: [(m.timestamp_ns, m.data) for m in reader.messages(topics=[t])]
+                    for t in reader.topics}
+    got, full = messages(out), messages(gt_run[0])
+    assert set(got) == {t for t in full if t.startswith('/mocap/world/') or t == '/tf'}, \
+        sorted(got)
+    assert '/mocap/world/motion' in got and '/mocap/world/bodies/markers' in got
+    for topic in ('/mocap/world/motion', '/mocap/world/joints3d', '/tf'):
+        assert got[topic] == full[topic], topic       # serialised from arrays: same bytes
+
+
 def test_process_starts_from_lifter_motion(gt_run, tmp_path):
     """A bag holding the lifter's output (e.g. a recording) runs physics and GMR only."""
     from mocap_core.bag_io import BagReader

@@ -77,13 +77,17 @@ class InProcessGraph:
         record_raw: ``record`` takes what was published as it is: a message, or a
             :class:`SerializedMessage` where a node published bytes. Otherwise it always
             gets a message.
+        record_filter: ``record_filter(topic)`` says whether ``record`` wants the topic
+            (default: every topic); only then does it count as a subscriber of the topic.
     """
 
     def __init__(self, record: Optional[RecordFn] = None,
                  on_error: Optional[Callable[[str, str, BaseException], None]] = None,
-                 live: bool = False, record_raw: bool = False) -> None:
+                 live: bool = False, record_raw: bool = False,
+                 record_filter: Optional[Callable[[str], bool]] = None) -> None:
         self.record = record
         self.record_raw = record_raw
+        self.record_filter = record_filter
         self.on_error = on_error
         #: live (``mocap run``): every message also leaves through DDS while a subscriber
         #: outside the graph listens, and the wired subscriptions ignore what DDS delivers
@@ -145,8 +149,8 @@ class InProcessGraph:
         inner = self._publisher(topic, pub.qos_profile, pub.msg_type)
         if not self.live:
             pub.publish = inner
-            pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + (
-                1 if self.record is not None else 0)
+            pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + \
+                self._recorded(topic)
             return
         dds_publish, dds_count = pub.publish, pub.get_subscription_count
 
@@ -160,8 +164,14 @@ class InProcessGraph:
                 dds_publish(msg)
 
         pub.publish = publish
-        pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + (
-            1 if self.record is not None else 0) + outside()
+        pub.get_subscription_count = lambda: len(self._subscribers.get(topic, ())) + \
+            self._recorded(topic) + outside()
+
+    def _recorded(self, topic: str) -> int:
+        """1 if ``record`` takes ``topic``, else 0."""
+        if self.record is None:
+            return 0
+        return 1 if self.record_filter is None or self.record_filter(topic) else 0
 
     def _publisher(self, topic: str, qos: Any, msg_type: type) -> Callable[[Any], None]:
         def publish(msg: Any) -> None:
@@ -174,7 +184,7 @@ class InProcessGraph:
         """Record ``msg`` (a message or a :class:`SerializedMessage`) and deliver it (and
         everything published in response) before returning; re-entrant calls from callbacks
         only enqueue."""
-        if self.record is not None:
+        if self._recorded(topic):
             self.record(topic, msg if self.record_raw else _message(msg), qos)
         self.published[topic] += 1
         self._queue.append((topic, msg))

@@ -76,10 +76,15 @@ class Pose:
         return self._fk().global_rotations.copy()
 
     def contact_positions(self) -> Dict[str, np.ndarray]:
-        """Foot contact points (heel, toe; left, right) -> (3,) position in the pose's frame."""
-        fk = self._fk()
-        return {name: fk.positions[j] + fk.global_rotations[j] @ p
-                for name, (j, p) in self.skeleton.contact_points().items()}
+        """Foot contact points (heel, toe; left, right) -> (3,) position in the pose's frame
+        (new arrays)."""
+        cached = self.__dict__.get('_contacts_cache')
+        if cached is None:
+            fk = self._fk()
+            cached = {name: fk.positions[j] + fk.global_rotations[j] @ p
+                      for name, (j, p) in self.skeleton.contact_points().items()}
+            object.__setattr__(self, '_contacts_cache', cached)
+        return {name: p.copy() for name, p in cached.items()}
 
     def _fk(self):
         """Forward kinematics, computed once per pose (the pose is immutable)."""
@@ -92,8 +97,13 @@ class Pose:
 
     def revolute_angles(self) -> np.ndarray:
         """(J-1, 3) angles (rad) of the z, y, x revolute joints standing for each non-root
-        ball joint in the URDF (intrinsic Euler 'ZYX'), joints in skeleton order."""
-        return quat_to_euler(self.rotations[1:], BALL_EULER_ORDER)
+        ball joint in the URDF (intrinsic Euler 'ZYX'), joints in skeleton order (a new
+        array; computed once per pose)."""
+        cached = self.__dict__.get('_angles_cache')
+        if cached is None:
+            cached = quat_to_euler(self.rotations[1:], BALL_EULER_ORDER)
+            object.__setattr__(self, '_angles_cache', cached)
+        return cached.copy()
 
     def with_revolute_angles(self, angles: np.ndarray) -> 'Pose':
         """Copy with the non-root rotations replaced from (J-1, 3) z, y, x angles (rad)."""

@@ -28,12 +28,13 @@ YAML, e.g. ``--param lifter.mode=causal --param physics.gains_mode=learned``).
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import os
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from .. import topics as T
 from .inputs import VIDEO_SUFFIXES, is_bag
@@ -160,18 +161,42 @@ def _overrides(values: Dict[str, Any]) -> List[Any]:
 class Recorder:
     """Writes every message the graph sees to the output bag (see the module doc)."""
 
-    def __init__(self, writer, exclude: Tuple[str, ...] = ()) -> None:
+    def __init__(self, writer, exclude: Tuple[str, ...] = (),
+                 only: Optional[Sequence[str]] = None) -> None:
         self.writer = writer
         self.now_ns = 0
         self.counts: Dict[str, int] = {}
         self.exclude = set(exclude)
+        #: glob patterns of the topics to write (None: all)
+        self.only = None if only is None else list(only)
+        self._selected: Dict[str, bool] = {}
+
+    def selected(self, topic: str) -> bool:
+        """Whether ``topic`` is among those to write (``only``)."""
+        chosen = self._selected.get(topic)
+        if chosen is None:
+            chosen = self.only is None or any(fnmatch.fnmatchcase(topic, p) for p in self.only)
+            self._selected[topic] = chosen
+        return chosen
+
+    def wants(self, topic: str) -> bool:
+        """Whether this recorder writes ``topic`` (the input topics that the driver copies
+        are excluded). The graph counts the recorder as a subscriber of these topics only,
+        so the nodes build no other optional output."""
+        return topic not in self.exclude and self.selected(topic)
+
+    def unmatched(self) -> List[str]:
+        """The ``only`` patterns that matched no topic seen so far."""
+        seen = list(self._selected)
+        return [p for p in (self.only or []) if not any(fnmatch.fnmatchcase(t, p)
+                                                          for t in seen)]
 
     def __call__(self, topic: str, msg: Any, qos: Any) -> None:
         """``msg``: a message, or a SerializedMessage (the graph hands them on raw)."""
         from ..inprocess import SerializedMessage
         from ..ros_msgs import header_stamp_ns, msgtype_of
 
-        if topic in self.exclude:
+        if not self.wants(topic):
             return
         if isinstance(msg, SerializedMessage):
             if topic not in self.writer.topics:
@@ -206,9 +231,14 @@ def _stamp_ns(msg: Any) -> Optional[int]:
 def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic: str = '',
             params: Optional[Dict[str, Dict[str, Any]]] = None, overwrite: bool = False,
             record_images: bool = False, progress: bool = True, log=print,
-            log_level: str = 'info') -> Dict[str, Any]:
+            log_level: str = 'info', topics_out: Optional[Sequence[str]] = None
+            ) -> Dict[str, Any]:
     """Run the pipeline on ``input_path`` and write ``output``; returns a summary dict
-    (plan, frames, seconds, per-topic counts of the output, problems)."""
+    (plan, frames, seconds, per-topic counts of the output, problems).
+
+    ``topics_out``: glob patterns (``fnmatch``, e.g. ``/mocap/world/*``) of the topics to
+    write, None = every topic. The nodes then build only the optional outputs that are
+    written (or that another node reads)."""
     import rclpy
     from rclpy.context import Context
 
@@ -257,14 +287,15 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
         context.try_shutdown()
         raise ProcessError(str(exc)) from None
     try:
-        recorder = Recorder(writer, exclude=tuple(plan.feed_topics))
+        recorder = Recorder(writer, exclude=tuple(plan.feed_topics), only=topics_out)
 
         def on_error(node: str, topic: str, exc: BaseException) -> None:
             text = f'{node} failed on a {topic} message: {type(exc).__name__}: {exc}'
             problems.append(text)
             log(f'  warning: {text}')
 
-        graph = InProcessGraph(record=recorder, on_error=on_error, record_raw=True)
+        graph = InProcessGraph(record=recorder, on_error=on_error, record_raw=True,
+                              record_filter=recorder.wants)
         driver = rclpy.create_node('mocap_process', context=context)
         feeders = {}
         for t in plan.feed_topics:
@@ -302,6 +333,9 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
             if diag is not None:
                 diag.publish()
         seconds = time.perf_counter() - t0
+        for pattern in recorder.unmatched():
+            problems.append(f'--topics {pattern}: no such topic')
+            log(f'  warning: --topics {pattern} matched no topic of this run')
         summary.update(frames=frames, seconds=seconds,
                        fps=frames / seconds if seconds > 0 else float('nan'),
                        topics=dict(sorted(recorder.counts.items())), problems=problems)
@@ -324,10 +358,12 @@ def _run_bag(reader, infos, plan: Plan, feeders, graph, recorder, writer, proble
 
     from ..bag_io import BagError
 
-    keep = [t for t in infos if t not in plan.dropped_topics]
-    for t in keep:
+    written = [t for t in infos if t not in plan.dropped_topics and recorder.selected(t)]
+    for t in written:
         i = infos[t]
         writer.add_topic(t, i.msgtype, i.qos, msgdef=i.msgdef, type_hash=i.type_hash)
+    keep = [t for t in infos if t in written or t in feeders]
+    written = set(written)
     first = plan.feed_topics[0]
     total = infos[first].count
     frames = 0
@@ -336,7 +372,8 @@ def _run_bag(reader, infos, plan: Plan, feeders, graph, recorder, writer, proble
     try:
         for m in reader.messages(topics=keep):
             recorder.now_ns = m.timestamp_ns
-            writer.write(m.topic, m.timestamp_ns, m.data)
+            if m.topic in written:
+                writer.write(m.topic, m.timestamp_ns, m.data)
             if m.topic not in feeders:
                 continue
             try:
@@ -403,6 +440,10 @@ def add_parser(sub) -> None:
     p.add_argument('--image-topic', default='', help='image topic of the input bag')
     p.add_argument('--param', action='append', default=[], metavar='NODE.NAME=VALUE',
                    help='node parameter (repeatable)')
+    p.add_argument('--topics', nargs='+', metavar='TOPIC', default=None,
+                   help='write only these topics (glob patterns, e.g. "/mocap/world/*" '
+                   '/tf; quote them); the stages then skip building the optional outputs '
+                   'that are not written. Default: every topic')
     p.add_argument('--record-images', action='store_true',
                    help='video input: also write the frames to /camera/image_raw')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
@@ -430,6 +471,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         extra += ['--start', args.start]
     if args.image_topic:
         extra += ['--image-topic', args.image_topic]
+    if args.topics:
+        extra += ['--topics', *args.topics]
     t0 = time.monotonic()
     try:
         batch = run_batch(inputs, Path(args.output), args.jobs, args.param,
@@ -457,7 +500,8 @@ def cmd_process(args: argparse.Namespace) -> int:
         summary = process(Path(args.input), Path(args.output), start=args.start,
                           image_topic=args.image_topic, params=params,
                           overwrite=args.overwrite, record_images=args.record_images,
-                          progress=not args.no_progress, log_level=args.log_level)
+                          progress=not args.no_progress, log_level=args.log_level,
+                          topics_out=args.topics)
     except ProcessError as exc:
         print(f'mocap process: error: {exc}', file=sys.stderr)
         return 2
