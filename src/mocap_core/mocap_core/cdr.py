@@ -22,8 +22,10 @@ then the elements; a struct has no alignment of its own).
 
 from __future__ import annotations
 
+import contextlib
 import struct
-from typing import Dict, Mapping, Optional, Sequence, Tuple
+import sys
+from typing import Dict, Iterator, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -33,7 +35,7 @@ from .skeleton import CONTACT_POINT_NAMES
 __all__ = ['CdrWriter', 'PathTrail', 'bodies_contacts_to_msg', 'bodies_to_cloud',
            'bodies_to_motion', 'contacts_to_msg', 'marker_array', 'pose_to_joint_state',
            'pose_to_markers', 'pose_to_motion', 'positions_to_cloud', 'root_to_odometry',
-           'tf_message']
+           'built_messages', 'tf_message']
 
 _ENCAPSULATION = b'\x00\x01\x00\x00'      # CDR_LE, no options
 _I32 = struct.Struct('<i')
@@ -425,3 +427,63 @@ class PathTrail:
             rest['pose'] = self.poses[1:]
             w.buf += rest.tobytes()
         return w.data()
+
+
+# ---------------------------------------------------------------------------------------------
+# The reference: the same messages built as rclpy objects
+# ---------------------------------------------------------------------------------------------
+_ENCODERS = ('pose_to_motion', 'bodies_to_motion', 'pose_to_joint_state', 'contacts_to_msg',
+             'bodies_contacts_to_msg', 'positions_to_cloud', 'bodies_to_cloud',
+             'pose_to_markers', 'marker_array', 'root_to_odometry')
+
+
+@contextlib.contextmanager
+def built_messages() -> Iterator[None]:
+    """Within the block, every encoder of this module (and the TF and path outputs that use
+    them) builds the rclpy message with :mod:`mocap_core.ros_conversions` and serialises it
+    with rclpy: the stages' outputs as they were made before this module. For the
+    equivalence test (``test/test_process.py``) and the baseline of ``mocap bench
+    pipeline``. Not thread-safe: it swaps module attributes."""
+    from nav_msgs.msg import Path
+
+    from . import ros_conversions as rc
+    from .ros_msgs import serialize
+    from .tf import TfBroadcaster, pose_to_transforms
+
+    def built(fn):
+        return lambda *a, **k: serialize(fn(*a, **k))
+
+    def path_message(trail: PathTrail) -> bytes:
+        # a Path message kept beside the trail and appended to, as the stage did before
+        path = trail.__dict__.setdefault('_reference', Path())
+        stamps = [(int(a), int(b)) for a, b in trail.stamps]
+        last = ((path.poses[-1].header.stamp.sec, path.poses[-1].header.stamp.nanosec)
+                if path.poses else None)
+        if last is None or last not in stamps:
+            path.poses = []
+            start = 0
+        else:
+            start = stamps.index(last) + 1
+        for (sec, nanosec), p in zip(stamps[start:], trail.poses[start:]):
+            header = rc.make_header(sec * 1_000_000_000 + nanosec, trail.frame_id)
+            rc.append_to_path(path, rc.root_to_odometry(p[:3], p[3:], header), len(trail))
+        if not stamps:
+            path.poses = []
+        return serialize(path)
+
+    def send_pose(self, pose, header, person_id) -> None:
+        self.send(pose_to_transforms(pose, header, person_id))
+
+    module = sys.modules[__name__]
+    saved = {name: getattr(module, name) for name in _ENCODERS}
+    saved_path, saved_tf = PathTrail.message, TfBroadcaster.send_pose
+    try:
+        for name in _ENCODERS:
+            setattr(module, name, built(getattr(rc, name)))
+        PathTrail.message = path_message
+        TfBroadcaster.send_pose = send_pose
+        yield
+    finally:
+        for name, fn in saved.items():
+            setattr(module, name, fn)
+        PathTrail.message, TfBroadcaster.send_pose = saved_path, saved_tf
