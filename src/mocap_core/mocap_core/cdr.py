@@ -439,16 +439,15 @@ _ENCODERS = ('pose_to_motion', 'bodies_to_motion', 'pose_to_joint_state', 'conta
 
 @contextlib.contextmanager
 def built_messages() -> Iterator[None]:
-    """Within the block, every encoder of this module (and the TF and path outputs that use
-    them) builds the rclpy message with :mod:`mocap_core.ros_conversions` and serialises it
-    with rclpy: the stages' outputs as they were made before this module. For the
-    equivalence test (``test/test_process.py``) and the baseline of ``mocap bench
-    pipeline``. Not thread-safe: it swaps module attributes."""
+    """Within the block, every encoder of this module (and the path trail's message) builds
+    the rclpy message with :mod:`mocap_core.ros_conversions` and serialises it with rclpy:
+    the stages' outputs as they were made before this module. For the equivalence test
+    (``test/test_process.py``) and the baseline of ``mocap bench pipeline``. Not
+    thread-safe: it swaps module attributes."""
     from nav_msgs.msg import Path
 
     from . import ros_conversions as rc
     from .ros_msgs import serialize
-    from .tf import TfBroadcaster, pose_to_transforms
 
     def built(fn):
         return lambda *a, **k: serialize(fn(*a, **k))
@@ -471,19 +470,23 @@ def built_messages() -> Iterator[None]:
             path.poses = []
         return serialize(path)
 
-    def send_pose(self, pose, header, person_id) -> None:
-        self.send(pose_to_transforms(pose, header, person_id))
+    def tf_built(stamp, parents, children, transforms) -> bytes:
+        from std_msgs.msg import Header
+        from tf2_msgs.msg import TFMessage
+        return serialize(TFMessage(transforms=[
+            rc.transform_stamped(Header(stamp=stamp, frame_id=p), c, t[3:], t[:3])
+            for p, c, t in zip(parents, children, transforms)]))
 
     module = sys.modules[__name__]
-    saved = {name: getattr(module, name) for name in _ENCODERS}
-    saved_path, saved_tf = PathTrail.message, TfBroadcaster.send_pose
+    saved = {name: getattr(module, name) for name in _ENCODERS + ('tf_message',)}
+    saved_path = PathTrail.message
     try:
         for name in _ENCODERS:
             setattr(module, name, built(getattr(rc, name)))
+        module.tf_message = tf_built
         PathTrail.message = path_message
-        TfBroadcaster.send_pose = send_pose
         yield
     finally:
         for name, fn in saved.items():
             setattr(module, name, fn)
-        PathTrail.message, TfBroadcaster.send_pose = saved_path, saved_tf
+        PathTrail.message = saved_path

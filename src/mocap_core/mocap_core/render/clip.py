@@ -82,6 +82,77 @@ class ClipResult:
     skipped: bool = False
 
 
+@dataclass
+class PlacedBody:
+    """A body posed along a motion, standing on the floor (pipeline world frame, z up, m).
+
+    Attributes:
+        body: the Anny body; regions: per vertex region name.
+        scale: body leg length / motion leg length (the motion's path is scaled by it).
+        pelvis: (F, 3) the body's pelvis path.
+        vertices: (F, V, 3) float32 mesh; joints, joints_rig: (F, 18, 3) (``PosedBody``).
+        keypoints_world: (F, 23, 3) the mesh keypoints in the layout (Anny's COCO regressor;
+            zeros where ``have`` (23,) is False).
+    """
+
+    body: object
+    regions: List[str]
+    scale: float
+    pelvis: np.ndarray
+    vertices: np.ndarray
+    joints: np.ndarray
+    joints_rig: np.ndarray
+    keypoints_world: np.ndarray
+    have: np.ndarray
+
+
+def place_body(model, coco, skeleton, global_rotations: np.ndarray, root: np.ndarray,
+               contacts: np.ndarray, phenotype, about: Optional[np.ndarray] = None
+               ) -> PlacedBody:
+    """Pose the body of ``phenotype`` along a motion: (F, 18, 3, 3) global rotations and the
+    (F, 3) root path of the motion's ``skeleton``. The path is scaled about ``about`` (xy;
+    default the origin) by the ratio of the leg lengths, so the body's steps match its legs,
+    and the body is lifted so that its soles touch z = 0 in the frames whose (F, 4)
+    ``contacts`` has a contact. ``coco``: Anny's COCO keypoint regressor of ``model``."""
+    import torch
+
+    from .body import AnnyBody, region_of_vertices
+
+    body = AnnyBody.create(model, phenotype)
+    sk_len = skeleton.bone_lengths()
+    mocap_leg = sk_len[JOINT_INDEX['left_knee']] + sk_len[JOINT_INDEX['left_ankle']]
+    scale = body.leg_length() / mocap_leg
+    if about is None:
+        pelvis = np.asarray(root, dtype=np.float64) * scale
+    else:
+        centre = np.array([about[0], about[1], 0.0])
+        pelvis = centre + (np.asarray(root, dtype=np.float64) - centre) * scale
+    posed = body.pose(global_rotations, pelvis)
+    # Level the floor: the soles touch z = 0 in the frames labelled as contacts.
+    regions = region_of_vertices(body)
+    foot = np.array([r == 'foot' for r in regions])
+    sole = posed.vertices[:, foot, 2].min(axis=1).astype(np.float64)
+    stance = np.asarray(contacts, dtype=bool).any(axis=1)
+    dz = float(np.median(sole[stance])) if stance.any() else float(np.percentile(sole, 5))
+    shift = np.array([0.0, 0.0, -dz])
+    with torch.no_grad():
+        mesh_kp = coco({'vertices': torch.from_numpy(posed.vertices).double()}).double().numpy()
+    mesh_kp = mesh_kp + shift  # a linear blend of the vertices (already in pipeline axes)
+    # Mesh keypoints in the layout (Anny's regressor has the 17 COCO body points; the feet
+    # points come from the layout's own feet where it lacks them).
+    labels = list(coco.labels) if hasattr(coco, 'labels') else []
+    kp_world = np.zeros((len(pelvis), NUM_KEYPOINTS, 3))
+    have = np.zeros(NUM_KEYPOINTS, dtype=bool)
+    for i, name in enumerate(labels):
+        lay = _COCO_TO_LAYOUT.get(name)
+        if lay is not None:
+            kp_world[:, KEYPOINT_INDEX[lay]] = mesh_kp[:, i]
+            have[KEYPOINT_INDEX[lay]] = True
+    return PlacedBody(body, regions, scale, pelvis + shift, posed.vertices +
+                      shift.astype(np.float32), posed.joints + shift, posed.joints_rig + shift,
+                      kp_world, have)
+
+
 def _facing(global_rotations: np.ndarray) -> np.ndarray:
     """(F, 2) horizontal forward direction of the pelvis."""
     f = global_rotations[:, 0, :2, 0]
@@ -127,10 +198,9 @@ class ClipRenderer:
         ``out_dir`` (module docstring). ``camera_ranges``: a
         :class:`~.cameras.CameraRanges` (default ranges when None). Returns what was done."""
         import cv2
-        import torch
 
         from ..rotations import matrix_to_quat
-        from .body import AnnyBody, region_of_vertices, sample_phenotype
+        from .body import sample_phenotype
         from .cameras import sample_camera_path, view_labels
         from .scene import SceneRenderer, sample_appearance
 
@@ -145,27 +215,12 @@ class ClipRenderer:
         G = fk.global_rotations[start:start + F]
         P = fk.positions[start:start + F]
         pheno = sample_phenotype(rng, self._model)
-        body = AnnyBody.create(self._model, pheno)
-        sk_len = motion.skeleton.bone_lengths()
-        mocap_leg = sk_len[JOINT_INDEX['left_knee']] + sk_len[JOINT_INDEX['left_ankle']]
-        scale = body.leg_length() / mocap_leg
-        pelvis = P[:, 0] * scale
-        posed = body.pose(G, pelvis)
-        # Level the floor: the soles touch z = 0 in the frames labelled as contacts.
-        regions = region_of_vertices(body)
-        foot = np.array([r == 'foot' for r in regions])
-        sole = posed.vertices[:, foot, 2].min(axis=1).astype(np.float64)
         contacts = np.asarray(motion.contacts[start:start + F], dtype=bool)
-        stance = contacts.any(axis=1)
-        dz = float(np.median(sole[stance])) if stance.any() else float(np.percentile(sole, 5))
-        shift = np.array([0.0, 0.0, -dz])
-        verts = posed.vertices + shift.astype(np.float32)
-        joints = posed.joints + shift
-        joints_rig = posed.joints_rig + shift
-        with torch.no_grad():
-            coco = self._coco({'vertices': torch.from_numpy(posed.vertices).double()}
-                               ).double().numpy()
-        coco = coco + shift  # a linear blend of the vertices (already in pipeline axes)
+        placed = place_body(self._model, self._coco, motion.skeleton, G, P[:, 0], contacts,
+                            pheno)
+        body, regions, scale = placed.body, placed.regions, placed.scale
+        pelvis, verts, joints, joints_rig = (placed.pelvis, placed.vertices, placed.joints,
+                                             placed.joints_rig)
         facing = _facing(G)
         mean_facing = facing.mean(axis=0)
         sample = verts[:, ::997].astype(np.float64)
@@ -175,16 +230,7 @@ class ClipRenderer:
         appearance = sample_appearance(rng)
         K = cam.K()
         joints_cam = cam.world_to_camera(joints)
-        # Mesh keypoints in the layout (Anny's regressor has the 17 COCO body points; the feet
-        # points come from the layout's own feet where it lacks them).
-        labels = list(self._coco.labels) if hasattr(self._coco, 'labels') else []
-        kp_world = np.zeros((F, NUM_KEYPOINTS, 3))
-        have = np.zeros(NUM_KEYPOINTS, dtype=bool)
-        for i, name in enumerate(labels):
-            lay = _COCO_TO_LAYOUT.get(name)
-            if lay is not None:
-                kp_world[:, KEYPOINT_INDEX[lay]] = coco[:, i]
-                have[KEYPOINT_INDEX[lay]] = True
+        kp_world, have = placed.keypoints_world, placed.have
         kp_mesh = project_pinhole(K, cam.world_to_camera(kp_world))
         kp_mesh[:, ~have] = 0.0
 

@@ -151,6 +151,13 @@ def check_renderer() -> Optional[str]:
     return None
 
 
+def vertex_colours(appearance: Appearance, regions: Sequence[str]) -> np.ndarray:
+    """(V, 4) float32 RGBA of each vertex from its body region's colour (clothing, skin)."""
+    ap = appearance
+    return np.array([list(ap.colours.get(r, ap.colours['trunk'])) + [1.0] for r in regions],
+                    dtype=np.float32)
+
+
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V, 3) unit vertex normals (area-weighted face normals summed per vertex)."""
     v = vertices.astype(np.float64)
@@ -216,12 +223,10 @@ class SceneRenderer:
         # A light at the camera (shining where it looks) so that a back-lit body is not black.
         self._headlight = self.scene.add(
             pr.DirectionalLight(color=np.ones(3), intensity=ap.headlight), pose=np.eye(4))
-        colours = np.array([list(ap.colours.get(r, ap.colours['trunk'])) + [1.0]
-                            for r in self.regions], dtype=np.float32)
-        self._colours = colours
+        self._colours = vertex_colours(ap, self.regions)
         self._material = pr.MetallicRoughnessMaterial(metallicFactor=0.0, roughnessFactor=0.8,
                                                       baseColorFactor=[1.0, 1.0, 1.0, 1.0])
-        self._body_node = None
+        self._body_nodes: list = []
         self._renderer = None
         self._frames = 0
 
@@ -257,19 +262,27 @@ class SceneRenderer:
     def render(self, vertices: np.ndarray, R: np.ndarray, position: np.ndarray) -> np.ndarray:
         """(H, W, 3) uint8 **BGR** image of the body ``vertices`` (V, 3) from the camera
         (``R`` world -> optical, ``position``)."""
+        return self.render_bodies([(vertices, self._colours)], R, position)
+
+    def render_bodies(self, bodies: Sequence[Tuple[np.ndarray, np.ndarray]], R: np.ndarray,
+                      position: np.ndarray) -> np.ndarray:
+        """As :meth:`render`, several bodies in one image: ``(vertices (V, 3), colours (V, 4)
+        RGBA float32)`` each (:func:`vertex_colours`), all with this renderer's faces."""
         pr = self._pr
         if self._renderer is None or self._frames % RENDERER_REFRESH_FRAMES == 0:
             if self._renderer is not None:
                 self._renderer.delete()
             self._renderer = pr.OffscreenRenderer(self.width, self.height)
         self._frames += 1
-        if self._body_node is not None:
-            self.scene.remove_node(self._body_node)
-        prim = pr.Primitive(positions=vertices.astype(np.float32),
-                            normals=vertex_normals(vertices, self.faces),
-                            color_0=self._colours, indices=self.faces.astype(np.uint32),
-                            material=self._material)
-        self._body_node = self.scene.add(pr.Mesh([prim]))
+        for node in self._body_nodes:
+            self.scene.remove_node(node)
+        self._body_nodes = []
+        for vertices, colours in bodies:
+            prim = pr.Primitive(positions=vertices.astype(np.float32),
+                                normals=vertex_normals(vertices, self.faces),
+                                color_0=colours, indices=self.faces.astype(np.uint32),
+                                material=self._material)
+            self._body_nodes.append(self.scene.add(pr.Mesh([prim])))
         self.scene.set_pose(self._camera_node, optical_to_gl(R, position))
         self.scene.set_pose(self._headlight, optical_to_gl(R, position))
         rgb, _ = self._renderer.render(self.scene)
