@@ -210,3 +210,115 @@ def test_scene_has_occlusion_shuffle_blips_and_entries(motions):
     scenes = crossing_scenes(*motions, np.random.default_rng(0))
     present = [len(k) for k in scenes['enter_leave'].keypoints]
     assert present[0] == 0 and max(present) >= 3                      # nobody, then three
+
+
+# ---------------------------------------------------------------------------- appearance
+def _draw(img, kp, torso_bgr, legs_bgr):
+    """Paint a person's torso and leg segments (thick lines) on ``img``."""
+    import cv2
+    from mocap_core.skeleton import KEYPOINT_INDEX as K
+    pt = lambda n: tuple(int(round(v)) for v in kp[K[n], :2])  # noqa: E731
+    for a, b in (('left_shoulder', 'right_hip'), ('right_shoulder', 'left_hip'),
+                 ('left_shoulder', 'left_elbow'), ('right_shoulder', 'right_elbow')):
+        cv2.line(img, pt(a), pt(b), torso_bgr, 25)
+    for a, b in (('left_hip', 'left_knee'), ('right_hip', 'right_knee'),
+                 ('left_knee', 'left_ankle'), ('right_knee', 'right_ankle')):
+        cv2.line(img, pt(a), pt(b), legs_bgr, 25)
+
+
+def walker(cx, cy, h=300.0):
+    """A stick person whose segments are long enough to paint (upright, arms down)."""
+    from mocap_core.skeleton import KEYPOINT_NAMES
+    layout = {'nose': (0, -0.45), 'left_eye': (0.02, -0.47), 'right_eye': (-0.02, -0.47),
+              'left_ear': (0.05, -0.45), 'right_ear': (-0.05, -0.45),
+              'left_shoulder': (0.12, -0.3), 'right_shoulder': (-0.12, -0.3),
+              'left_elbow': (0.15, -0.1), 'right_elbow': (-0.15, -0.1),
+              'left_wrist': (0.16, 0.05), 'right_wrist': (-0.16, 0.05),
+              'left_hip': (0.08, 0.05), 'right_hip': (-0.08, 0.05),
+              'left_knee': (0.09, 0.27), 'right_knee': (-0.09, 0.27),
+              'left_ankle': (0.09, 0.48), 'right_ankle': (-0.09, 0.48)}
+    kp = np.zeros((NUM_KEYPOINTS, 3))
+    for i, n in enumerate(KEYPOINT_NAMES):
+        x, y = layout.get(n, (0.09 if n.startswith('left') else -0.09, 0.5))
+        kp[i] = (cx + x * h, cy + y * h, 0.9)
+    return kp
+
+
+def test_appearance_features_read_the_clothes():
+    from mocap_core.tracking import appearance_distance, appearance_features
+    img = np.full((600, 800, 3), 90, np.uint8)
+    a, b = walker(250, 300), walker(550, 300)
+    _draw(img, a, (40, 40, 200), (200, 60, 30))        # red shirt, blue trousers (BGR)
+    _draw(img, b, (40, 200, 40), (200, 60, 30))        # green shirt, the same trousers
+    fa, fb = appearance_features(img, a), appearance_features(img, b)
+    assert fa.shape == (4, 3) and np.all(np.isfinite(fa))
+    # torso and arms differ, thighs and shins agree
+    torso = np.linalg.norm(fa[:2] - fb[:2], axis=1)
+    legs = np.linalg.norm(fa[2:] - fb[2:], axis=1)
+    assert torso.min() > 40 and legs.max() < 3, (torso, legs)
+    assert appearance_distance(fa, fa) == 0.0 and appearance_distance(fa, fb) > 20
+    # a region whose keypoints are not seen, or outside the image, is unknown
+    hidden = a.copy()
+    hidden[[13, 14, 15, 16], 2] = 0.0                  # knees and ankles
+    fh = appearance_features(img, hidden)
+    assert np.all(np.isnan(fh[3])) and np.all(np.isfinite(fh[:2]))
+    assert appearance_features(img, walker(2000, 300)) is None
+    assert appearance_features(np.zeros((10, 10), np.uint8), a) is None
+
+
+def test_clothes_keep_ids_when_two_people_cross():
+    """Two people of the same size swap places behind each other in one frame (their boxes
+    coincide while they pass): by position alone the tracker cannot tell who is who; with the
+    image, the clothes keep each id on its person."""
+    def frames():
+        out = []
+        for f in range(40):
+            x = 200 + 10 * f                   # A walks right, B walks left, same height
+            a, b = walker(x, 300), walker(600 - 10 * f + 200, 300)
+            img = np.full((600, 1000, 3), 90, np.uint8)
+            # near the crossing only the person in front is seen
+            near = abs(a[0, 0] - b[0, 0]) < 120
+            rows = [a] if near else [a, b]
+            if near and f % 2:
+                rows = [b]                     # the detector sees one or the other
+            for kp, shirt in ((a, (40, 40, 200)), (b, (40, 200, 40))):
+                if any(kp is r for r in rows):
+                    _draw(img, kp, shirt, (200, 60, 30))
+            truth = [0 if r is a else 1 for r in rows]
+            out.append((np.array(rows), img, truth))
+        return out
+
+    def score(with_image):
+        tr = PersonTracker()
+        ids = {0: set(), 1: set()}
+        for f, (rows, img, truth) in enumerate(frames()):
+            got = tr.update(rows, f / 30.0, image=img if with_image else None)
+            for p in got:
+                ids[truth[p.row]].add(p.id)
+        return ids
+    seen = score(True)
+    assert seen[0] == {1} and seen[1] == {2}, seen
+    blind = score(False)
+    assert blind[0] != {1} or blind[1] != {2}, blind    # the test is not trivially passed
+
+
+def test_a_person_hidden_longer_than_max_lost_gets_their_id_back_by_their_clothes():
+    import cv2  # noqa: F401  (appearance_features needs it)
+
+    def show(kp, shirt):
+        img = np.full((600, 1000, 3), 90, np.uint8)
+        _draw(img, kp, shirt, (200, 60, 30))
+        return img
+    red, green = (40, 40, 200), (40, 200, 40)
+    for shirt, expected in ((red, {1}), (green, {1, 2})):
+        tr = PersonTracker(TrackerParams(max_lost_s=1.0, appearance_max_lost_s=3.0))
+        ids = set()
+        for f in range(10):
+            kp = walker(300 + 3 * f, 300)
+            ids |= {p.id for p in tr.update(kp[None], f / 30.0, image=show(kp, red))}
+        for f in range(10, 70):                # hidden 2 s
+            tr.update(np.zeros((0, NUM_KEYPOINTS, 3)), f / 30.0)
+        for f in range(70, 80):                # back 60 px on: the same clothes or not
+            kp = walker(390 + 3 * f - 210, 300)
+            ids |= {p.id for p in tr.update(kp[None], f / 30.0, image=show(kp, shirt))}
+        assert ids == expected, (shirt, ids)

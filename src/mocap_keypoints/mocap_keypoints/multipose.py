@@ -14,10 +14,12 @@ the BlazePose way, per person:
 
 * **Detection** every ``detection_interval`` frames (and whenever nobody is followed): the
   Tasks landmarker in IMAGE mode with ``num_poses = max_persons`` on one region of the image.
-  The regions take turns: the whole image, then squares of the image's short side along its
-  long side (overlapping by at least a third). The detector sees its input at 224 x 224, so
-  in a wide image a person a third of the image high is ~50 px to it and often missed; in a
-  square tile the same person is twice that. Each region is scanned every
+  The regions take turns: the whole image, squares of the image's short side along its long
+  side, and in larger images the whole image again and squares of two thirds of the short
+  side on a grid (overlapping by at least a third). The detector sees its input at
+  224 x 224, so in a wide image a person a third of the image high is ~50 px to it and often
+  missed; in the smaller squares the same person is three times that. A person that a
+  square cuts is not taken from it (a larger region finds them whole). Each region is scanned every
   ``detection_interval`` x (number of regions) frames; while whole rounds find nobody new
   the interval doubles, up to ``max_detection_interval``, and it drops back as soon as someone
   new is found or a window ends.
@@ -28,8 +30,11 @@ the BlazePose way, per person:
   of one frame seed the next; no detection); when the person nears the window's edge, the
   window is moved onto the person and its landmarker restarted.
 * **Windows end** when their landmarker loses the person for ``max_missed`` frames (in the
-  meantime it looks for them again in its window, as MediaPipe does after losing track), or when
-  two windows follow the same person (the less confident one ends).
+  meantime it looks for them again in its window, as MediaPipe does after losing track), or
+  when two windows follow the same person (the less confident one ends). When the landmarker
+  jumps to somebody else in its window (:func:`jumped`: the torso moves by more than its own
+  length in one frame; a person passing in front or behind), that frame counts as missed and
+  the window's landmarker starts afresh.
 
 Identities are not this module's job: :class:`mocap_core.tracking.PersonTracker` gives them
 downstream, and also merges the duplicates that remain.
@@ -41,11 +46,11 @@ import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Sequence
 
 import numpy as np
 
-from mocap_core.skeleton import NUM_KEYPOINTS
+from mocap_core.skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
 from mocap_core.tracking import box_iou, keypoint_box, oks
 
 from .blazepose import blazepose_to_layout
@@ -91,6 +96,80 @@ def pose_bundle(cache_dir: Optional[Path] = None) -> Path:
         str(tmp))
     os.replace(tmp, out)
     return out
+
+
+def mask_box(kp: np.ndarray, margin: float = 0.1) -> Optional[tuple]:
+    """``(x0, y0, x1, y1)`` integer pixels covering a person's seen keypoints (confidence
+    >= 0.3), grown by ``margin`` x the person's height on every side (hair, clothes and
+    hands beyond the keypoints); None when fewer than two are seen."""
+    box = keypoint_box(kp, 0.3)
+    if box is None:
+        return None
+    cx, cy, bh, bw = box
+    pad = margin * bh
+    return (int(np.floor(cx - bw / 2 - pad)), int(np.floor(cy - bh / 2 - pad)),
+            int(np.ceil(cx + bw / 2 + pad)), int(np.ceil(cy + bh / 2 + pad)))
+
+
+def cut_by(kp: np.ndarray, region: tuple, width: int, height: int,
+           margin: float = 0.02) -> bool:
+    """Whether a person found in ``region`` ``(x0, y0, x1, y1)`` of a ``width`` x
+    ``height`` image reaches one of the region's edges that lie inside the image (within
+    ``margin`` of the region's side): a person the square cuts, whose keypoints beyond the
+    edge are guesses. The whole image, or a larger square, finds them whole."""
+    box = mask_box(kp, margin=0.0)
+    if box is None:
+        return False
+    x0, y0, x1, y1 = region
+    m = margin * max(x1 - x0, y1 - y0)
+    return bool((x0 > 0 and box[0] <= x0 + m) or (y0 > 0 and box[1] <= y0 + m) or
+                (x1 < width and box[2] >= x1 - m) or (y1 < height and box[3] >= y1 - m))
+
+
+def _fill(crop: np.ndarray, box: tuple, x0: int, y0: int) -> None:
+    """Paint the image box ``(x0, y0, x1, y1)`` grey in ``crop``, whose top-left corner is
+    at image pixel (``x0``, ``y0``)."""
+    bx0, by0, bx1, by1 = box
+    crop[max(by0 - y0, 0):max(by1 - y0, 0), max(bx0 - x0, 0):max(bx1 - x0, 0)] = 127
+
+
+#: Side of the smaller search squares (:meth:`BlazePoseMultiDetector.regions`) as a fraction
+#: of the image's short side. The detector sees its input at 224 x 224; measured on rendered
+#: people 28 % of a 720p frame high (``mocap eval people``), squares of the short side found
+#: them in about half of the scans, squares of two thirds of it in every scan, and a third of
+#: it gave partial bodies. A person such a square cuts is left to the larger regions
+#: (:func:`cut_by`).
+TILE_FRACTION = 2.0 / 3.0
+#: The smaller squares are scanned only in images whose short side is at least this (px):
+#: in smaller images a person the detector misses whole is too small to follow anyway, and
+#: the extra regions would only slow the discovery of everybody else.
+SMALL_TILE_MIN_SIDE = 480
+
+#: Keypoints of the torso (shoulders and hips), for :func:`jumped`.
+_TORSO = tuple(KEYPOINT_INDEX[n] for n in ('left_shoulder', 'right_shoulder', 'left_hip',
+                                           'right_hip'))
+
+
+def jumped(last: np.ndarray, kp: np.ndarray, max_shift: float = 1.0,
+           max_ratio: float = 1.3) -> bool:
+    """Whether (23, 3) keypoints ``kp`` of one frame cannot be the same person as ``last`` of
+    the frame before: the torso (shoulders and hips) moved by more than ``max_shift`` torso
+    lengths (mid-shoulder to mid-hip), or its length changed by more than ``max_ratio``. A
+    person walking or running moves a fraction of a torso length per frame at 30 fps; the
+    landmarker of a window that takes the person passing in front is off by more. False when
+    a torso is not seen in both."""
+    def torso(k):
+        t = k[list(_TORSO)]
+        if np.any(t[:, 2] < 0.3):
+            return None
+        shoulders, hips = t[:2, :2].mean(axis=0), t[2:, :2].mean(axis=0)
+        return (shoulders + hips) / 2.0, float(np.linalg.norm(shoulders - hips))
+    a, b = torso(last), torso(kp)
+    if a is None or b is None or min(a[1], b[1]) < 1.0:
+        return False
+    size = max(a[1], b[1])
+    return bool(np.linalg.norm(a[0] - b[0]) > max_shift * size
+                or max(a[1], b[1]) / min(a[1], b[1]) > max_ratio)
 
 
 @dataclass
@@ -168,6 +247,8 @@ class BlazePoseMultiDetector:
         #: counters for diagnostics
         self.detections = 0
         self.windows_opened = 0
+        #: windows ended because their landmarker jumped to somebody else
+        self.jumps = 0
 
     # ------------------------------------------------------------------ protocol
     def detect(self, image: np.ndarray) -> np.ndarray:
@@ -179,7 +260,17 @@ class BlazePoseMultiDetector:
         self._ts_ms += 33          # VIDEO mode wants increasing stamps; only order matters
         people: List[np.ndarray] = []
         for win in list(self._windows):
-            kp = self._track(win, rgb)
+            others = [o.last for o in self._windows if o is not win and o.last is not None]
+            kp = self._track(win, rgb, others)
+            if kp is not None and win.last is not None and jumped(win.last, kp):
+                # the landmarker took somebody else in its window (a person passing in
+                # front or behind), or lost its person: this frame has nobody from this
+                # window, and a fresh landmarker looks for the person again (the others
+                # masked) from the next frame on
+                self.jumps += 1
+                win.landmarker.close()
+                win.landmarker = self._new_landmarker()
+                kp = None
             if kp is None:
                 win.missed += 1
                 if win.missed >= self.max_missed:
@@ -195,7 +286,7 @@ class BlazePoseMultiDetector:
                                  len(self._windows) < self.max_persons):
             self._since_find = 0
             opened = 0
-            for kp in self._find(rgb):
+            for kp in self._find(rgb, [wn.last for wn in self._windows if wn.last is not None]):
                 box = keypoint_box(kp, 0.3)
                 if box is None or box[2] < self.min_person_px:
                     continue
@@ -261,26 +352,45 @@ class BlazePoseMultiDetector:
 
     @staticmethod
     def regions(width: int, height: int) -> List[tuple]:
-        """``(x0, y0, x1, y1)`` regions scanned in turn: the whole image, then, for an image
-        more than 1.2 times longer than high (or the reverse), squares of the short side
-        along the long side, evenly spaced, overlapping by at least a third."""
+        """``(x0, y0, x1, y1)`` regions scanned in turn: the whole image, squares of the
+        image's short side along its long side; then, in an image whose short side is at
+        least :data:`SMALL_TILE_MIN_SIDE`, the whole image again and squares of
+        :data:`TILE_FRACTION` of the short side on a grid over the image (row by row).
+        Neighbouring squares overlap by at least a third of a square."""
+        short = min(width, height)
+
+        def grid(side: int, both: bool) -> List[tuple]:
+            def starts(length: int) -> List[int]:
+                if length <= side:
+                    return [0]
+                n = int(np.ceil((length - side) / (side * 2.0 / 3.0))) + 1
+                return [int(round(k * (length - side) / (n - 1))) for k in range(n)]
+            ys = starts(height) if both or height > width else [0]
+            xs = starts(width) if both or width >= height else [0]
+            return [(x, y, x + side, y + side) for y in ys for x in xs]
+
         out = [(0, 0, width, height)]
-        long_, short = max(width, height), min(width, height)
-        if long_ <= 1.2 * short:
-            return out
-        n = int(np.ceil((long_ - short) / (short * 2.0 / 3.0))) + 1
-        for k in range(n):
-            a = int(round(k * (long_ - short) / (n - 1)))
-            out.append((a, 0, a + short, short) if width >= height else (0, a, short, a + short))
+        if max(width, height) > 1.2 * short:
+            out += grid(short, both=False)
+        if short >= SMALL_TILE_MIN_SIDE:
+            out += [(0, 0, width, height)] + grid(int(round(TILE_FRACTION * short)), both=True)
         return out
 
-    def _find(self, rgb: np.ndarray) -> List[np.ndarray]:
-        """Detection on this turn's region: (23, 3) image keypoints of every person found."""
+    def _find(self, rgb: np.ndarray, followed: Sequence[np.ndarray] = ()
+              ) -> List[np.ndarray]:
+        """Detection on this turn's region: (23, 3) image keypoints of every person found.
+        The people already ``followed`` (their last (23, 3) keypoints) are masked grey
+        (:func:`mask_box`): the detector's strongest detections are often the people it
+        already follows, and it then reports nobody else."""
         h, w = rgb.shape[:2]
         regions = self.regions(w, h)
         x0, y0, x1, y1 = regions[self.detections % len(regions)]
         self.detections += 1
-        crop = np.ascontiguousarray(rgb[y0:y1, x0:x1])
+        crop = np.array(rgb[y0:y1, x0:x1])
+        for kp in followed:
+            box = mask_box(kp)
+            if box is not None:
+                _fill(crop, box, x0, y0)
         with warnings.catch_warnings():
             warnings.simplefilter('ignore', UserWarning)
             res = self._finder.detect(self._mp.Image(image_format=self._mp.ImageFormat.SRGB,
@@ -291,7 +401,8 @@ class BlazePoseMultiDetector:
             seen = kp[:, 2] > 0
             kp[seen, 0] += x0
             kp[seen, 1] += y0
-            out.append(kp)
+            if not cut_by(kp, (x0, y0, x1, y1), w, h):
+                out.append(kp)
         out.sort(key=lambda k: -float(np.sum(k[:, 2])))
         return out
 
@@ -318,13 +429,27 @@ class BlazePoseMultiDetector:
         self._windows.remove(win)
         self._interval, self._quiet = self.detection_interval, 0   # look again soon
 
-    def _track(self, win: _Window, rgb: np.ndarray) -> Optional[np.ndarray]:
+    def _track(self, win: _Window, rgb: np.ndarray, others: Sequence[np.ndarray] = ()
+               ) -> Optional[np.ndarray]:
         """Run the window's landmarker on its crop (borders outside the image are black);
-        return image keypoints or None."""
+        return image keypoints or None. The other people followed (``others``: their last
+        (23, 3) keypoints) are masked grey in the crop, except where they overlap the window's
+        own person: the landmarker then keeps to its person instead of taking a more salient
+        one next to them."""
         M = np.array([[1.0, 0.0, -win.x0], [0.0, 1.0, -win.y0]])
         crop = self._cv2.warpAffine(rgb, M, (win.side, win.side),
                                     flags=self._cv2.INTER_LINEAR,
                                     borderMode=self._cv2.BORDER_CONSTANT)
+        own = mask_box(win.last) if win.last is not None else None
+        if others and own is not None:
+            keep = crop.copy()
+            for kp in others:
+                box = mask_box(kp)
+                if box is not None:
+                    _fill(crop, box, win.x0, win.y0)
+            ox0, oy0 = max(own[0] - win.x0, 0), max(own[1] - win.y0, 0)
+            ox1, oy1 = max(own[2] - win.x0, 0), max(own[3] - win.y0, 0)
+            crop[oy0:oy1, ox0:ox1] = keep[oy0:oy1, ox0:ox1]
         with warnings.catch_warnings():
             warnings.simplefilter('ignore', UserWarning)
             res = win.landmarker.detect_for_video(

@@ -222,7 +222,8 @@ class FrameProcessor:
             res.notes.append(f'intrinsics: {note}')
         res.intrinsics = fi
         if self.tracker is not None:
-            tracked = self.tracker.update(people, frame.stamp_ns * 1e-9)[:self.max_persons]
+            tracked = self.tracker.update(people, frame.stamp_ns * 1e-9,
+                                          image=image)[:self.max_persons]
             if tracked:
                 raw = np.stack([t.keypoints for t in tracked])
                 res.ids = np.array([t.id for t in tracked], dtype=np.int64)

@@ -256,6 +256,27 @@ def identity_metrics(truth: Sequence[np.ndarray], ids: Sequence[Dict[int, int]]
     }
 
 
+def scene_actors(walk_a: Motion, walk_b: Motion, stand: Motion
+                 ) -> Dict[str, Tuple[List[Actor], int, VirtualCamera]]:
+    """The actors, frame count and camera of each scene of :func:`crossing_scenes` (which
+    see), for the keypoint scenes and for rendered video (:mod:`mocap_core.render.people`)."""
+    cam = crossing_camera()
+    n_ab = min(walk_a.num_frames, walk_b.num_frames)
+    # a walker whose path starts outside the picture: anchored at its first frame 2.5 m
+    # beyond the border of the camera's view at that depth
+    half = 7.0 * np.tan(np.radians(35.0))
+    return {
+        'cross2': ([Actor(walk_a, 0.0, (0.0, 0.0)), Actor(walk_b, np.pi, (0.0, 1.0))],
+                   n_ab, cam),
+        'cross3': ([Actor(walk_a, 0.0, (0.0, 0.0)), Actor(walk_b, np.pi, (0.0, 1.0)),
+                    Actor(stand, 0.0, (0.2, 2.2))], n_ab, cam),
+        'enter_leave': ([Actor(walk_a, 0.0, (-half - 1.0, 0.5), anchor_frame=0),
+                         Actor(walk_b, np.pi, (half + 1.0, -0.5), anchor_frame=0, start=40),
+                         Actor(stand, np.pi / 2, (0.5, -2.5), start=60, stop=140)],
+                        n_ab + 40, cam),
+    }
+
+
 def crossing_scenes(walk_a: Motion, walk_b: Motion, stand: Motion, rng: np.random.Generator,
                     **scene_kwargs) -> Dict[str, Scene]:
     """The standard set of multi-person test scenes, made from two walking clips (walking
@@ -271,23 +292,5 @@ def crossing_scenes(walk_a: Motion, walk_b: Motion, stand: Motion, rng: np.rando
 
     Extra keyword arguments go to :func:`make_scene`.
     """
-    cam = crossing_camera()
-    n_ab = min(walk_a.num_frames, walk_b.num_frames)
-    out = {
-        'cross2': make_scene([Actor(walk_a, 0.0, (0.0, 0.0)),
-                              Actor(walk_b, np.pi, (0.0, 1.0))],
-                             n_ab, cam, rng, **scene_kwargs),
-        'cross3': make_scene([Actor(walk_a, 0.0, (0.0, 0.0)),
-                              Actor(walk_b, np.pi, (0.0, 1.0)),
-                              Actor(stand, 0.0, (0.2, 2.2))],
-                             n_ab, cam, rng, **scene_kwargs),
-    }
-    # a walker whose path starts outside the picture: anchored at its first frame 2.5 m
-    # beyond the border of the camera's view at that depth
-    half = 7.0 * np.tan(np.radians(35.0))
-    out['enter_leave'] = make_scene(
-        [Actor(walk_a, 0.0, (-half - 1.0, 0.5), anchor_frame=0),
-         Actor(walk_b, np.pi, (half + 1.0, -0.5), anchor_frame=0, start=40),
-         Actor(stand, np.pi / 2, (0.5, -2.5), start=60, stop=140)],
-        n_ab + 40, cam, rng, **scene_kwargs)
-    return out
+    return {name: make_scene(actors, frames, cam, rng, **scene_kwargs)
+            for name, (actors, frames, cam) in scene_actors(walk_a, walk_b, stand).items()}
