@@ -21,15 +21,19 @@
   occlusion), and the gate widens with the time lost. After that it is dropped.
 * **Appearance.** With the image, :func:`appearance_features` gives each candidate the mean
   colours (CIE Lab) of its torso, upper arms, thighs and shins. A track keeps a running mean
-  of its own, updated only while it overlaps nobody (a person half hidden by another would
-  take the other's colours); a candidate's similarity to a track is multiplied by
-  ``exp(-d^2 / (2 appearance_sigma^2))`` (d: the mean colour distance over the regions both
-  show, floored at ``appearance_floor``), so two people crossing, whose boxes and keypoints
-  coincide for a moment, are told apart by their clothes. A lost track with an appearance
-  is kept for ``appearance_max_lost_s`` (longer than ``max_lost_s``), and a new person who
-  looks the same (``appearance_reid``) near where it was lost takes its id back. Measured on
-  rendered crossings (``mocap eval people``, docs/multi_person.md): the same person's colours
-  stay within 8.5 Lab units in 95 % of frames, two different people's are 18 or more apart.
+  of its own and of how far its frames fall from it (its *spread*), updated only while it
+  overlaps nobody (a person half hidden by another would take the other's colours); a
+  candidate's similarity to a track is multiplied by ``exp(-d^2 / (2 sigma^2))`` (d: the
+  mean colour distance over the regions both show; sigma: twice the track's spread, at least
+  ``appearance_sigma_min``; floored at ``appearance_floor``) where the match is ambiguous (the
+  candidate could go to more than one track, or the track take more than one candidate), so
+  two people crossing, whose boxes and keypoints coincide for a moment, are told apart by
+  their clothes, while a lone person whose colours change at once keeps their id. The scale is
+  the track's own because footage differs: on rendered people (flat colours) a person's
+  frames fall 2.3 Lab units from their mean (median), on the real tai chi clip 8.4, with
+  different rendered people 18-53 apart. A lost track with an appearance is kept for
+  ``appearance_max_lost_s`` (longer than ``max_lost_s``), and a new person within
+  ``appearance_reid`` sigmas of its colours near where it was lost takes its id back.
 * **Signatures.** :meth:`PersonTracker.set_signature` attaches a vector to an id (the 3D
   stages' bone lengths, m); a coasting track only takes a candidate whose signature, when the
   caller gives one, is within ``signature_tolerance`` (relative) of its own.
@@ -99,15 +103,22 @@ class TrackerParams:
     #: Appearance (module docstring): colour distance (CIE Lab units) at which the
     #: similarity falls to exp(-1/2) of its value, the least factor, and the weight of a new
     #: frame in a track's running mean of its colours.
-    appearance_sigma: float = 10.0
+    #: Each track's colour scale sigma is ``appearance_spread_factor`` x the running mean
+    #: distance of its own frames from its mean colours (how much this person's colours vary
+    #: in this footage), at least ``appearance_sigma_min``; ``appearance_sigma`` until
+    #: ``appearance_min_frames`` frames have measured it.
+    appearance_sigma: float = 15.0
+    appearance_sigma_min: float = 5.0
+    appearance_spread_factor: float = 2.0
+    appearance_min_frames: int = 5
     appearance_floor: float = 0.05
     appearance_rate: float = 0.1
     #: A lost track whose appearance is known is kept this long (s, at least
-    #: ``max_lost_s``); a new person within ``appearance_reid`` colour distance of it, and
+    #: ``max_lost_s``); a new person within ``appearance_reid`` of its sigma in colour, and
     #: within ``reid_distance`` box heights plus ``reid_speed`` box heights per second lost of
     #: where it was last seen, takes its id (a person hidden for a while by another).
     appearance_max_lost_s: float = 3.0
-    appearance_reid: float = 8.0
+    appearance_reid: float = 1.5
     reid_speed: float = 1.0
 
     def __post_init__(self) -> None:
@@ -204,6 +215,8 @@ class _Track:
     missed: int = 0               # frames since the last match
     signature: Optional[np.ndarray] = None
     appearance: Optional[np.ndarray] = None   # (R, 3) Lab per region, NaN where unknown
+    spread: float = 0.0                       # running mean distance of its frames (Lab)
+    looks: int = 0                            # frames that measured ``spread``
 
     def box_at(self, dt: float) -> np.ndarray:
         x, _ = self.kalman.predicted(dt)
@@ -312,9 +325,19 @@ class PersonTracker:
             for j in range(len(cands)):
                 if not self._signature_ok(t, sigs[j]):
                     continue
-                s = oks(cands[j], pred_kp[i], pred_box[i][2], p.min_confidence,
-                        p.oks_scale * widen) + 0.3 * box_iou(boxes[j], pred_box[i])
-                sim[i, j] = s * self._look_factor(t.appearance, looks[j])
+                sim[i, j] = oks(cands[j], pred_kp[i], pred_box[i][2], p.min_confidence,
+                                p.oks_scale * widen) + 0.3 * box_iou(boxes[j], pred_box[i])
+        # Clothes decide only where position and pose do not: a candidate that more than one
+        # track could take, or a track that could take more than one candidate (two people
+        # crossing). A lone match keeps its similarity, so a person whose colours change at
+        # once (a light switched on, the camera's exposure) keeps their id.
+        # A track lost for longer than max_lost_s is kept only for its clothes: they decide.
+        plausible = sim >= p.match_threshold
+        for i, j in zip(*np.nonzero(plausible)):
+            t = self._tracks[i]
+            if plausible[:, j].sum() > 1 or plausible[i].sum() > 1 or \
+                    stamp_s - t.last_s > p.max_lost_s:
+                sim[i, j] *= self._look_factor(t, looks[j])
         # Matching cascade: the tracks seen in the last frame choose first, then the coasting
         # ones, the tentative ones last, so that a long-lost track (whose gate is wide) cannot
         # take a person that a track seen a moment ago explains.
@@ -353,7 +376,7 @@ class PersonTracker:
             if sigs[j] is not None and t.signature is None:
                 t.signature = np.asarray(sigs[j], dtype=np.float64)
             if alone[j]:
-                t.appearance = _blend(t.appearance, looks[j], p.appearance_rate)
+                self._learn_look(t, looks[j])
             if not t.id and t.hits >= p.birth_frames:
                 ready.append((t, j))
         # the most confident tentative tracks are confirmed first, while there is room (a
@@ -393,7 +416,7 @@ class PersonTracker:
             self._set_shape(t, cands[j], boxes[j])
             t.row = rows[j]
             if alone[j]:
-                t.appearance = _blend(None, looks[j], 1.0)
+                self._learn_look(t, looks[j])
             self._tracks.append(t)
             if p.birth_frames <= 1:
                 self._confirm(t, stamp_s, set())
@@ -439,10 +462,11 @@ class PersonTracker:
             ob = o.box_at(lost)
             d = float(np.hypot(tb[0] - ob[0], tb[1] - ob[1]) / max(ob[2], 1.0))
             look = appearance_distance(o.appearance, t.appearance)
+            limit = p.appearance_reid * self._sigma(o)
             if lost <= p.max_lost_s:
-                ok = d < p.reid_distance and (look is None or look <= 2 * p.appearance_reid)
+                ok = d < p.reid_distance
             else:            # kept for its appearance: it must look the same
-                ok = look is not None and look <= p.appearance_reid and \
+                ok = look is not None and look <= limit and \
                     d < p.reid_distance + p.reid_speed * lost
             if ok and d < best_d and 0.7 <= tb[2] / max(ob[2], 1.0) <= 1.4 and \
                     self._signature_ok(o, t.signature):
@@ -456,14 +480,31 @@ class PersonTracker:
             return p.max_lost_s
         return max(p.max_lost_s, p.appearance_max_lost_s)
 
-    def _look_factor(self, a: Optional[np.ndarray], b: Optional[np.ndarray]) -> float:
-        """The appearance factor of the similarity (module docstring); 1 when either is
-        unknown."""
-        d = appearance_distance(a, b)
+    def _sigma(self, t: _Track) -> float:
+        """Track ``t``'s colour scale (Lab units; :class:`TrackerParams`)."""
+        p = self.params
+        if t.looks < p.appearance_min_frames:
+            return p.appearance_sigma
+        return max(p.appearance_sigma_min, p.appearance_spread_factor * t.spread)
+
+    def _learn_look(self, t: _Track, look: Optional[np.ndarray]) -> None:
+        """Update the running mean colours of ``t`` and the spread of its frames about it."""
+        if look is None:
+            return
+        d = appearance_distance(t.appearance, look)
+        if d is not None:
+            t.looks += 1
+            t.spread += (d - t.spread) / min(t.looks, 1.0 / self.params.appearance_rate)
+        t.appearance = _blend(t.appearance, look, self.params.appearance_rate)
+
+    def _look_factor(self, t: _Track, look: Optional[np.ndarray]) -> float:
+        """The appearance factor of the similarity of track ``t`` and a candidate that looks
+        ``look`` (module docstring); 1 when either is unknown."""
+        d = appearance_distance(t.appearance, look)
         if d is None:
             return 1.0
         p = self.params
-        return max(p.appearance_floor, float(np.exp(-0.5 * (d / p.appearance_sigma) ** 2)))
+        return max(p.appearance_floor, float(np.exp(-0.5 * (d / self._sigma(t)) ** 2)))
 
     def _valid(self, cands: np.ndarray) -> Tuple[List[int], List[np.ndarray]]:
         p = self.params

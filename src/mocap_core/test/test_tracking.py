@@ -322,3 +322,19 @@ def test_a_person_hidden_longer_than_max_lost_gets_their_id_back_by_their_clothe
             kp = walker(390 + 3 * f - 210, 300)
             ids |= {p.id for p in tr.update(kp[None], f / 30.0, image=show(kp, shirt))}
         assert ids == expected, (shirt, ids)
+
+
+def test_a_lone_person_whose_colours_change_at_once_keeps_the_id():
+    """Clothes only decide between candidates: a person alone whose colours change from one
+    frame to the next (a light switched on, the camera's exposure) keeps their id."""
+    tr = PersonTracker()
+    ids = set()
+    for f in range(30):
+        kp = walker(300 + 2 * f, 300)
+        img = np.full((600, 1000, 3), 90 if f < 15 else 200, np.uint8)
+        _draw(img, kp, (40, 40, 200) if f < 15 else (120, 120, 255), (200, 60, 30))
+        got = tr.update(kp[None], f / 30.0, image=img)
+        ids |= {p.id for p in got}
+        if f >= 3:
+            assert got, f                    # published in every frame once confirmed
+    assert ids == {1}

@@ -142,6 +142,12 @@ PARAMETERS = (
     ParamSpec('id_timeout_s', 1.0, 'A person unseen for longer than this loses the id; seen '
               'again sooner, near where they were expected, they keep it', min_value=0.0,
               read_only=True),
+    ParamSpec('id_by_appearance', True, 'Tell people apart also by the colours of their '
+              'clothes (torso, arms, legs) when they cross, and give a person hidden for up to '
+              'id_appearance_timeout_s their id back when they look the same', read_only=True),
+    ParamSpec('id_appearance_timeout_s', 3.0, 'With id_by_appearance: how long a person '
+              'unseen keeps their id for a return recognised by their clothes (at least '
+              'id_timeout_s)', min_value=0.0, read_only=True),
     ParamSpec('calibration_file', '', 'Camera calibration (standard camera_info YAML); takes '
               'precedence over the CameraInfo topic', read_only=True),
     ParamSpec('horizontal_fov_deg', 60.0, 'Horizontal field of view for approximate '
@@ -349,13 +355,15 @@ class KeypointsNode(Node):
             max_persons=p['max_persons'], min_height_px=p['min_person_height_px'],
             birth_frames=(p['id_after_frames'] or (3 if p['max_persons'] > 1 else 1))
             if p['tracking'] else 1,
-            max_lost_s=p['id_timeout_s'] if p['tracking'] else 0.0))
+            max_lost_s=p['id_timeout_s'] if p['tracking'] else 0.0,
+            appearance_max_lost_s=p['id_appearance_timeout_s'] if p['tracking'] else 0.0))
         self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
                                         undistort=p['undistort'],
                                         annotate=p['publish_annotated'],
                                         fixed_size=fixed_size,
                                         restart_after_s=p['restart_after_s'],
-                                        camera_motion=motion, tracker=self.tracker)
+                                        camera_motion=motion, tracker=self.tracker,
+                                        appearance=p['id_by_appearance'])
         self.pub_kp = self.create_publisher(PointCloud2, topics.KEYPOINTS, SENSOR_QOS)
         self.pub_tracked = self.create_publisher(UInt32MultiArray, topics.BODIES_TRACKED,
                                                  STREAM_QOS)

@@ -125,9 +125,11 @@ class FrameProcessor:
                  fixed_size: Optional[Tuple[int, int]] = None,
                  restart_after_s: float = 1.0,
                  camera_motion: Optional[CameraMotionParams] = None,
-                 tracker: Optional[PersonTracker] = None) -> None:
+                 tracker: Optional[PersonTracker] = None, appearance: bool = True) -> None:
         self.detector = detector
         self.tracker = tracker
+        #: the tracker also sees the image (people's clothes; mocap_core.tracking)
+        self.appearance = appearance
         # stamps jumping back start a new stream: the detector forgets the person it tracked
         self.order = StampOrder(restart_after_s)
         self.intrinsics = intrinsics
@@ -222,8 +224,9 @@ class FrameProcessor:
             res.notes.append(f'intrinsics: {note}')
         res.intrinsics = fi
         if self.tracker is not None:
-            tracked = self.tracker.update(people, frame.stamp_ns * 1e-9,
-                                          image=image)[:self.max_persons]
+            tracked = self.tracker.update(
+                people, frame.stamp_ns * 1e-9,
+                image=image if self.appearance else None)[:self.max_persons]
             if tracked:
                 raw = np.stack([t.keypoints for t in tracked])
                 res.ids = np.array([t.id for t in tracked], dtype=np.int64)
