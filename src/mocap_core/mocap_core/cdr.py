@@ -25,17 +25,22 @@ from __future__ import annotations
 import contextlib
 import struct
 import sys
-from typing import Dict, Iterator, Mapping, Optional, Sequence, Tuple
+from typing import Dict, Iterator, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .pose import Pose
+from .ros_conversions import (KEYPOINT_ID_FIELD, POSITION_FIELDS, bodies_cloud_values,
+                              cloud_values, contact_values, effort_values, pose_marker_specs,
+                              positions_cloud_values)
 from .skeleton import CONTACT_POINT_NAMES
+from .topics import body_name
+from .urdf import revolute_joint_names
 
 __all__ = ['CdrWriter', 'PathTrail', 'bodies_contacts_to_msg', 'bodies_to_cloud',
-           'bodies_to_motion', 'contacts_to_msg', 'marker_array', 'pose_to_joint_state',
-           'pose_to_markers', 'pose_to_motion', 'positions_to_cloud', 'root_to_odometry',
-           'built_messages', 'tf_message']
+           'bodies_to_motion', 'built_messages', 'contacts_to_msg', 'marker_array',
+           'pose_to_joint_state', 'pose_to_markers', 'pose_to_motion', 'pose_transforms',
+           'positions_to_cloud', 'root_to_odometry', 'tf_message']
 
 _ENCAPSULATION = b'\x00\x01\x00\x00'      # CDR_LE, no options
 _I32 = struct.Struct('<i')
@@ -127,8 +132,10 @@ class CdrWriter:
 # ---------------------------------------------------------------------------------------------
 # Motion: trajectory_msgs/MultiDOFJointTrajectory (mocap_core.ros_conversions.pose_to_motion)
 # ---------------------------------------------------------------------------------------------
-def _motion_transforms(pose: Pose) -> np.ndarray:
-    """(J, 7) translation x, y, z and rotation x, y, z, w of each joint's transform."""
+def pose_transforms(pose: Pose) -> np.ndarray:
+    """(J, 7) translation x, y, z (m) and rotation x, y, z, w of each joint's transform, as
+    the motion message and the TF frames carry them: the root pose, then each joint's
+    offset from its parent and rotation relative to it."""
     out = np.empty((len(pose.rotations), 7))
     out[:, :3] = pose.skeleton.offsets
     out[0, :3] = pose.root_position
@@ -151,15 +158,13 @@ def _motion(header, names: Sequence[str], transforms: np.ndarray) -> bytes:
 
 def pose_to_motion(pose: Pose, header) -> bytes:
     """As :func:`mocap_core.ros_conversions.pose_to_motion`, serialised."""
-    return _motion(header, pose.joint_names, _motion_transforms(pose))
+    return _motion(header, pose.joint_names, pose_transforms(pose))
 
 
 def bodies_to_motion(bodies: Sequence[Tuple[int, Pose]], header) -> bytes:
     """As :func:`mocap_core.ros_conversions.bodies_to_motion`, serialised."""
-    from .topics import body_name
-
     names = [f'{body_name(pid)}/{n}' for pid, pose in bodies for n in pose.joint_names]
-    transforms = (np.concatenate([_motion_transforms(pose) for _, pose in bodies])
+    transforms = (np.concatenate([pose_transforms(pose) for _, pose in bodies])
                   if bodies else np.zeros((0, 7)))
     return _motion(header, names, transforms)
 
@@ -180,42 +185,20 @@ def _joint_state(header, names: Sequence[str], position: np.ndarray,
 
 def pose_to_joint_state(pose: Pose, header, efforts: Optional[np.ndarray] = None) -> bytes:
     """As :func:`mocap_core.ros_conversions.pose_to_joint_state`, serialised."""
-    from .ros_conversions import MessageError
-    from .urdf import revolute_joint_names
-
     names = revolute_joint_names(pose.skeleton)
-    eff = None
-    if efforts is not None:
-        eff = np.asarray(efforts, dtype=np.float64).reshape(-1)
-        if eff.size != len(names):
-            raise MessageError(f'expected {len(names)} efforts, got {eff.size}')
+    eff = None if efforts is None else effort_values(efforts, len(names))
     return _joint_state(header, names, pose.revolute_angles().reshape(-1), eff)
-
-
-def _contact_values(probabilities) -> np.ndarray:
-    from .ros_conversions import MessageError
-
-    if isinstance(probabilities, Mapping):
-        values = np.array([probabilities[n] for n in CONTACT_POINT_NAMES], dtype=np.float64)
-    else:
-        values = np.asarray(probabilities, dtype=np.float64).reshape(-1)
-    if len(values) != len(CONTACT_POINT_NAMES):
-        raise MessageError(f'expected {len(CONTACT_POINT_NAMES)} contact probabilities, '
-                           f'got {len(values)}')
-    return np.clip(values, 0.0, 1.0)
 
 
 def contacts_to_msg(probabilities, header) -> bytes:
     """As :func:`mocap_core.ros_conversions.contacts_to_msg`, serialised."""
-    return _joint_state(header, CONTACT_POINT_NAMES, _contact_values(probabilities))
+    return _joint_state(header, CONTACT_POINT_NAMES, contact_values(probabilities))
 
 
 def bodies_contacts_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header) -> bytes:
     """As :func:`mocap_core.ros_conversions.bodies_contacts_to_msg`, serialised."""
-    from .topics import body_name
-
     names = [f'{body_name(pid)}/{n}' for pid, _ in bodies for n in CONTACT_POINT_NAMES]
-    values = (np.concatenate([_contact_values(p) for _, p in bodies]) if bodies
+    values = (np.concatenate([contact_values(p) for _, p in bodies]) if bodies
               else np.zeros(0))
     return _joint_state(header, names, values)
 
@@ -225,11 +208,7 @@ def bodies_contacts_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header) -> 
 # ---------------------------------------------------------------------------------------------
 def array_to_cloud(values: np.ndarray, fields: Sequence[str], header) -> bytes:
     """As :func:`mocap_core.ros_conversions.array_to_cloud`, serialised."""
-    from .ros_conversions import MessageError
-
-    values = np.asarray(values, dtype=np.float64)
-    if values.ndim != 3 or values.shape[-1] != len(fields):
-        raise MessageError(f'expected values of shape (H, W, {len(fields)}), got {values.shape}')
+    values = cloud_values(values, fields)
     height, width, nf = values.shape
     w = CdrWriter()
     w.header(header)
@@ -251,18 +230,11 @@ def array_to_cloud(values: np.ndarray, fields: Sequence[str], header) -> bytes:
 
 def positions_to_cloud(positions: np.ndarray, header) -> bytes:
     """As :func:`mocap_core.ros_conversions.positions_to_cloud`, serialised."""
-    from .ros_conversions import POSITION_FIELDS, MessageError
-
-    pos = np.asarray(positions, dtype=np.float64)
-    if pos.ndim != 2 or pos.shape[1] != 3:
-        raise MessageError(f'positions must have shape (J, 3), got {pos.shape}')
-    return array_to_cloud(pos[None], POSITION_FIELDS, header)
+    return array_to_cloud(positions_cloud_values(positions), POSITION_FIELDS, header)
 
 
 def bodies_to_cloud(positions: np.ndarray, ids: Sequence[int], header) -> bytes:
     """As :func:`mocap_core.ros_conversions.bodies_to_cloud`, serialised."""
-    from .ros_conversions import KEYPOINT_ID_FIELD, POSITION_FIELDS, bodies_cloud_values
-
     return array_to_cloud(bodies_cloud_values(positions, ids),
                           POSITION_FIELDS + (KEYPOINT_ID_FIELD,), header)
 
@@ -317,8 +289,6 @@ def pose_to_markers(pose: Pose, header, ns: str = 'mocap',
                     forces: Optional[Dict[str, np.ndarray]] = None,
                     newtons_per_metre: float = 1000.0) -> bytes:
     """As :func:`mocap_core.ros_conversions.pose_to_markers`, serialised."""
-    from .ros_conversions import pose_marker_specs
-
     return marker_array(pose_marker_specs(pose, ns, color, contacts, forces,
                                           newtons_per_metre), header)
 

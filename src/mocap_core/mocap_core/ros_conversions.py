@@ -79,9 +79,7 @@ def make_header(stamp_ns: int, frame_id: str) -> Header:
 # ---------------------------------------------------------------------------------------------
 def array_to_cloud(values: np.ndarray, fields: Sequence[str], header: Header) -> PointCloud2:
     """(H, W, F) values -> organised PointCloud2 with float32 fields ``fields`` (packed, LE)."""
-    values = np.asarray(values, dtype=np.float64)
-    if values.ndim != 3 or values.shape[-1] != len(fields):
-        raise MessageError(f'expected values of shape (H, W, {len(fields)}), got {values.shape}')
+    values = cloud_values(values, fields)
     height, width, nf = values.shape
     msg = PointCloud2()
     msg.header = header
@@ -95,6 +93,14 @@ def array_to_cloud(values: np.ndarray, fields: Sequence[str], header: Header) ->
     msg.data = values.astype('<f4').tobytes()
     msg.is_dense = bool(np.all(np.isfinite(values)))
     return msg
+
+
+def cloud_values(values: np.ndarray, fields: Sequence[str]) -> np.ndarray:
+    """``values`` as float64 (H, W, F) for the ``fields``; MessageError for another shape."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 3 or values.shape[-1] != len(fields):
+        raise MessageError(f'expected values of shape (H, W, {len(fields)}), got {values.shape}')
+    return values
 
 
 def cloud_to_array(msg: PointCloud2, fields: Sequence[str],
@@ -248,10 +254,16 @@ def sanitize_keypoints(kp: np.ndarray) -> np.ndarray:
 
 def positions_to_cloud(positions: np.ndarray, header: Header) -> PointCloud2:
     """(J, 3) joint positions (m) -> PointCloud2 (height 1, width J, fields x, y, z)."""
+    return array_to_cloud(positions_cloud_values(positions), POSITION_FIELDS, header)
+
+
+def positions_cloud_values(positions: np.ndarray) -> np.ndarray:
+    """(1, J, 3) float64 values of :func:`positions_to_cloud`; MessageError for a shape that
+    is not (J, 3)."""
     pos = np.asarray(positions, dtype=np.float64)
     if pos.ndim != 2 or pos.shape[1] != 3:
         raise MessageError(f'positions must have shape (J, 3), got {pos.shape}')
-    return array_to_cloud(pos[None], POSITION_FIELDS, header)
+    return pos[None]
 
 
 def cloud_to_positions(msg: PointCloud2, num_points: Optional[int] = None) -> np.ndarray:
@@ -342,11 +354,17 @@ def pose_to_joint_state(pose: Pose, header: Header,
     msg.name = revolute_joint_names(pose.skeleton)
     msg.position = [float(a) for a in pose.revolute_angles().reshape(-1)]
     if efforts is not None:
-        eff = np.asarray(efforts, dtype=np.float64).reshape(-1)
-        if eff.size != len(msg.name):
-            raise MessageError(f'expected {len(msg.name)} efforts, got {eff.size}')
-        msg.effort = [float(e) for e in eff]
+        msg.effort = [float(e) for e in effort_values(efforts, len(msg.name))]
     return msg
+
+
+def effort_values(efforts: np.ndarray, count: int) -> np.ndarray:
+    """(count,) float64 joint torques of :func:`pose_to_joint_state`; MessageError for
+    another count."""
+    eff = np.asarray(efforts, dtype=np.float64).reshape(-1)
+    if eff.size != count:
+        raise MessageError(f'expected {count} efforts, got {eff.size}')
+    return eff
 
 
 def joint_state_to_angles(msg: JointState, skeleton: Skeleton) -> np.ndarray:
@@ -371,18 +389,25 @@ def joint_state_to_angles(msg: JointState, skeleton: Skeleton) -> np.ndarray:
 def contacts_to_msg(probabilities: Mapping[str, float] | Sequence[float] | np.ndarray,
                     header: Header) -> JointState:
     """Foot contact probabilities -> JointState (name = contact points, position = p)."""
-    if isinstance(probabilities, Mapping):
-        values = [probabilities[n] for n in CONTACT_POINT_NAMES]
-    else:
-        values = list(np.asarray(probabilities, dtype=np.float64).reshape(-1))
-    if len(values) != len(CONTACT_POINT_NAMES):
-        raise MessageError(f'expected {len(CONTACT_POINT_NAMES)} contact probabilities, '
-                           f'got {len(values)}')
     msg = JointState()
     msg.header = header
     msg.name = list(CONTACT_POINT_NAMES)
-    msg.position = [float(np.clip(v, 0.0, 1.0)) for v in values]
+    msg.position = [float(v) for v in contact_values(probabilities)]
     return msg
+
+
+def contact_values(probabilities: Mapping[str, float] | Sequence[float] | np.ndarray
+                   ) -> np.ndarray:
+    """(4,) contact probabilities in :data:`CONTACT_POINT_NAMES` order, clipped to [0, 1],
+    from a mapping by name or a sequence; MessageError for another count."""
+    if isinstance(probabilities, Mapping):
+        values = np.array([probabilities[n] for n in CONTACT_POINT_NAMES], dtype=np.float64)
+    else:
+        values = np.asarray(probabilities, dtype=np.float64).reshape(-1)
+    if len(values) != len(CONTACT_POINT_NAMES):
+        raise MessageError(f'expected {len(CONTACT_POINT_NAMES)} contact probabilities, '
+                           f'got {len(values)}')
+    return np.clip(values, 0.0, 1.0)
 
 
 def msg_to_contacts(msg: JointState) -> np.ndarray:

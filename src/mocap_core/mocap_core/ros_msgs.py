@@ -12,10 +12,11 @@ return the canonical spelling.
 from __future__ import annotations
 
 import array
+import functools
 import importlib
 import re
-import sys
 import struct
+import sys
 from typing import Any
 
 __all__ = [
@@ -128,11 +129,16 @@ def header_stamp_ns(data: bytes, msg_type: type) -> int | None:
     """The header stamp (ns) of a serialised message whose first field is a
     ``std_msgs/Header`` (read from the CDR bytes: int32 sec, uint32 nanosec right after the
     4-byte encapsulation header); None for other types."""
-    fields = msg_type.get_fields_and_field_types()
-    if next(iter(fields.items()), None) != ('header', 'std_msgs/Header'):
+    if not _header_first(msg_type):
         return None
     sec, nanosec = struct.unpack_from('<iI', data, 4)
     return sec * 1_000_000_000 + nanosec
+
+
+@functools.lru_cache(maxsize=None)
+def _header_first(msg_type: type) -> bool:
+    fields = msg_type.get_fields_and_field_types()
+    return next(iter(fields.items()), None) == ('header', 'std_msgs/Header')
 
 
 def ns_to_stamp(ns: int) -> Any:

@@ -52,11 +52,7 @@ def pose_frames(pose: Pose, header: Header, person_id: int
     parents = pose.skeleton.parents
     children = [joint_frame(person_id, n, names[0]) for n in names]
     frames = [header.frame_id] + [children[parents[j]] for j in range(1, len(names))]
-    transforms = np.empty((len(names), 7))
-    transforms[:, :3] = pose.skeleton.offsets
-    transforms[0, :3] = pose.root_position
-    transforms[:, 3:] = pose.rotations
-    return frames, children, transforms
+    return frames, children, cdr.pose_transforms(pose)
 
 
 def pose_to_transforms(pose: Pose, header: Header, person_id: int) -> List[TransformStamped]:

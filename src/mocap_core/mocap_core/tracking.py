@@ -51,7 +51,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .skeleton import KEYPOINT_NAMES, NUM_KEYPOINTS
+from .skeleton import KEYPOINT_INDEX, KEYPOINT_NAMES, NUM_KEYPOINTS
 
 #: Per-keypoint OKS tolerance (COCO's sigmas for the 17 body points; the foot points as the
 #: ankles'), in the 23-point layout order.
@@ -100,13 +100,12 @@ class TrackerParams:
     coast_velocity_s: float = 0.2
     #: Largest relative change of a track's box height from one frame to the next.
     max_height_change: float = 0.15
-    #: Appearance (module docstring): colour distance (CIE Lab units) at which the
-    #: similarity falls to exp(-1/2) of its value, the least factor, and the weight of a new
-    #: frame in a track's running mean of its colours.
-    #: Each track's colour scale sigma is ``appearance_spread_factor`` x the running mean
-    #: distance of its own frames from its mean colours (how much this person's colours vary
-    #: in this footage), at least ``appearance_sigma_min``; ``appearance_sigma`` until
-    #: ``appearance_min_frames`` frames have measured it.
+    #: Appearance (module docstring). Each track's colour scale sigma is
+    #: ``appearance_spread_factor`` x the running mean distance of its own frames from its
+    #: mean colours (how much this person's colours vary in this footage), at least
+    #: ``appearance_sigma_min``; ``appearance_sigma`` until ``appearance_min_frames`` frames
+    #: have measured it. The factor is at least
+    #: ``appearance_floor``; a new frame weighs ``appearance_rate`` in a track's running mean.
     appearance_sigma: float = 15.0
     appearance_sigma_min: float = 5.0
     appearance_spread_factor: float = 2.0
@@ -605,8 +604,7 @@ APPEARANCE_REGIONS: Tuple[Tuple[Tuple[str, str], ...], ...] = (
     (('left_hip', 'left_knee'), ('right_hip', 'right_knee')),              # thighs
     (('left_knee', 'left_ankle'), ('right_knee', 'right_ankle')),          # shins
 )
-_KEYPOINT_INDEX = {n: i for i, n in enumerate(KEYPOINT_NAMES)}
-_REGION_INDEX = tuple(tuple((_KEYPOINT_INDEX[a], _KEYPOINT_INDEX[b]) for a, b in pairs)
+_REGION_INDEX = tuple(tuple((KEYPOINT_INDEX[a], KEYPOINT_INDEX[b]) for a, b in pairs)
                       for pairs in APPEARANCE_REGIONS)
 
 

@@ -386,11 +386,10 @@ class BlazePoseMultiDetector:
         regions = self.regions(w, h)
         x0, y0, x1, y1 = regions[self.detections % len(regions)]
         self.detections += 1
-        crop = np.array(rgb[y0:y1, x0:x1])
-        for kp in followed:
-            box = mask_box(kp)
-            if box is not None:
-                _fill(crop, box, x0, y0)
+        boxes = [b for b in map(mask_box, followed) if b is not None]
+        crop = (np.array if boxes else np.ascontiguousarray)(rgb[y0:y1, x0:x1])
+        for box in boxes:
+            _fill(crop, box, x0, y0)
         with warnings.catch_warnings():
             warnings.simplefilter('ignore', UserWarning)
             res = self._finder.detect(self._mp.Image(image_format=self._mp.ImageFormat.SRGB,
@@ -442,14 +441,14 @@ class BlazePoseMultiDetector:
                                     borderMode=self._cv2.BORDER_CONSTANT)
         own = mask_box(win.last) if win.last is not None else None
         if others and own is not None:
-            keep = crop.copy()
+            ox0, oy0 = max(own[0] - win.x0, 0), max(own[1] - win.y0, 0)
+            ox1, oy1 = max(own[2] - win.x0, 0), max(own[3] - win.y0, 0)
+            keep = crop[oy0:oy1, ox0:ox1].copy()
             for kp in others:
                 box = mask_box(kp)
                 if box is not None:
                     _fill(crop, box, win.x0, win.y0)
-            ox0, oy0 = max(own[0] - win.x0, 0), max(own[1] - win.y0, 0)
-            ox1, oy1 = max(own[2] - win.x0, 0), max(own[3] - win.y0, 0)
-            crop[oy0:oy1, ox0:ox1] = keep[oy0:oy1, ox0:ox1]
+            crop[oy0:oy1, ox0:ox1] = keep
         with warnings.catch_warnings():
             warnings.simplefilter('ignore', UserWarning)
             res = win.landmarker.detect_for_video(

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import fnmatch
+import functools
 import os
 import sys
 import time
@@ -37,6 +38,8 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from .. import topics as T
+from ..inprocess import SerializedMessage
+from ..ros_msgs import header_stamp_ns, msgtype_of
 from .inputs import VIDEO_SUFFIXES, is_bag
 from ..plugins import PIPELINE as NODES
 from ..plugins import PluginError, load_node_class
@@ -193,9 +196,6 @@ class Recorder:
 
     def __call__(self, topic: str, msg: Any, qos: Any) -> None:
         """``msg``: a message, or a SerializedMessage (the graph hands them on raw)."""
-        from ..inprocess import SerializedMessage
-        from ..ros_msgs import header_stamp_ns, msgtype_of
-
         if not self.wants(topic):
             return
         if isinstance(msg, SerializedMessage):
@@ -218,6 +218,7 @@ class Recorder:
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
 
+@functools.lru_cache(maxsize=None)
 def _header_field(msg_type: type) -> Any:
     return msg_type.get_fields_and_field_types().get('header')
 
