@@ -82,6 +82,10 @@ from .wbid import WholeBodyID
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
+#: m/s: whole body: a point between ``contact_height`` and ``stance_height`` above the floor
+#: becomes a stance point only while it comes down slower than this (a dropped foot lands)
+LANDING_SPEED = 0.5
+
 
 class InvalidInput(ValueError):
     """The cycle cannot run on this input (no skeleton yet, malformed target, ...)."""
@@ -214,7 +218,8 @@ class PhysicsCycle:
                                     residual_bound=p.residual_bound,
                                     residual_moment_bound=p.residual_moment_bound,
                                     smoothness=p.force_smoothness,
-                                    slide_threshold=p.slide_threshold, solver=p.wbid_solver)
+                                    slide_threshold=p.slide_threshold,
+                                    slide_time=p.slide_time, solver=p.wbid_solver)
         self._kp, self._kd = self.params.gains(model.nv)
         self.dynet = None
         if self._dynet_net is not None:
@@ -351,6 +356,7 @@ class PhysicsCycle:
             self._q = self._lift(q_hat)
             self._v = np.zeros(self.model.nv)
             self._reset_solvers()
+            self._anchored[:] = False       # anchors of the old state would pull the feet
         self._target_prev = q_hat.copy()
         self._stamp = stamp
 
@@ -588,7 +594,11 @@ class PhysicsCycle:
             if alpha is not None:
                 a_des = a_des + cho_solve(cho_factor(M), alpha)
             # -- stance points and their stabilising reference -------------------------------
-            stance = mask & (pos[:, 2] < p.contact_height)
+            # a point the probabilities put down is in stance near the floor, or up to
+            # stance_height above it when it is not coming down fast (a foot falling onto
+            # the floor lands first: it is not braked in the air)
+            stance = mask & ((pos[:, 2] < p.contact_height)
+                             | ((pos[:, 2] < p.stance_height) & (vel[:, 2] > -LANDING_SPEED)))
             new = stance & ~anchored
             anchor[new] = pos[new, :2]
             anchored = stance.copy()
@@ -598,7 +608,7 @@ class PhysicsCycle:
             # -- whole-body inverse dynamics -------------------------------------------------
             res = self.wbid.solve(M, h, a_des, Jc, drift, stance, a_ref, pos[:, :2], vel,
                                   feet, m.body_mass, GRAVITY,
-                                  root_rotation=data.oMi[1].rotation)
+                                  root_rotation=data.oMi[1].rotation, dt=dt)
             acc['t_grf'] += res.solve_time
             if not res.ok:
                 # no consistent solution: the PD alone drives the body for this sub-step

@@ -41,8 +41,12 @@ class PhysicsParams:
     stance_gain: float = 20.0             # 1/s: stance points return to their anchor (whole body)
     stance_release: float = 0.15          # m: whole body: a stance anchor follows the target
     #                                       point when it is farther (at most stick_speed)
-    slide_threshold: float = 0.05         # body weights: horizontal residual that lets a foot
+    slide_threshold: float = 0.15         # body weights: horizontal residual that lets a foot
     #                                       with saturated friction slide (whole body)
+    slide_time: float = 0.1               # s: whole body: that residual is averaged over this
+    stance_height: float = 0.08           # m: whole body: a point the contact probability puts
+    #                                       down becomes a stance point this close to the floor
+    #                                       (and is pulled onto it)
     force_smoothness: float = 0.01        # w_s of the whole-body QP (forces between sub-steps)
     wbid_solver: str = 'osqp'             # 'osqp' (deterministic) or 'proxqp' (mocap_physics.wbid)
     substeps: int = 6                     # k of the paper
@@ -104,7 +108,7 @@ class PhysicsParams:
             if not (np.isfinite(val) and val > 0):
                 bad.append(f'{name}={val} (must be > 0)')
         for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness',
-                     'stance_release', 'slide_threshold'):
+                     'stance_release', 'slide_threshold', 'slide_time', 'stance_height'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0):
                 bad.append(f'{name}={val} (must be >= 0)')

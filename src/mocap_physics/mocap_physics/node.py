@@ -176,6 +176,10 @@ PARAMETERS = (
     ParamSpec('slide_threshold', _D.slide_threshold, 'whole_body: a foot whose friction is '
               'saturated slides when holding it needs a horizontal residual root force above '
               'this, body weights', min_value=0.0, read_only=True),
+    ParamSpec('stance_height', _D.stance_height, 'whole_body: a contact point whose contact '
+              'probability is above contact_threshold becomes a stance point (held, carrying '
+              'a force, pulled onto the floor) within this height of the floor, m',
+              min_value=0.0, read_only=True),
     ParamSpec('wbid_solver', _D.wbid_solver, 'whole_body: QP solver, osqp (deterministic) or '
               'proxqp (faster; last bits vary between runs)', read_only=True),
     ParamSpec('root_residual', _D.root_residual, 'paper: share of the residual direct root '
@@ -258,7 +262,8 @@ class PhysicsNode(Node):
             residual_horizontal_weight=p['residual_horizontal_weight'],
             residual_bound=p['residual_bound'],
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
-            stance_release=p['stance_release'], slide_threshold=p['slide_threshold'])
+            stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
+            stance_height=p['stance_height'])
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         contacts_topic = p['contacts_topic']

@@ -174,7 +174,8 @@ class WholeBodyID:
         residual_moment_bound: moment bound, body weight metres.
         smoothness: w_s. force_regularization: w_f (> 0: the least internal force).
         slide_threshold: body weights; a foot whose friction is saturated slides only when
-            the feet-fixed solution needed a residual root force at least this large.
+            the feet-fixed solution needed a residual root force at least this large,
+            averaged over ``slide_time`` (s; 0: at once) while the foot was saturated.
         eps: solver tolerance (dimensionless units).
         solver: 'osqp' (default: deterministic, bit-identical runs) or 'proxqp' (ProxQP's
             dense solver: faster, but its result varies in the last bits from run to run;
@@ -186,7 +187,8 @@ class WholeBodyID:
                  residual_bound: float = 1.0,
                  residual_moment_bound: float = 0.5, smoothness: float = 1e-2,
                  force_regularization: float = 1e-4, slide_threshold: float = 0.05,
-                 eps: float = 1e-7, max_iter: int = 1000, solver: str = 'osqp') -> None:
+                 slide_time: float = 0.0, eps: float = 1e-7, max_iter: int = 1000,
+                 solver: str = 'osqp') -> None:
         if solver not in SOLVERS:
             raise ValueError(f'solver must be one of {SOLVERS}, got {solver!r}')
         if solver == 'proxqp' and proxqp is None:
@@ -209,6 +211,8 @@ class WholeBodyID:
         self.smoothness = float(smoothness)
         self.force_regularization = float(force_regularization)
         self.slide_threshold = float(slide_threshold)
+        self.slide_time = float(slide_time)
+        self._need: dict = {}
         self.eps = float(eps)
         self.max_iter = int(max_iter)
         self._prev = np.zeros((self.num_contacts, 3))
@@ -217,14 +221,15 @@ class WholeBodyID:
     def reset(self) -> None:
         """Forget the previous forces (smoothness term) and the warm starts."""
         self._prev[:] = 0.0
+        self._need.clear()
         self._solvers.clear()
 
     # ------------------------------------------------------------------------------------
     def solve(self, M: np.ndarray, h: np.ndarray, a_des: np.ndarray, Jc: np.ndarray,
               drift: np.ndarray, stance: np.ndarray, a_ref: np.ndarray, xy: np.ndarray,
               velocity: np.ndarray, feet: Sequence[str], body_mass: float,
-              gravity: float = 9.81, root_rotation: Optional[np.ndarray] = None
-              ) -> WbidResult:
+              gravity: float = 9.81, root_rotation: Optional[np.ndarray] = None,
+              dt: float = 0.0) -> WbidResult:
         """Solve one sub-step.
 
         Args:
@@ -237,6 +242,7 @@ class WholeBodyID:
             feet: (C,) foot of each point. body_mass: kg. gravity: m/s^2.
             root_rotation: (3, 3) root orientation (root frame -> world); the residual's
                 weights and bounds apply on world axes (identity when None).
+            dt: the sub-step, s: the time base of ``slide_time`` (0: no averaging).
         """
         R = np.eye(3) if root_rotation is None else np.asarray(root_rotation, dtype=float)
         t0 = time.perf_counter()
@@ -262,8 +268,16 @@ class WholeBodyID:
             # ... and holding it needed the residual: the feet-fixed solution leaned on a
             # root force the floor could not give (a body that can follow its target with
             # the friction it has keeps its feet where they are)
-            if np.linalg.norm((R @ r1[:3])[:2]) < self.slide_threshold * body_mass * gravity:
-                sat[:] = False
+            # (averaged over slide_time: a lifter's noise asks for a burst of force that no
+            # foot could give, a real pull lasts)
+            need = float(np.linalg.norm((R @ r1[:3])[:2])) / (body_mass * gravity)
+            a = 1.0 if self.slide_time <= 0.0 or dt <= 0.0 else dt / (self.slide_time + dt)
+            for foot in set(feet):
+                pts = [c for c in range(self.num_contacts) if feet[c] == foot]
+                old = self._need.get(foot, 0.0)
+                self._need[foot] = old + a * ((need if sat[pts].any() else 0.0) - old)
+                if self._need[foot] < self.slide_threshold:
+                    sat[pts] = False
             if np.any(sat):
                 for c in np.flatnonzero(sat):
                     v = velocity[c, :2]

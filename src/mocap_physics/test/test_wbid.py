@@ -104,6 +104,62 @@ def test_friction_outside_the_cone_slides(skeleton):
     assert np.all(np.abs(f[:, 0]) <= 0.8 / np.sqrt(2) * f[:, 2] * (1 + 1e-6) + 1e-6)
 
 
+def _jittering_stand(skeleton, params: PhysicsParams, frames: int = 60):
+    """A standing target whose root jitters horizontally by 5 cm per frame (white, as a
+    lifter's depth does), feet labelled in contact. Returns the cycle and the feet's
+    horizontal displacement per frame (F-1, 4, m)."""
+    cyc = PhysicsCycle(skeleton, params)
+    rest = Pose.rest(skeleton)
+    rng = np.random.default_rng(0)
+    xy = []
+    for i in range(frames):
+        jitter = np.r_[rng.normal(scale=0.05, size=2), 0.0]
+        r = cyc.step(Pose(skeleton, rest.rotations, rest.root_position + jitter), i / FPS,
+                     [1, 1, 1, 1])
+        xy.append(cyc.model.contact_positions(r.q)[:, :2])
+    return cyc, np.linalg.norm(np.diff(np.array(xy), axis=0), axis=-1)
+
+
+def test_noise_bursts_do_not_make_the_feet_slide(skeleton):
+    """Frame-rate jitter of the target's root asks for short bursts of horizontal force
+    beyond the friction cone. Averaged over ``slide_time`` they stay below the slide
+    threshold: the feet stay put. Deciding on each sub-step alone (slide_time 0, the
+    threshold of a steady pull), the same input makes them slide: the test tells the two
+    apart."""
+    cyc, step = _jittering_stand(skeleton, PhysicsParams())
+    assert cyc.stats.sliding_substeps == 0
+    assert step.mean() < 1e-4
+    cyc0, step0 = _jittering_stand(skeleton, PhysicsParams(slide_threshold=0.05,
+                                                           slide_time=0.0))
+    assert cyc0.stats.sliding_substeps > 10
+    assert step0.mean() > 5e-4
+
+
+def test_hovering_stance_foot_is_put_on_the_floor(skeleton):
+    """A target whose left knee is bent so that its heel hovers 5 cm above the floor while
+    the contact probabilities say it is down (a lifter's leg error): within
+    ``stance_height`` the heel becomes a stance point, is pulled onto the floor and carries
+    weight. With stance_height at contact_height it hovers with its target."""
+    from mocap_core.rotations import axis_angle_to_quat
+    from mocap_core.skeleton import JOINT_INDEX
+    rest = Pose.rest(skeleton)
+    rot = rest.rotations.copy()
+    rot[JOINT_INDEX['left_knee']] = axis_angle_to_quat(np.array([0.0, 0.4, 0.0]))
+    target = Pose(skeleton, rot, rest.root_position)
+    for height, hovers in ((PhysicsParams().stance_height, False), (0.03, True)):
+        cyc = PhysicsCycle(skeleton, PhysicsParams(stance_height=height))
+        heel = cyc.model.contact_positions(cyc.model.pose_to_q(target))[0, 2]
+        assert 0.04 < heel < 0.06
+        for i in range(30):
+            r = cyc.step(target, i / FPS, [1, 1, 1, 1])
+        if hovers:
+            assert r.contact_heights[0] > 0.04
+        else:
+            assert abs(r.contact_heights[0]) < 0.002
+            assert r.contact_forces[0, 2] > 0.05 * cyc.model.weight
+        assert r.residual_ratio < 0.01
+
+
 @pytest.mark.parametrize('bound', [0.6, 1.0])
 def test_unsupported_target_is_held_by_the_bounded_residual(skeleton, bound):
     """A target 0.5 m up with no contact at all (the lifter says flight) that stays there:

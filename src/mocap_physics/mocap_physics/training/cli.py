@@ -85,7 +85,10 @@ def _configs(quick: bool, dynet: Optional[str]) -> List['EvalConfig']:
             EvalConfig('physics, est. floor', PhysicsParams(), 'estimate'),
             EvalConfig('paper (eq. 13), true floor', PhysicsParams(dynamics='paper'), 'gt')]
     if not quick:
-        cfgs += [EvalConfig('whole body, ProxQP', PhysicsParams(wbid_solver='proxqp'), 'gt'),
+        cfgs += [EvalConfig('whole body, slide at once, stance 3 cm',
+                            PhysicsParams(slide_threshold=0.05, slide_time=0.0,
+                                          stance_height=0.03), 'gt'),
+                 EvalConfig('whole body, ProxQP', PhysicsParams(wbid_solver='proxqp'), 'gt'),
                  EvalConfig('paper, no stick', PhysicsParams(dynamics='paper',
                                                              foot_stick=False), 'gt'),
                  EvalConfig('paper, stiff root (kp 3600, kd 120)',
