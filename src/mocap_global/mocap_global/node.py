@@ -190,6 +190,10 @@ PARAMETERS = (
     ParamSpec('foot_lock', True, "With the vertical from the input: contact points standing "
               "on the floor (below lock_height) stay where they touched down in the world; "
               "GMR's translation moves the body only while no foot stands"),
+    ParamSpec('heading_smoothing', 7, 'With the vertical from the input: frames on each '
+              'side over which the heading offset between the world and the input frame is '
+              'averaged (the later ones from the look-ahead; 0 = GMR\'s heading per frame)',
+              min_value=0, read_only=True),
     ParamSpec('lock_height', 0.02, 'Height above the floor below which a contact point '
               'stands (foot_lock), m', min_value=0.0),
     ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
@@ -371,7 +375,8 @@ class GMRNode(Node):
         return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
                          p['tilt_correction'], fusion, model_up, p['device'],
                          chunk=p['chunk'], floor_input=on_floor,
-                         foot_lock=p['foot_lock'], lock_height=p['lock_height'])
+                         foot_lock=p['foot_lock'], lock_height=p['lock_height'],
+                         heading_smoothing=p['heading_smoothing'])
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera-motion estimate of each stamp (the last ``MAX_CAMERA_FRAMES``)."""

@@ -238,6 +238,10 @@ class OnlineGMR:
             docstring).
         foot_lock: with ``floor_input``, hold the contact points that stand on the floor
             (lower than ``lock_height`` m) where they touched down (module docstring).
+        heading_smoothing: with ``floor_input``, h > 0 frames: the heading offset between
+            the world and the input frame is averaged over the frames k - n .. k + n, n =
+            min(h, frames available on both sides) (module docstring, heading); 0: GMR's
+            heading of each frame.
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
@@ -245,7 +249,7 @@ class OnlineGMR:
                  fusion: Optional[StaticCameraFusion] = None,
                  input_up: Optional[np.ndarray] = None, device: str = 'cpu',
                  chunk: int = 1, floor_input: bool = False, foot_lock: bool = False,
-                 lock_height: float = 0.02) -> None:
+                 lock_height: float = 0.02, heading_smoothing: int = 0) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -263,6 +267,9 @@ class OnlineGMR:
         self.floor_input = bool(floor_input)
         self.foot_lock = bool(foot_lock)
         self.lock_height = float(lock_height)
+        self.heading_smoothing = int(heading_smoothing)
+        if self.heading_smoothing < 0:
+            raise ValueError(f'heading_smoothing must be >= 0, got {heading_smoothing}')
         if self.cfg.root_input == 'up' and input_up is None:
             raise ValueError("this model needs the input frame's up direction (input_up)")
         self.input_up = None if input_up is None else np.asarray(input_up, dtype=np.float64)
@@ -290,7 +297,8 @@ class OnlineGMR:
         self._R_out: Optional[np.ndarray] = None     # the last emitted pose
         self._T_out: Optional[np.ndarray] = None
         self._T_gmr_prev: Optional[np.ndarray] = None
-        self._anchors: dict = {}                      # contact point -> world xy (lock)
+        self._anchors: dict = {}          # standing contact point -> its xy relative to the root
+        self._offsets: Deque[float] = collections.deque(maxlen=max(1, self.heading_smoothing))
         self._cache: Optional[Tuple[int, dict]] = None
         self._last_motion: Tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))
         self._last_up = _EZ.copy()
@@ -412,8 +420,14 @@ class OnlineGMR:
     def _lock_feet(self, k: int, R: np.ndarray, T: np.ndarray, T_gmr: np.ndarray,
                    pose: Pose) -> np.ndarray:
         """The output root position with the feet that stand on the floor held where they
-        touched down (module docstring, foot lock). ``R``, ``T``: the output pose on the
-        floor; ``T_gmr``: GMR's own position this frame."""
+        are (module docstring, foot lock). ``R``, ``T``: the output pose on the floor;
+        ``T_gmr``: GMR's own position this frame.
+
+        Differential: the root moves by minus the mean horizontal motion, relative to the
+        root, of the points that stand in this frame and stood in the previous one, so that
+        they do not move; a point that lands or lifts changes nothing at once (an absolute
+        anchor per point made the root jump whenever the set of standing points changed,
+        since each point's anchor drifts with the pose's noise)."""
         probe = Pose(pose.skeleton, np.concatenate([matrix_to_quat(R)[None],
                                                     pose.rotations[1:]]), np.zeros(3))
         local = np.array([probe.contact_positions()[n] for n in CONTACT_POINT_NAMES])
@@ -421,24 +435,48 @@ class OnlineGMR:
         if k == 0 or self._T_gmr_prev is None:
             xy = T[:2].copy()
         else:
-            xy = self._T_out[:2] + (T_gmr[:2] - self._T_gmr_prev[:2])   # GMR's step
             held = [c for c in range(len(down)) if down[c] and c in self._anchors]
             if held:
-                xy = np.mean([self._anchors[c] - local[c, :2] for c in held], axis=0)
-        self._anchors = {c: self._anchors.get(c, xy + local[c, :2])
-                         for c in range(len(down)) if down[c]}
+                xy = self._T_out[:2] - np.mean([local[c, :2] - self._anchors[c]
+                                                for c in held], axis=0)
+            else:
+                xy = self._T_out[:2] + (T_gmr[:2] - self._T_gmr_prev[:2])   # GMR's step
+        # the standing points' horizontal positions relative to the root, for the next frame
+        self._anchors = {c: local[c, :2].copy() for c in range(len(down)) if down[c]}
         self._T_gmr_prev = T_gmr.copy()
         return np.array([xy[0], xy[1], T[2]])
 
     @staticmethod
-    def _on_floor(R: np.ndarray, T: np.ndarray, pose: Pose) -> Tuple[np.ndarray, np.ndarray]:
-        """GMR's heading and horizontal position with the floor-frame input's tilt and
-        height: ``R = Rz(yaw(R) - yaw(R_in)) R_in``, ``T_z = T_in,z``. Turning a pose about
-        the vertical does not change any height, so every joint and contact point is as
-        high above z = 0 as in the input."""
-        R_in = quat_to_matrix(pose.rotations[0])
-        R = heading_rotation(yaw_of(R) - yaw_of(R_in)) @ R_in
+    def _on_floor(offset: float, T: np.ndarray, pose: Pose) -> Tuple[np.ndarray, np.ndarray]:
+        """The floor-frame input pose turned by the heading ``offset`` (rad) about the
+        vertical, at GMR's horizontal position and the input's height: ``R = Rz(offset)
+        R_in``, ``T_z = T_in,z``. Turning a pose about the vertical does not change any
+        height, so every joint and contact point is as high above z = 0 as in the input."""
+        R = heading_rotation(offset) @ quat_to_matrix(pose.rotations[0])
         return R, np.array([T[0], T[1], float(pose.root_position[2])])
+
+    def _heading_offset(self, R: np.ndarray, out: dict, pos: int) -> float:
+        """The heading offset (rad) between the world and the input frame at window
+        position ``pos``: ``yaw(R) - yaw(R_in)`` of this frame (``R``: GMR's orientation),
+        averaged (circular mean) with the offsets of the ``n`` frames before and after it,
+        the later ones from GMR's motion over the look-ahead (module docstring, heading)."""
+        def offset(R_k: np.ndarray, p: int) -> float:
+            return yaw_of(R_k) - yaw_of(quat_to_matrix(self._poses[p].rotations[0]))
+        now = offset(R, pos)
+        n = min(self.heading_smoothing, len(self._offsets), len(self._poses) - 1 - pos)
+        values = [now] + list(self._offsets)[len(self._offsets) - n:]
+        R_k = R
+        for m in range(1, n + 1):
+            aa = out['axis_angle'][pos + m - 1]           # motion into frame pos + m
+            if not np.all(np.isfinite(aa)):
+                break
+            R_k = R_k @ axis_angle_to_matrix(aa)
+            values.append(offset(R_k, pos + m))
+        if self.heading_smoothing > 0:
+            self._offsets.append(now)
+        if len(values) == 1:
+            return now
+        return math.atan2(float(np.mean(np.sin(values))), float(np.mean(np.cos(values))))
 
     def _fuse(self, R: np.ndarray, T: np.ndarray, pose: Pose, anchor: Optional[InputAnchor],
               up: np.ndarray, first: bool) -> Tuple[np.ndarray, np.ndarray, bool]:
@@ -491,7 +529,7 @@ class OnlineGMR:
         T_gmr = T
         self._R, self._T = R, T                         # the accumulation stays GMR's
         if self.floor_input:
-            R, T = self._on_floor(R, T, pose)
+            R, T = self._on_floor(self._heading_offset(R, out, pos), T, pose)
             if self.foot_lock and fused:
                 # the fused root follows the input's, whose feet are the physics' own: no
                 # lock (it would keep GMR's drift); it starts afresh when the fusion stops

@@ -26,7 +26,9 @@ Metrics (positions in metres in, millimetres out):
   share of frames with one more than 5 mm below, and foot skating: the mean horizontal
   displacement (mm per frame) of an ankle or toe joint while the ground truth says that
   heel or toe is on the floor in both frames; and their PA-MPJPE (per-frame similarity
-  alignment, so the frame does not matter);
+  alignment, so the frame does not matter) and jitter against the lifter's (the world
+  stage's against the lifter carried into the true world by the true camera pose: a
+  moving camera's frame accelerates);
 * the physics stage's floor estimate (:func:`floor_errors`): tilt and height of the
   estimated floor under the person against the true floor, at 1 s and after.
 
@@ -282,11 +284,18 @@ class ClipScore:
 
 
 def _paired_with_lifter(stage: np.ndarray, stage_idx: np.ndarray, lifter: np.ndarray,
-                        lifter_idx: np.ndarray, G: np.ndarray, fps: float) -> Dict[str, float]:
+                        lifter_idx: np.ndarray, G: np.ndarray, fps: float,
+                        lifter_world: Optional[np.ndarray] = None) -> Dict[str, float]:
     """A stage's change from the lifter on the frames both have: ``pa_mpjpe_change`` (mm,
     stage minus lifter PA-MPJPE) and, over the longest run of consecutive frames,
-    ``jitter_vs_lifter`` (mean joint acceleration, stage over lifter; PA-MPJPE and
-    acceleration do not depend on the frame the joints are in)."""
+    ``jitter_vs_lifter`` (mean joint acceleration, stage over lifter).
+
+    PA-MPJPE does not depend on the frame the joints are in; acceleration does not depend
+    on a *fixed* rigid frame, but a moving camera's frame accelerates. The physics output
+    lives in a floor frame fixed to the camera, like the lifter's; the world output does
+    not: for it pass ``lifter_world``, the lifter's joints carried into the true world by
+    the true camera pose of each frame, so that both sides are in an inertial frame
+    (``jitter_vs_lifter_camera_frame`` keeps the ratio against the camera-frame lifter)."""
     pos = {int(f): i for i, f in enumerate(lifter_idx)}
     both = [(i, pos[int(f)]) for i, f in enumerate(stage_idx) if int(f) in pos]
     if len(both) < 3:
@@ -301,9 +310,22 @@ def _paired_with_lifter(stage: np.ndarray, stage_idx: np.ndarray, lifter: np.nda
     runs = np.split(np.arange(len(frames)), breaks)
     run = max(runs, key=len)
     if len(run) >= 10:
+        a_s = acceleration(stage[si[run]], fps)
         a_l = acceleration(lifter[li[run]], fps)
-        out['jitter_vs_lifter'] = acceleration(stage[si[run]], fps) / max(a_l, 1e-9)
+        if lifter_world is not None:
+            out['jitter_vs_lifter_camera_frame'] = a_s / max(a_l, 1e-9)
+            a_l = acceleration(lifter_world[li[run]], fps)
+        out['jitter_vs_lifter'] = a_s / max(a_l, 1e-9)
     return out
+
+
+def camera_to_world(points: np.ndarray, index: np.ndarray, gt: Dict[str, np.ndarray]
+                    ) -> np.ndarray:
+    """(N, J, 3) points in the optical frame of rendered frames ``index`` (N,) -> the true
+    world frame, with that frame's camera pose (``p_camera = R (p_world - position)``)."""
+    R = np.asarray(gt['camera_R'])[index]
+    return np.einsum('fji,fkj->fki', R, points) + np.asarray(gt['camera_position'])[index][
+        :, None]
 
 
 def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
@@ -367,7 +389,10 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
             g_s = G[sidx[ok]]
             root[stage]['pa_mpjpe'] = float(1000 * np.linalg.norm(
                 procrustes_align(full[ok], g_s) - g_s, axis=-1).mean())
-            root[stage].update(_paired_with_lifter(full[ok], sidx[ok], P, idx, G, fps))
+            world_lifter = camera_to_world(P, idx, gt) if stage == 'world' \
+                and 'camera_R' in gt else None
+            root[stage].update(_paired_with_lifter(full[ok], sidx[ok], P, idx, G, fps,
+                                                   world_lifter))
             if 'contacts' in gt:
                 root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
             if stage == 'world':
@@ -548,6 +573,8 @@ COMPARISON_ROWS = (
      '{:+.1f}'),
     ("physics jitter / the lifter's", 'physics_jitter_vs_lifter', '{:.2f}'),
     ("world jitter / the lifter's", 'world_jitter_vs_lifter', '{:.2f}'),
+    ("world jitter / the lifter's, lifter in its moving camera frame",
+     'world_jitter_vs_lifter_camera_frame', '{:.2f}'),
     ('physics feet: deepest ankle/toe below its floor after 1 s (mm)',
      'physics_penetration_after_1s_mm', '{:.1f}'),
     ('world feet: deepest ankle/toe below its floor after 1 s (mm)',
