@@ -144,7 +144,9 @@ def test_live_nodes_replay_record_and_agree_with_mocap_process(processes, ros2_c
     live.gt_stamps, live.gt_joints, live.gt_contacts = gt.gt_stamps, gt.gt_joints, \
         gt.gt_contacts
     acc = accuracy(live)
-    assert acc['lifter']['mpjpe_mm'] < 60 and acc['physics']['mpjpe_mm'] < 70, acc
+    # the default lifter's figures on this bag (test_process.py says why these bounds)
+    assert acc['lifter']['mpjpe_mm'] < 68 and acc['physics']['mpjpe_mm'] < 78, acc
+    assert acc['lifter']['pa_mpjpe_mm'] < 40 and acc['physics']['pa_mpjpe_mm'] < 40, acc
     assert plausibility(live)['physics']['penetration_mm'] < 5.0
 
     # the same bag through `mocap process`: identical where nothing was lost and the lifter's

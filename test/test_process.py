@@ -163,10 +163,14 @@ def test_process_ground_truth_bag_every_topic_same_stamps_accurate(gt_run):
     for stage in ('lifter', 'physics', 'world'):
         assert np.all(np.isfinite(run.stages[stage].joints)), stage
     acc = accuracy(run)
-    # windowed MotioNet on noisy keypoints: 43 mm over the validation split (weights report)
-    assert acc['lifter']['mpjpe_mm'] < 60 and acc['lifter']['pa_mpjpe_mm'] < 45, acc
+    # the default windowed MotioNet (stage 3, chosen on rendered people through the real
+    # detector: test/test_lifter_rendered.py) on this bag's synthetic keypoints: 61.3 / 35.6
+    # mm, physics 70.7 / 36.0 mm (2026-11-26). The previous default, trained on this bag's
+    # own keypoint synthesizer, reached about 45 mm here with a bound of 60; the bounds follow
+    # the new default's figures with 10 % to spare
+    assert acc['lifter']['mpjpe_mm'] < 68 and acc['lifter']['pa_mpjpe_mm'] < 40, acc
     assert acc['lifter']['contact_accuracy'] > 0.85, acc
-    assert acc['physics']['mpjpe_mm'] < 70 and acc['physics']['pa_mpjpe_mm'] < 50, acc
+    assert acc['physics']['mpjpe_mm'] < 78 and acc['physics']['pa_mpjpe_mm'] < 40, acc
     pl = plausibility(run)
     assert pl['physics']['penetration_mm'] < 5.0, pl
     assert pl['physics']['skating_mm'] < pl['lifter']['skating_mm'], pl

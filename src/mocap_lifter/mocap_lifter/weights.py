@@ -32,10 +32,21 @@ MODELS = ('motionet', 'vtm')
 Lifter = Union[MotioNet, VTM]
 
 
+#: Shipped files that are the default of a (model, mode) other than ``<model>_<mode>.pt``.
+#: Windowed MotioNet: the weights fine-tuned with wide cameras, detector-placed keypoints and
+#: rendered BlazePose windows (stage 3). On the rendered benchmark (the real detector on
+#: people, motions, scenes and cameras never trained on; 58 clips, 2026-11-26) they reach
+#: 82.5 / 45.2 mm MPJPE / PA-MPJPE (median over clips) against 122.1 / 78.2 for
+#: ``motionet_windowed.pt``, the default until 2026-11-26, which is still shipped;
+#: ``weights/README.md`` has the whole comparison and why not the strict-split weights.
+DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered.pt'}
+
+
 def default_weights(mode: str, model: str = 'motionet') -> Path:
-    """The shipped weights ``<model>_<mode>.pt`` from the package share directory (or the
-    source tree when the package is not installed through ament)."""
-    name = f'{model}_{mode}.pt'
+    """The shipped default weights of ``model`` in ``mode`` (:data:`DEFAULT_FILES`, else
+    ``<model>_<mode>.pt``) from the package share directory (or the source tree when the
+    package is not installed through ament)."""
+    name = DEFAULT_FILES.get((model, mode), f'{model}_{mode}.pt')
     try:
         from ament_index_python.packages import get_package_share_directory
         path = Path(get_package_share_directory('mocap_lifter')) / 'weights' / name
