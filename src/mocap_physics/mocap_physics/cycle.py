@@ -52,14 +52,24 @@ measurements behind them: ``docs/physics.md``.
    dragged along to stay within ``stick_release`` m of the target's point. Then
    ``q = pinocchio.integrate(q, dt qdot*)`` (semi-implicit Euler).
 
+The steps above are the paper's cycle (``dynamics='paper'``). The default
+(``dynamics='whole_body'``) replaces steps 2-3 by the whole-body inverse-dynamics QP of
+:mod:`mocap_physics.wbid` per sub-step. Its stance points are the points the probabilities
+put down that lie within ``contact_height`` of the floor, or within ``stance_height`` while
+they come down slower than :data:`LANDING_SPEED` (they are then pulled onto the floor). A
+foot slides when its friction is saturated and holding it needs ``slide_threshold`` body
+weights of horizontal residual, averaged over ``slide_time``. Step 4's velocity QP stays as
+the last guard.
+
 Robustness: the first frame and a time jump (a gap over ``max_frame_gap`` s or stamps going
 backwards) re-initialise q from the target (lifted so that no contact point is below the
-floor) with qdot = 0. A skeleton change (bones off by more than ``skeleton_tolerance`` m)
-rebuilds the model and keeps the state (lifted out of the floor). A non-finite or malformed
-target holds the last valid one. A failed penetration QP or a non-finite / exploding state
-(|qdot| above ``max_speed``) falls back to the (lifted) kinematic target for that frame and
-continues from it with the target's velocity. Every event is counted in
-:attr:`PhysicsCycle.stats` and named in the frame's ``status``. No NaN is ever returned.
+floor) with qdot = 0, and drop the stance anchors. A skeleton change (bones off by more
+than ``skeleton_tolerance`` m) rebuilds the model and keeps the state (lifted out of the
+floor). A non-finite or malformed target holds the last valid one. A failed penetration QP
+or a non-finite / exploding state (|qdot| above ``max_speed``) falls back to the (lifted)
+kinematic target for that frame and continues from it with the target's velocity. Every
+event is counted in :attr:`PhysicsCycle.stats` and named in the frame's ``status``. No NaN
+is ever returned.
 """
 
 from __future__ import annotations
