@@ -47,9 +47,20 @@ class ParamSpec:
 
 
 def declare_parameters(node, specs: Iterable[ParamSpec]) -> Dict[str, Any]:
-    """Declare every spec on ``node`` and return ``{name: current value}``."""
+    """Declare every spec on ``node`` and return ``{name: current value}``.
+
+    An integer given for a floating-point parameter (``-p kp_joint:=6400``, ``mocap process
+    --param physics.kp_joint=6400``) is taken as that number, not refused for its type: rclpy
+    alone would raise ``InvalidParameterTypeException`` and the node would not start."""
+    from rclpy.parameter import Parameter
+
+    overrides = getattr(node, '_parameter_overrides', None)
     values: Dict[str, Any] = {}
     for spec in specs:
+        given = overrides.get(spec.name) if isinstance(overrides, dict) else None
+        if (given is not None and isinstance(spec.default, float)
+                and given.type_ == Parameter.Type.INTEGER):
+            overrides[spec.name] = Parameter(spec.name, value=float(given.value))
         param = node.declare_parameter(spec.name, spec.default, spec.descriptor())
         values[spec.name] = param.value
     return values

@@ -115,6 +115,39 @@ def test_declare_parameters_with_descriptions_and_ranges(node):
     assert '| `fps` | `30.0` | frames per second |' in table
 
 
+def test_an_integer_for_a_float_parameter_is_taken_as_its_value():
+    """``-p kp:=6400`` or ``--param physics.kp=6400`` on a float parameter: rclpy alone refuses
+    the integer (the node would not start); declared through the specs it is 6400.0. A
+    string for a float is still refused."""
+    import rclpy
+    from rclpy.exceptions import InvalidParameterTypeException
+    from rclpy.parameter import Parameter
+
+    from mocap_core.parameters import ParamSpec, declare_parameters
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '0')) % 200 + 30)
+    try:
+        specs = (ParamSpec('kp', 3600.0, 'gain'), ParamSpec('n', 6, 'count'))
+        n = rclpy.create_node('int_for_float', context=ctx, parameter_overrides=[
+            Parameter('kp', value=6400), Parameter('n', value=7)])
+        values = declare_parameters(n, specs)
+        assert values == {'kp': 6400.0, 'n': 7} and isinstance(values['kp'], float)
+        n.destroy_node()
+        plain = rclpy.create_node('int_for_float_plain', context=ctx,
+                                  parameter_overrides=[Parameter('kp', value=6400)])
+        with pytest.raises(InvalidParameterTypeException):
+            plain.declare_parameter('kp', 3600.0)          # what rclpy does by itself
+        plain.destroy_node()
+        bad = rclpy.create_node('str_for_float', context=ctx,
+                                parameter_overrides=[Parameter('kp', value='fast')])
+        with pytest.raises(InvalidParameterTypeException):
+            declare_parameters(bad, specs)
+        bad.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+
+
 SPIN_SCRIPT = '''
 import sys
 import rclpy
