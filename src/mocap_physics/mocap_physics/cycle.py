@@ -605,10 +605,12 @@ class PhysicsCycle:
                 a_des = a_des + cho_solve(cho_factor(M), alpha)
             # -- stance points and their stabilising reference -------------------------------
             # a point the probabilities put down is in stance near the floor, or up to
-            # stance_height above it when it is not coming down fast (a foot falling onto
-            # the floor lands first: it is not braked in the air)
+            # stance_height above it when it enters stance not coming down fast (a foot
+            # falling onto the floor lands first: it is not braked in the air); once in
+            # stance the speed of its own pull onto the floor does not release it
             stance = mask & ((pos[:, 2] < p.contact_height)
-                             | ((pos[:, 2] < p.stance_height) & (vel[:, 2] > -LANDING_SPEED)))
+                             | ((pos[:, 2] < p.stance_height)
+                                & (anchored | (vel[:, 2] > -LANDING_SPEED))))
             new = stance & ~anchored
             anchor[new] = pos[new, :2]
             anchored = stance.copy()

@@ -176,6 +176,9 @@ PARAMETERS = (
     ParamSpec('slide_threshold', _D.slide_threshold, 'whole_body: a foot whose friction is '
               'saturated slides when holding it needs a horizontal residual root force above '
               'this, body weights', min_value=0.0, read_only=True),
+    ParamSpec('slide_time', _D.slide_time, 'whole_body: the horizontal residual that lets a '
+              'foot slide is averaged over this time while its friction is saturated, s (0: '
+              'decided per sub-step)', min_value=0.0, read_only=True),
     ParamSpec('stance_height', _D.stance_height, 'whole_body: a contact point whose contact '
               'probability is above contact_threshold becomes a stance point (held, carrying '
               'a force, pulled onto the floor) within this height of the floor, m',
@@ -263,7 +266,7 @@ class PhysicsNode(Node):
             residual_bound=p['residual_bound'],
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
-            stance_height=p['stance_height'])
+            stance_height=p['stance_height'], slide_time=p['slide_time'])
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         contacts_topic = p['contacts_topic']

@@ -249,6 +249,8 @@ class WholeBodyID:
         stance = np.asarray(stance, dtype=bool)
         sliding = np.zeros(self.num_contacts, dtype=bool)
         slide_dir = np.zeros((self.num_contacts, 2))
+        if not np.any(stance):
+            self._need.clear()                     # flight: no foot carries a history
         res = self._solve(M, h, a_des, Jc, drift, stance, a_ref, xy, sliding, slide_dir,
                           feet, body_mass, gravity, R)
         solves = 1
@@ -274,6 +276,9 @@ class WholeBodyID:
             a = 1.0 if self.slide_time <= 0.0 or dt <= 0.0 else dt / (self.slide_time + dt)
             for foot in set(feet):
                 pts = [c for c in range(self.num_contacts) if feet[c] == foot]
+                if not stance[pts].any():          # a foot in the air starts afresh
+                    self._need.pop(foot, None)
+                    continue
                 old = self._need.get(foot, 0.0)
                 self._need[foot] = old + a * ((need if sat[pts].any() else 0.0) - old)
                 if self._need[foot] < self.slide_threshold:
