@@ -546,6 +546,30 @@ def test_floor_input_heading_offset_is_averaged_over_past_and_look_ahead():
         OnlineGMR(model, floor_input=True, heading_smoothing=-1)
 
 
+def test_heading_offset_reads_the_motion_into_each_later_frame():
+    """``_heading_offset`` with known network motions: the window holds input poses facing
+    +x, GMR turns by a different yaw into each frame (0.1, 0.2, 0.3, ... rad), so the offset
+    of frame pos + m is yaw(R) plus the turns into frames pos + 1 .. pos + m. Reading the
+    motion of the wrong frame (one off) would give another mean."""
+    online = OnlineGMR(_small_model(), lookahead=3, floor_input=True, heading_smoothing=2)
+    poses = _poses(6)
+    facing = []
+    for p in poses:
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(np.eye(3))
+        facing.append(Pose(p.skeleton, rot, p.root_position))
+    online._poses.extend(facing)
+    online._offsets.extend([0.05, 0.07])              # two earlier frames' offsets
+    turns = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    out = {'axis_angle': turns[:, None] * np.array([0.0, 0.0, 1.0])}
+    pos = 2                                             # frames 3 and 4 lie ahead
+    got = online._heading_offset(rz(0.3), out, pos)
+    values = [0.3, 0.05, 0.07, 0.3 + turns[2], 0.3 + turns[2] + turns[3]]
+    expected = np.arctan2(np.mean(np.sin(values)), np.mean(np.cos(values)))
+    assert got == pytest.approx(expected, abs=1e-12)
+    assert list(online._offsets)[-1] == pytest.approx(0.3)   # this frame's own offset kept
+
+
 def test_position_input_is_the_root_frame_joints_and_ignores_leaf_twist():
     R, T = circle_walk(10)
     m = _motion(R, T)
