@@ -178,6 +178,13 @@ def world_to_optical(R: np.ndarray, position: np.ndarray, points: np.ndarray) ->
                      np.asarray(position)[:, None])
 
 
+def optical_to_world(R: np.ndarray, position: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`world_to_optical`: a moving camera's optical-frame points into
+    the world (same arguments; ``points`` (F, N, 3) in the optical frame), metres."""
+    return np.einsum('fji,fkj->fki', np.asarray(R), np.asarray(points)) + \
+        np.asarray(position)[:, None]
+
+
 def project_pinhole(K: np.ndarray, points: np.ndarray, min_depth: float = 1e-3
                     ) -> np.ndarray:
     """(..., 3) optical-frame points -> (..., 3) pixels u, v and a visibility flag 1; points

@@ -297,7 +297,7 @@ class OnlineGMR:
         self._R_out: Optional[np.ndarray] = None     # the last emitted pose
         self._T_out: Optional[np.ndarray] = None
         self._T_gmr_prev: Optional[np.ndarray] = None
-        self._anchors: dict = {}          # standing contact point -> its xy relative to the root
+        self._standing: dict = {}         # standing contact point -> its xy relative to root
         self._offsets: Deque[float] = collections.deque(maxlen=max(1, self.heading_smoothing))
         self._cache: Optional[Tuple[int, dict]] = None
         self._last_motion: Tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))
@@ -435,14 +435,14 @@ class OnlineGMR:
         if k == 0 or self._T_gmr_prev is None:
             xy = T[:2].copy()
         else:
-            held = [c for c in range(len(down)) if down[c] and c in self._anchors]
+            held = [c for c in range(len(down)) if down[c] and c in self._standing]
             if held:
-                xy = self._T_out[:2] - np.mean([local[c, :2] - self._anchors[c]
+                xy = self._T_out[:2] - np.mean([local[c, :2] - self._standing[c]
                                                 for c in held], axis=0)
             else:
                 xy = self._T_out[:2] + (T_gmr[:2] - self._T_gmr_prev[:2])   # GMR's step
         # the standing points' horizontal positions relative to the root, for the next frame
-        self._anchors = {c: local[c, :2].copy() for c in range(len(down)) if down[c]}
+        self._standing = {c: local[c, :2].copy() for c in range(len(down)) if down[c]}
         self._T_gmr_prev = T_gmr.copy()
         return np.array([xy[0], xy[1], T[2]])
 
@@ -533,7 +533,7 @@ class OnlineGMR:
             if self.foot_lock and fused:
                 # the fused root follows the input's, whose feet are the physics' own: no
                 # lock (it would keep GMR's drift); it starts afresh when the fusion stops
-                self._anchors = {}
+                self._standing = {}
                 self._T_gmr_prev = T_gmr.copy()
             elif self.foot_lock:
                 T = self._lock_feet(k, R, T, T_gmr, pose)

@@ -44,7 +44,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from ..camera import project_pinhole
+from ..camera import optical_to_world, project_pinhole
 from ..pose_metrics import procrustes_align
 from ..skeleton import JOINT_INDEX, KEYPOINT_INDEX, PARENTS
 
@@ -323,9 +323,8 @@ def camera_to_world(points: np.ndarray, index: np.ndarray, gt: Dict[str, np.ndar
                     ) -> np.ndarray:
     """(N, J, 3) points in the optical frame of rendered frames ``index`` (N,) -> the true
     world frame, with that frame's camera pose (``p_camera = R (p_world - position)``)."""
-    R = np.asarray(gt['camera_R'])[index]
-    return np.einsum('fji,fkj->fki', R, points) + np.asarray(gt['camera_position'])[index][
-        :, None]
+    return optical_to_world(np.asarray(gt['camera_R'])[index],
+                            np.asarray(gt['camera_position'])[index], points)
 
 
 def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
