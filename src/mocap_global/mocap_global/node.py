@@ -182,6 +182,14 @@ PARAMETERS = (
               'correction towards the input root', min_value=0.0),
     ParamSpec('fusion_orientation_time_constant_s', 1.0, 'Time constant of the orientation '
               'correction towards the input root', min_value=0.0),
+    ParamSpec('fusion_static_position_time_constant_s', 0.0, 'The same for the frames of a '
+              'camera that stands still (measured static, or camera_mode static) with a floor '
+              'input (the physics output): 0 = the '
+              'output root is the input root moved rigidly into the world, so the feet stay '
+              'where the input put them', min_value=0.0),
+    ParamSpec('fusion_static_orientation_time_constant_s', 0.0, 'The orientation correction '
+              'of those frames (0 = the input root orientation, turned into the world)',
+              min_value=0.0),
     ParamSpec('vertical', 'auto', "Where the root's height and tilt come from: 'input' (an "
               "input in a floor frame, z up, floor z = 0, e.g. the physics output: one floor "
               "for all outputs; GMR gives heading and horizontal path), 'gmr' (accumulated "
@@ -355,7 +363,10 @@ class GMRNode(Node):
             fusion = StaticCameraFusion(
                 self.fps, p['fusion_init_s'], p['fusion_position_time_constant_s'],
                 p['fusion_orientation_time_constant_s'], input_up=up,
-                known_world=self.camera_mode == 'known')
+                known_world=self.camera_mode == 'known',
+                static_position_time_constant_s=p['fusion_static_position_time_constant_s'],
+                static_orientation_time_constant_s=p[
+                    'fusion_static_orientation_time_constant_s'])
             self.get_logger().info(
                 ('static camera: fusing' if self.camera_mode == 'static' else
                  'camera mode auto: fusing the frames of a static or turning camera')
@@ -490,14 +501,15 @@ class GMRNode(Node):
         R0 = cm[1]
         C = np.zeros(3) if position is None else position
         if not on_floor:
-            return InputAnchor(True, R0, C)
+            return InputAnchor(True, R0, C, static=state == 'static')
         if self.floor is None:
             # no floor yet: the camera's motion cannot be put into the floor frame
-            return InputAnchor(state == 'static')
+            return InputAnchor(state == 'static', static=state == 'static')
         # p_first_camera = R0 p_camera + C and p_camera = A p_floor + b, for the floor frame
         # of the first image as for this one
         _, A, b = self.floor
-        return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b))
+        return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b),
+                           static=state == 'static')
 
     @property
     def online(self) -> Optional[OnlineGMR]:

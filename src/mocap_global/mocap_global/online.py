@@ -46,6 +46,14 @@ Static camera (``fusion``, :class:`StaticCameraFusion`): the input's root trajec
 own frame (the camera frame of the lifter, the floor frame of the physics stage) is fixed to
 the world when the camera does not move, and each accumulated pose is pulled towards it.
 
+With a floor input, a frame of a camera that stands still (an anchor with ``static=True``, or
+no anchors at all: a camera declared static) is pulled with its own time constants, by
+default 0: its pose is
+the input root moved rigidly into the world (the input frame does not move, so neither does
+the transform), and the feet stay exactly where the input put them. The time constants of
+the other fused frames (turning or translating cameras, whose anchors carry the noise of the
+camera-motion estimate, and known camera poses) stay longer.
+
 Camera motion (:class:`InputAnchor`, given per frame to :meth:`OnlineGMR.push`): when the
 camera only turns, the input root is first turned back into the frame of the camera's first
 image (``p_fixed = rotation p_input + translation``) and then fused as for a static camera;
@@ -105,11 +113,14 @@ class InputAnchor:
     translation`` (rotation (3, 3), translation (3,) m) maps the input frame into the fixed
     frame (the camera, or the floor frame, at the first image). ``fixed=False``: the camera
     translates or its motion is unknown; the input root does not locate the person in the
-    world."""
+    world. ``static``: the camera stands still in this frame, so the map is the same as in
+    the frame before (no estimate noise in it): fused with the static time constants of
+    :class:`StaticCameraFusion`."""
 
     fixed: bool
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    static: bool = False
 
     def apply(self, R_in: np.ndarray, T_in: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """An input root pose (R (3, 3), T (3,)) in the fixed frame."""
@@ -140,16 +151,26 @@ class StaticCameraFusion:
 
     Each new GMR pose ``G = G_prev dG`` is then pulled towards the measurement ``W (R_in,
     T_in)``: the position by ``1 - exp(-dt / position_time_constant_s)`` per frame, the
-    orientation (geodesically) by ``1 - exp(-dt / orientation_time_constant_s)``.
+    orientation (geodesically) by ``1 - exp(-dt / orientation_time_constant_s)``; a frame
+    of a camera that stands still (``step(..., static=True)``) by its own
+    ``static_position_time_constant_s`` and ``static_orientation_time_constant_s``. A time
+    constant of 0 takes the measurement as it is.
     """
 
     def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.15,
                  orientation_time_constant_s: float = 1.0,
-                 input_up: Optional[np.ndarray] = None, known_world: bool = False) -> None:
+                 input_up: Optional[np.ndarray] = None, known_world: bool = False,
+                 static_position_time_constant_s: float = 0.0,
+                 static_orientation_time_constant_s: float = 0.0) -> None:
         self.known_world = bool(known_world)
         self.init_frames = max(1, int(round(init_s * fps)))
-        self.alpha_p = 1.0 - math.exp(-1.0 / (fps * max(position_time_constant_s, 1e-6)))
-        self.alpha_r = 1.0 - math.exp(-1.0 / (fps * max(orientation_time_constant_s, 1e-6)))
+
+        def gain(tau: float) -> float:
+            return 1.0 if tau <= 0 else 1.0 - math.exp(-1.0 / (fps * tau))
+        self.alpha_p = gain(position_time_constant_s)
+        self.alpha_r = gain(orientation_time_constant_s)
+        self.alpha_p_static = gain(static_position_time_constant_s)
+        self.alpha_r_static = gain(static_orientation_time_constant_s)
         self.input_up = None if input_up is None else \
             np.asarray(input_up, dtype=np.float64) / np.linalg.norm(input_up)
         self.reset()
@@ -187,10 +208,12 @@ class StaticCameraFusion:
         return self.W_R @ R_in, self.W_R @ T_in + self.W_t
 
     def step(self, R: np.ndarray, T: np.ndarray, R_in: np.ndarray, T_in: np.ndarray,
-             up_body: np.ndarray, first: bool = False) -> Tuple[np.ndarray, np.ndarray, bool]:
+             up_body: np.ndarray, first: bool = False,
+             static: bool = False) -> Tuple[np.ndarray, np.ndarray, bool]:
         """GMR pose (R, T), input root pose, GMR's up estimate in the body frame -> fused
         (R, T) and whether the measurement was used. ``first``: the first frame of a
-        segment (with a known input up, the fused pose starts at the measurement)."""
+        segment (with a known input up, the fused pose starts at the measurement);
+        ``static``: the camera stands still in this frame (the static time constants)."""
         if self.W_R is None:
             self._pairs.append((R, T, R_in, T_in, up_body))
             need = 1 if self._realigning and self.input_up is not None else self.init_frames
@@ -200,9 +223,11 @@ class StaticCameraFusion:
         Rm, Tm = self.measurement(R_in, T_in)
         if first:
             return Rm, Tm, True
-        T = T + self.alpha_p * (Tm - T)
+        a_p, a_r = (self.alpha_p_static, self.alpha_r_static) if static else \
+            (self.alpha_p, self.alpha_r)
+        T = T + a_p * (Tm - T)
         corr = matrix_to_axis_angle(R.T @ Rm)
-        R = R @ axis_angle_to_matrix(self.alpha_r * corr)
+        R = R @ axis_angle_to_matrix(a_r * corr)
         return R, T, True
 
     def _estimate(self) -> None:
@@ -489,7 +514,12 @@ class OnlineGMR:
                     self.fusion.realign()
                 return R, T, False
             R_in, T_in = anchor.apply(R_in, T_in)
-        return self.fusion.step(R, T, R_in, T_in, up, first=first)
+        # no anchors: a camera declared static; a known camera pose moves. Only a floor
+        # input (the physics output, already filtered) is taken as it is: a camera-frame
+        # root carries the lifter's depth noise
+        static = self.floor_input and (anchor.static if anchor is not None
+                                       else not self.fusion.known_world)
+        return self.fusion.step(R, T, R_in, T_in, up, first=first, static=static)
 
     def _emit(self) -> WorldFrame:
         k = self._emitted                               # segment index of the frame

@@ -749,3 +749,38 @@ def test_sampler_lifted_inputs_follow_the_window_through_mirror_and_reversal():
     with pytest.raises(ValueError, match='frame-aligned'):
         WindowSampler(clips, 24, 30.0, lifted=[LiftedClip(c.rotations[:, :5], c.lengths)
                                                for c in other])
+
+
+def test_static_camera_frames_are_the_floor_input_moved_rigidly():
+    """A camera that stands still, floor input, default time constants: every output frame
+    is the input pose moved by one rigid transform (a turn about z and a shift), so every
+    contact point moves in the world exactly as the physics moved it (no skating added);
+    a turning camera's frames (anchors not static) keep the slower pull towards the input."""
+    from mocap_global.online import InputAnchor
+
+    poses = []
+    for p in _poses(50, seed=5):
+        low = min(c[2] for c in p.contact_positions().values())
+        poses.append(Pose(p.skeleton, p.rotations, p.root_position - [0, 0, low]))
+    pts_in = np.array([[p.contact_positions()[n] for n in CONTACT_POINT_NAMES]
+                       for p in poses])
+
+    def run(static):
+        fusion = StaticCameraFusion(30.0, input_up=EZ)
+        online = OnlineGMR(_small_model(), lookahead=3, fusion=fusion, floor_input=True,
+                           foot_lock=True)
+        frames = []
+        for i, p in enumerate(poses):
+            frames += online.push(i * 33_333_333, p, InputAnchor(True, static=static))[0]
+        frames += online.flush()
+        assert len(frames) == len(poses) and all(f.fused for f in frames)
+        pts = np.array([[f.pose.contact_positions()[n] for n in CONTACT_POINT_NAMES]
+                        for f in frames])
+        return fusion, pts
+
+    fusion, pts = run(True)
+    np.testing.assert_allclose(fusion.W_R @ EZ, EZ, atol=1e-12)     # a turn about z
+    np.testing.assert_allclose(pts, pts_in @ fusion.W_R.T + fusion.W_t, atol=1e-6)
+    # the same anchors said to turn: GMR's own steps, pulled with 0.15 s, are not rigid
+    fusion, pts = run(False)
+    assert np.abs(pts - (pts_in @ fusion.W_R.T + fusion.W_t)).max() > 0.005

@@ -142,6 +142,9 @@ PARAMETERS = (
               read_only=True),
     ParamSpec('kd_joint', _D.kd_joint, 'PD damping of the ball joints, s^-1', min_value=0.0,
               read_only=True),
+    ParamSpec('velocity_feedforward', _D.velocity_feedforward, 'PD damping against the '
+              "target's velocity (kd o (qdot_hat - qdot), qdot_hat differenced from the last "
+              'two targets) instead of against zero velocity (-kd o qdot)', read_only=True),
     ParamSpec('substeps', _D.substeps, 'Simulation sub-steps per frame (k, paper: 6)',
               min_value=1, max_value=100, read_only=True),
     ParamSpec('friction', _D.friction, 'Friction coefficient mu (friction cone as its '
@@ -266,7 +269,8 @@ class PhysicsNode(Node):
             residual_bound=p['residual_bound'],
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
-            stance_height=p['stance_height'], slide_time=p['slide_time'])
+            stance_height=p['stance_height'], slide_time=p['slide_time'],
+            velocity_feedforward=p['velocity_feedforward'])
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         contacts_topic = p['contacts_topic']
