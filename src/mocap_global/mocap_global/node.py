@@ -182,11 +182,11 @@ PARAMETERS = (
               'correction towards the input root', min_value=0.0),
     ParamSpec('fusion_orientation_time_constant_s', 1.0, 'Time constant of the orientation '
               'correction towards the input root', min_value=0.0),
-    ParamSpec('fusion_static_position_time_constant_s', 0.0, 'The same for the frames of a '
+    ParamSpec('fusion_static_position_time_constant_s', 0.05, 'The same for the frames of a '
               'camera that stands still (measured static, or camera_mode static) with a floor '
-              'input (the physics output): 0 = the '
-              'output root is the input root moved rigidly into the world, so the feet stay '
-              'where the input put them', min_value=0.0),
+              'input (the physics output): 0 = the output root is the input root moved '
+              'rigidly into the world, so the feet stay where the input put them (less '
+              'skating, a little more jitter: docs/global.md)', min_value=0.0),
     ParamSpec('fusion_static_orientation_time_constant_s', 0.0, 'The orientation correction '
               'of those frames (0 = the input root orientation, turned into the world)',
               min_value=0.0),

@@ -47,12 +47,12 @@ own frame (the camera frame of the lifter, the floor frame of the physics stage)
 the world when the camera does not move, and each accumulated pose is pulled towards it.
 
 With a floor input, a frame of a camera that stands still (an anchor with ``static=True``, or
-no anchors at all: a camera declared static) is pulled with its own time constants, by
-default 0: its pose is
-the input root moved rigidly into the world (the input frame does not move, so neither does
-the transform), and the feet stay exactly where the input put them. The time constants of
-the other fused frames (turning or translating cameras, whose anchors carry the noise of the
-camera-motion estimate, and known camera poses) stay longer.
+no anchors at all: a camera declared static) is pulled with its own, shorter time constants
+(0.05 s for the position, 0 for the orientation): with both 0 its pose is the input root moved
+rigidly into the world (the input frame does not move, so neither does the transform), and
+the feet stay exactly where the input put them. The time constants of the other fused frames
+(turning or translating cameras, whose anchors carry the noise of the camera-motion estimate,
+and known camera poses) stay longer.
 
 Camera motion (:class:`InputAnchor`, given per frame to :meth:`OnlineGMR.push`): when the
 camera only turns, the input root is first turned back into the frame of the camera's first
@@ -160,7 +160,7 @@ class StaticCameraFusion:
     def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.15,
                  orientation_time_constant_s: float = 1.0,
                  input_up: Optional[np.ndarray] = None, known_world: bool = False,
-                 static_position_time_constant_s: float = 0.0,
+                 static_position_time_constant_s: float = 0.05,
                  static_orientation_time_constant_s: float = 0.0) -> None:
         self.known_world = bool(known_world)
         self.init_frames = max(1, int(round(init_s * fps)))

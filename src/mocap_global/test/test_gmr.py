@@ -752,7 +752,7 @@ def test_sampler_lifted_inputs_follow_the_window_through_mirror_and_reversal():
 
 
 def test_static_camera_frames_are_the_floor_input_moved_rigidly():
-    """A camera that stands still, floor input, default time constants: every output frame
+    """A camera that stands still, floor input, static time constants 0: every output frame
     is the input pose moved by one rigid transform (a turn about z and a shift), so every
     contact point moves in the world exactly as the physics moved it (no skating added);
     a turning camera's frames (anchors not static) keep the slower pull towards the input."""
@@ -766,7 +766,7 @@ def test_static_camera_frames_are_the_floor_input_moved_rigidly():
                        for p in poses])
 
     def run(static):
-        fusion = StaticCameraFusion(30.0, input_up=EZ)
+        fusion = StaticCameraFusion(30.0, input_up=EZ, static_position_time_constant_s=0.0)
         online = OnlineGMR(_small_model(), lookahead=3, fusion=fusion, floor_input=True,
                            foot_lock=True)
         frames = []
