@@ -177,6 +177,8 @@ DEFAULT_BONE_GROUP_LENGTHS: Dict[str, float] = {
 #: frame in units of the foot bone length). The toe point is the toe joint itself; the heel
 #: lies behind the ankle at the height of the toe, so in the rest pose both touch the floor.
 CONTACT_POINT_NAMES: Tuple[str, ...] = ('left_heel', 'left_toe', 'right_heel', 'right_toe')
+#: ``contacts[..., CONTACT_MIRROR]`` swaps the left and right contact points.
+CONTACT_MIRROR: Tuple[int, ...] = _mirror_permutation(CONTACT_POINT_NAMES)
 _CONTACT_POINTS_FOOT_UNITS: Dict[str, Tuple[str, Tuple[float, float, float]]] = {
     'left_heel': ('left_ankle', (-0.25, 0.0, -_SIN30)),
     'left_toe': ('left_toe', (0.0, 0.0, 0.0)),

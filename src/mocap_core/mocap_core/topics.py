@@ -18,6 +18,12 @@ ANNOTATED = '/mocap/keypoints2d/annotated'
 #: nav_msgs/Odometry: the camera's rotation and motion state estimated from the image
 #: background (``ros_conversions.camera_motion_to_odometry`` documents the encoding)
 CAMERA_MOTION = '/mocap/camera/motion'
+#: suffix of the first image's camera frame (``<optical frame>_start``, the camera-motion
+#: estimate's header.frame_id)
+START_FRAME_SUFFIX = '_start'
+#: frame of the physics outputs with ``derotate_camera``: the floor frame of the first image,
+#: which does not turn with the camera (``floor`` turns with it)
+FLOOR_START_FRAME = 'floor' + START_FRAME_SUFFIX
 
 # every node
 DIAGNOSTICS = '/diagnostics'

@@ -495,6 +495,8 @@ class GMRNode(Node):
                 state += ' (translation measured)'
         self.camera_frames[state] = self.camera_frames.get(state, 0) + 1
         self.diag.set_value('camera_motion', state)
+        if on_floor and self.input_frame.endswith(topics.START_FRAME_SUFFIX):
+            return self._derotated_anchor(cm, state, position)
         fusable = ('static', 'rotating') if self.p['fuse_rotating'] else ('static',)
         if cm is None or (state not in fusable and position is None):
             return InputAnchor(False)
@@ -510,6 +512,28 @@ class GMRNode(Node):
         _, A, b = self.floor
         return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b),
                            static=state == 'static')
+
+    def _derotated_anchor(self, cm, state: str, position: Optional[np.ndarray]
+                          ) -> InputAnchor:
+        """The anchor of a floor input from which the physics stage took the camera's
+        rotation out (``derotate_camera``; frame ``floor_start``, the floor frame of the first
+        image): a camera that does not translate leaves that frame where the world is, so
+        static and turning frames are fixed with the identity, the physics output moved
+        rigidly (the static time constants); a translation measured over the floor moves
+        it by ``A^T C`` (A the floor's axes in the first camera frame, C the camera's
+        position there); other frames are GMR's."""
+        standing = cm is not None and state in ('static', 'rotating')
+        if position is None:
+            return InputAnchor(standing, static=standing)
+        if self.floor is None:
+            return InputAnchor(standing, static=standing)
+        f_stamp, A, _ = self.floor
+        # the floor message is in the current camera frame of its stamp: turn it into the
+        # first image's frame with the camera's rotation then
+        at = self.camera_motion.get(f_stamp)
+        A_start = (at[1] if at is not None else cm[1]) @ A
+        return InputAnchor(True, np.eye(3), A_start.T @ position,
+                           static=standing and state == 'static')
 
     @property
     def online(self) -> Optional[OnlineGMR]:

@@ -251,3 +251,39 @@ def test_a_known_camera_pose_with_the_physics_floor_input(graph_node):
     np.testing.assert_allclose(T[1:], np.stack([p.root_position for p in world])[1:],
                                atol=0.02)
     assert _values(node)['camera_pose_missing_frames'] == '1'
+
+
+@pytest.mark.parametrize('frame', ['floor_start', 'floor'])
+def test_a_turning_camera_taken_out_by_physics_is_fused_as_a_static_one(graph_node, frame):
+    """The physics stage took the camera's rotation out (``derotate_camera``: input frame
+    ``floor_start``): frames of a turning camera are fixed like a static camera's, and with
+    the static time constants 0 every output is the input moved by one rigid transform. The
+    same frames in ``floor`` (a floor frame that turns with the camera) are GMR's."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node(fusion_static_position_time_constant_s=0.0)
+    n = 50
+    poses = [Pose(p.skeleton, p.rotations, p.root_position - [0, 0, 0.1])
+             for p in _poses(n, seed=3)]
+    for i, p in enumerate(poses):
+        turn = matrix_to_quat(axis_angle_to_matrix(np.array([0.0, 0.01 * i, 0.0])))
+        graph.publish(topics.CAMERA_MOTION, rc.camera_motion_to_odometry(
+            'rotating', turn, np.array([0.0, 0.3, 0.0]), rc.make_header(i * DT_NS, 'cam_start'),
+            'cam'))
+        graph.publish('/in/motion', rc.pose_to_motion(p, rc.make_header(i * DT_NS, frame)))
+    graph.flush()
+    v = _values(node)
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == n
+    if frame == 'floor':
+        assert v['unfused_frames'] == str(n)
+        return
+    assert v['unfused_frames'] == '0'
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
+    T_in = np.stack([p.root_position for p in poses])
+    # one rigid transform (a turn about z and a shift) maps the input roots onto the output
+    d, d_in = np.diff(T, axis=0), np.diff(T_in, axis=0)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), np.linalg.norm(d_in, axis=1),
+                               atol=1e-6)
+    np.testing.assert_allclose(T[:, 2], T_in[:, 2], atol=1e-6)

@@ -702,7 +702,8 @@ class KeypointsNode(Node):
         if self.pub_motion is not None and cm is not None:
             self.pub_motion.publish(camera_motion_to_odometry(
                 cm.state, cm.orientation, cm.angular_velocity,
-                make_header(res.stamp_ns, header.frame_id + '_start'), header.frame_id,
+                make_header(res.stamp_ns, header.frame_id + topics.START_FRAME_SUFFIX),
+                header.frame_id,
                 position=cm.position if cm.translation_known else None,
                 linear_velocity=cm.linear_velocity))
             self.translation_frames += int(cm.translation_known and cm.state == 'moving')

@@ -14,7 +14,15 @@ Subscribes:
     ``left_heel, left_toe, right_heel, right_toe``, position = probabilities): matched to the
     motion by stamp; a motion frame waits up to ``contacts_wait_s`` for its contacts, then
     uses the newest older ones (at most ``contacts_max_age_s`` old) or none (contact from
-    the kinematics only).
+    the kinematics only);
+  * ``camera_motion_topic`` (default ``/mocap/camera/motion``, nav_msgs/Odometry, the keypoint
+    node's estimate), only with ``derotate_camera``: the camera's rotation since the first
+    image by stamp. Each input pose is turned by its frame's rotation into the first image's
+    camera frame before the floor estimate and the simulation
+    (:mod:`mocap_physics.camera_rotation`), so that a turning camera does not move the feet;
+    the outputs are then in ``floor_start``, the floor frame of the first image, and the
+    floor message stays the floor seen from each frame's camera. A frame without its own
+    estimate holds the newest one before it (counted).
 
 Publishes, stamped with the input's stamp, in the floor frame (z up, floor z = 0):
   * ``/mocap/physics/motion``, ``/joints3d``, ``/joint_states`` (``effort`` = joint torques of
@@ -80,6 +88,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
+from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, PointCloud2
 from trajectory_msgs.msg import MultiDOFJointTrajectory
@@ -95,13 +104,15 @@ from mocap_core.parameters import ParamSpec, declare_parameters, help_requested,
 from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bodies,
                                         motion_to_pose, msg_to_bodies_contacts,
-                                        msg_to_contacts, pose_marker_specs, stamp_to_ns,
-                                        wrench_to_msg)
+                                        msg_to_contacts, odometry_to_camera_motion,
+                                        pose_marker_specs, stamp_to_ns, wrench_to_msg)
+from mocap_core.rotations import quat_to_matrix
 
 from .cycle_params import PhysicsParams
 from .floor import FloorFrame, FloorTracker, FloorTrackerParams
 from .markers import floor_transform_msg, friction_cone_spec
 from .model import revolute_efforts
+from .camera_rotation import START_FLOOR_FRAME, CameraRotations, floor_in_camera, rotate_pose
 from .online import FloorSource, Notice, OnlinePhysics, PhysicsFrame
 
 _D = PhysicsParams()
@@ -112,6 +123,15 @@ PARAMETERS = (
               'MultiDOFJointTrajectory', read_only=True),
     ParamSpec('contacts_topic', topics.LIFTER_CONTACTS, 'Input foot contact probabilities '
               '(JointState: heel/toe, left/right); empty = none', read_only=True),
+    ParamSpec('camera_motion_topic', topics.CAMERA_MOTION, 'The keypoint node\'s camera-motion '
+              'estimate (nav_msgs/Odometry: the camera\'s orientation since the first image); '
+              'used with derotate_camera; empty = none', read_only=True),
+    ParamSpec('derotate_camera', False, 'Take the camera\'s rotation since the first image '
+              '(camera_motion_topic) out of each input pose before the floor estimate and the '
+              'simulation, so that a turning camera does not move the feet: outputs in the '
+              'floor frame of the first image (frame_id floor_start); the floor message stays '
+              'the floor in the current camera frame. Only with floor_source estimate or '
+              'camera_params', read_only=True),
     ParamSpec('contacts_wait_s', 0.05, 'Longest wait (wall clock) of a motion frame for the '
               'contacts with its stamp', min_value=0.0, max_value=5.0),
     ParamSpec('contacts_max_age_s', 0.1, 'Otherwise use the newest older contacts if at most '
@@ -273,6 +293,14 @@ class PhysicsNode(Node):
             velocity_feedforward=p['velocity_feedforward'])
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
+        # the camera's rotation taken out of the input (derotate_camera)
+        self.derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
+            and bool(p['camera_motion_topic'])
+        self.rotations = CameraRotations()
+        #: the rotation each input stamp was turned by (for the floor message), newest last
+        self.used_rotations: Dict[int, np.ndarray] = {}
+        self.rotation_held_frames = 0
+        self.rotation_own_frames = 0
         contacts_topic = p['contacts_topic']
         self.online = self._make_online(contacts_topic)
         # several people (the combined input): one OnlinePhysics per id
@@ -319,6 +347,15 @@ class PhysicsNode(Node):
             self.create_subscription(
                 JointState, p['bodies_contacts_topic'],
                 guarded(self, self.on_bodies_contacts, 'bodies contacts'), qos)
+        if self.derotate:
+            self.diag.watch('camera_motion', self.create_subscription(
+                Odometry, p['camera_motion_topic'],
+                guarded(self, self.on_camera_motion, 'camera motion'), qos))
+        elif p['derotate_camera']:
+            self.get_logger().warn('derotate_camera needs floor_source estimate or '
+                                   'camera_params and a camera_motion_topic: off')
+        self.diag.set_value('camera_rotation', 'taken out (outputs in the first image\'s '
+                            'floor frame)' if self.derotate else 'off')
         self.diag.watch('motion', self.pub_motion)
         self.create_timer(0.01, guarded(self, self.on_timer, 'process'))
         self.diag.on_publish(guarded(self, self.refresh_diagnostics, 'diagnostics'))
@@ -331,7 +368,8 @@ class PhysicsNode(Node):
         """A new per-person streaming state (its own floor estimate)."""
         p = self.p
         return OnlinePhysics(
-            self.params, self._floor_source(), frame_id=p['frame_id'],
+            self.params, self._floor_source(),
+            frame_id=p['frame_id'] or (START_FLOOR_FRAME if self.derotate else ''),
             contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
             contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
                                if contacts_topic else None),
@@ -440,7 +478,8 @@ class PhysicsNode(Node):
             accepted, frames = online.admit(stamp)
             self._publish(frames, pid)
             if accepted:
-                self._publish(online.add_motion(stamp, pose, msg.header.frame_id), pid)
+                self._publish(online.add_motion(stamp, self._derotated(stamp, pose),
+                                                msg.header.frame_id), pid)
         timeout = int(self.p['person_timeout_s'] * 1e9)
         for pid in [q for q, t in self.person_seen_ns.items() if stamp - t > timeout or
                     t - stamp > max(timeout, 10**9)]:
@@ -470,7 +509,38 @@ class PhysicsNode(Node):
             self.diag.dropped += 1
             self._problem('motion', f'dropping a motion message: {exc}')
             return
-        self._publish(self.online.add_motion(stamp, pose, msg.header.frame_id))
+        self._publish(self.online.add_motion(stamp, self._derotated(stamp, pose),
+                                             msg.header.frame_id))
+
+    def on_camera_motion(self, msg: Odometry) -> None:
+        """Keep the camera's rotation since the first image of each stamp."""
+        try:
+            state, q, _ = odometry_to_camera_motion(msg)
+        except MessageError as exc:
+            self._problem('camera_motion', f'ignoring camera motion: {exc}')
+            return
+        self.rotations.add(stamp_to_ns(msg.header.stamp), state, quat_to_matrix(q))
+
+    def _derotated(self, stamp: int, pose):
+        """The input pose in the first image's camera frame (derotate_camera; else as
+        is). A stamp without its own camera estimate holds the newest one before it
+        (counted)."""
+        if not self.derotate:
+            return pose
+        if stamp in self.used_rotations:       # another person of the same frame
+            R = self.used_rotations[stamp]
+        else:
+            R, own = self.rotations.at(stamp)
+            if own:
+                self.rotation_own_frames += 1
+            else:
+                self.rotation_held_frames += 1
+                self._warn_limited('rotation_held', 'no camera-motion estimate for this '
+                                   'frame: the last rotation is held', 10.0)
+            self.used_rotations[stamp] = R
+            while len(self.used_rotations) > 600:
+                del self.used_rotations[next(iter(self.used_rotations))]
+        return rotate_pose(pose, R)
 
     def on_timer(self) -> None:
         """Frames whose contacts did not come in time go now."""
@@ -532,6 +602,14 @@ class PhysicsNode(Node):
         res = frame.result
         header = make_header(frame.stamp_ns, frame.frame_id)
         pose = res.pose
+        if self.pub_floor is not None and frame.floor is not None:
+            # first, so that a frame's floor is known when its motion arrives; the floor in
+            # the current camera frame (derotate_camera: the first image's floor turned back
+            # by the rotation this frame was turned by)
+            publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
+                make_header(frame.stamp_ns, frame.input_frame),
+                floor_in_camera(frame.floor, self.used_rotations.get(frame.stamp_ns)
+                                if self.derotate else None), frame.frame_id))
         self.pub_motion.publish(cdr.pose_to_motion(pose, header))
         publish_if_heard(self.pub_joints,
                          lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
@@ -549,9 +627,6 @@ class PhysicsNode(Node):
         publish_if_heard(self.pub_com, com)
         if self.pub_markers is not None:
             publish_if_heard(self.pub_markers, lambda: self._markers(frame, header))
-        if self.pub_floor is not None and frame.floor is not None:
-            publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
-                make_header(frame.stamp_ns, frame.input_frame), frame.floor, frame.frame_id))
 
     def _markers(self, frame: PhysicsFrame, header) -> bytes:
         """The stick figure with contacts and force arrows, and the friction cones
@@ -589,6 +664,9 @@ class PhysicsNode(Node):
         d.set_value('friction_cone_violations', st.cone_violations)
         d.set_value('stick_failures', st.stick_failures)
         d.set_value('dynamics', self.params.dynamics)
+        if self.derotate:
+            d.set_value('camera_rotation_frames', f'{self.rotation_own_frames} with their own '
+                        f'estimate, {self.rotation_held_frames} held')
         d.set_value('residual_bound_reached_substeps', st.residual_saturations)
         d.set_value('sliding_substeps', st.sliding_substeps)
         floor = online.floor

@@ -17,13 +17,15 @@ import numpy as np
 
 from mocap_core.data.motion import Motion
 from mocap_core.data.synth2d import (CameraSampling, ConfidenceModel, Corruption,
-                                     corrupt_keypoints, keypoints_3d, mirror_motion,
-                                     motion_to_camera, project, sample_camera)
+                                     corrupt_keypoints, keypoints_3d, mirror_keypoints,
+                                     mirror_motion, motion_to_camera, project, sample_camera)
 from mocap_core.rotations import quat_rotate
 from mocap_core.kinematics import forward_kinematics
-from mocap_core.skeleton import JOINT_INDEX, NUM_BONE_GROUPS, Skeleton
+from mocap_core.skeleton import (CONTACT_MIRROR, JOINT_INDEX, JOINT_MIRROR, NUM_BONE_GROUPS,
+                                 Skeleton)
 
-from ..features import lifter_features, smooth_keypoints
+from ..features import (lifter_features, mirror_features, smooth_keypoints,
+                        unmirror_rotations)
 
 _LEG = [JOINT_INDEX['left_knee'], JOINT_INDEX['left_ankle']]
 
@@ -159,25 +161,31 @@ class RenderedWindowSampler:
     joints (``joints_camera``: the training convention, so the position targets are exact),
     the driving rotations (the root turned into the camera frame per frame), the bone-group
     lengths and the contacts. Frames without a detection stay in (zero confidence), as the
-    lifter sees them live. No flip augmentation: the renders already show every side.
+    lifter sees them live.
 
     Args:
         clip_dirs: rendered clip folders.
         window: frames per window; shorter clips are skipped.
         seed: the sampler's generator.
         keep: optional predicate on the clip id (e.g. the strict split's training clips).
+        flip: probability that a window is mirrored left-right (:func:`mirror_rendered_window`):
+            the detector's output on the mirrored image, up to the detector's own asymmetry,
+            with the mirrored body as its target. Doubles the people, scenes and camera
+            paths the renders show.
     """
 
     def __init__(self, clip_dirs: Sequence, window: int, seed: int = 0,
-                 keep=None) -> None:
+                 keep=None, flip: float = 0.0) -> None:
         import json
         from pathlib import Path
 
         from mocap_core.camera import CameraIntrinsics
         from mocap_core.rotations import matrix_to_quat, quat_multiply
         self.window = window
+        self.flip = float(flip)
         self.rng = np.random.default_rng(seed)
         self.clips: List[Dict[str, np.ndarray]] = []
+        self.widths: List[int] = []
         for d in clip_dirs:
             d = Path(d)
             meta = json.loads((d / 'meta.json').read_text())
@@ -201,6 +209,7 @@ class RenderedWindowSampler:
                     'lengths': z['bone_lengths'].astype(np.float32),
                     'contacts': z['contacts'].astype(np.float32),
                     'keypoints': z['keypoints'].astype(np.float32)})
+                self.widths.append(w)
         if not self.clips:
             raise ValueError(f'no rendered clip has {window} frames')
         counts = np.array([len(c['features']) - window + 1 for c in self.clips], float)
@@ -210,11 +219,36 @@ class RenderedWindowSampler:
         return len(self.clips)
 
     def sample(self) -> Dict[str, np.ndarray]:
-        c = self.clips[self.rng.choice(len(self.clips), p=self.weights)]
+        i = int(self.rng.choice(len(self.clips), p=self.weights))
+        c = self.clips[i]
         s = int(self.rng.integers(0, len(c['features']) - self.window + 1))
         out = {k: (v if k == 'lengths' else v[s:s + self.window]) for k, v in c.items()}
+        if self.flip > 0 and self.rng.random() < self.flip:
+            out = mirror_rendered_window(out, self.widths[i])
         out['tpose'] = np.float32(0.0)
         return out
+
+
+def mirror_rendered_window(w: Dict[str, np.ndarray], width: int) -> Dict[str, np.ndarray]:
+    """A rendered window (:meth:`RenderedWindowSampler.sample`'s keys but ``tpose``) as seen
+    in the left-right mirrored image: features mirrored about the principal point with left
+    and right keypoints exchanged (:func:`~mocap_lifter.features.mirror_features`); targets in
+    the camera optical frame reflected in x (positions and root), joints and contact points
+    exchanged left and right, rotations reflected (the same conjugation as
+    :func:`~mocap_lifter.features.unmirror_rotations`, which is its own inverse); the
+    bone-group lengths and the 2D scale are unchanged (the skeleton is symmetric). The pixel
+    keypoints are mirrored about the image's centre column (``width`` pixels)."""
+    out = dict(w)
+    feats, root_2d = mirror_features(w['features'], w['root_2d'])
+    out['features'] = feats.astype(np.float32)
+    out['root_2d'] = root_2d.astype(np.float32)
+    flip_x = np.array([-1.0, 1.0, 1.0], dtype=np.float32)
+    out['positions'] = (w['positions'][:, list(JOINT_MIRROR)] * flip_x).astype(np.float32)
+    out['root'] = (w['root'] * flip_x).astype(np.float32)
+    out['rotations'] = unmirror_rotations(w['rotations']).astype(np.float32)
+    out['contacts'] = w['contacts'][:, list(CONTACT_MIRROR)]
+    out['keypoints'] = mirror_keypoints(w['keypoints'], width).astype(np.float32)
+    return out
 
 
 class MixedSampler:

@@ -79,6 +79,8 @@ class TrainConfig:
     #: the folder of the renders (default ~/.cache/mocap/render; its train split is used)
     rendered_fraction: float = 0.0
     renders: Optional[str] = None
+    #: probability that a rendered window is mirrored left-right (image, keypoints, targets)
+    rendered_flip: float = 0.0
     #: 'committed' trains on the committed training split; 'strict' on the strict one
     #: (whole motion families held out, mocap_core.data.strict_split)
     split: str = 'committed'
@@ -288,7 +290,8 @@ def _with_renders(sampler: WindowSampler, cfg: TrainConfig):
     if not train_dirs:
         raise ValueError(f'rendered_fraction > 0 but no rendered training clip under {root} '
                          '(mocap data render --split train)')
-    rendered = RenderedWindowSampler(train_dirs, cfg.window, seed=cfg.seed + 7, keep=keep)
+    rendered = RenderedWindowSampler(train_dirs, cfg.window, seed=cfg.seed + 7, keep=keep,
+                                     flip=cfg.rendered_flip)
     print(f'rendered training clips: {len(rendered)} (of {len(train_dirs)} under {root})',
           flush=True)
     val_dirs = list(iter_done(root, 'validation'))

@@ -1,0 +1,157 @@
+"""Physics in the first image's frame (``derotate_camera``): the camera's rotation taken out
+of the input, so that a turning camera does not move the feet."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocap_core.pose import Pose
+from mocap_core.rotations import axis_angle_to_matrix, matrix_to_quat
+from mocap_core.skeleton import Skeleton
+from mocap_physics.camera_rotation import CameraRotations, floor_in_camera, rotate_pose
+from mocap_physics.floor import FloorFrame
+
+BAG = Path(__file__).resolve().parents[3] / 'bags' / 'gt_bandai_walk_exhausted'
+
+
+def _rot(axis, angle):
+    return axis_angle_to_matrix(np.asarray(axis, float) / np.linalg.norm(axis) * angle)
+
+
+def test_rotations_by_stamp_held_and_restarted():
+    rots = CameraRotations()
+    assert np.allclose(rots.at(5)[0], np.eye(3)) and not rots.at(5)[1]
+    A, B = _rot([0, 1, 0], 0.2), _rot([0, 1, 0], 0.3)
+    assert rots.add(10, 'rotating', A) and rots.add(20, 'moving', B)
+    assert not rots.add(30, 'unknown', np.eye(3))               # the estimator lost track
+    assert not rots.add(40, 'rotating', np.full((3, 3), np.nan))
+    R, own = rots.at(20)
+    assert own and np.allclose(R, B)
+    R, own = rots.at(30)                                        # held from 20
+    assert not own and np.allclose(R, B)
+    R, own = rots.at(15)
+    assert not own and np.allclose(R, A)
+    # a bag played again: its estimate starts again
+    assert rots.add(5, 'static', np.eye(3)) and len(rots) == 3   # 5 ns back: not a restart
+    assert rots.add(20 - 2_000_000_000, 'static', np.eye(3)) and len(rots) == 1
+
+
+def test_a_rotated_pose_and_the_floor_seen_from_the_current_camera():
+    skel = Skeleton.default()
+    rng = np.random.default_rng(0)
+    q = rng.normal(size=(skel.num_joints, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    pose = Pose(skel, q, np.array([0.3, 0.2, 4.0]))
+    R = _rot([0.2, 1.0, 0.1], 0.4)
+    turned = rotate_pose(pose, R)
+    assert np.allclose(turned.joint_positions(), pose.joint_positions() @ R.T)
+    floor = FloorFrame.from_camera_height_pitch(1.5, 0.2)      # in the first image's frame
+    seen = floor_in_camera(floor, R)
+    p = rng.normal(size=(5, 3))                                 # points in the current camera
+    assert np.allclose(seen.transform_points(p), floor.transform_points(p @ R.T))
+    assert floor_in_camera(floor, None) is floor
+
+
+def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame'):
+    """Drive a physics node in process (as ``mocap process`` does) with camera-frame poses,
+    their contacts and the camera-motion estimate (rotations since the first image, None =
+    no estimate published); returns the output frames and the published floors."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from mocap_core import topics
+    from mocap_core.inprocess import InProcessGraph
+    from mocap_core.ros_conversions import (camera_motion_to_odometry, contacts_to_msg,
+                                            make_header, pose_to_motion)
+    from mocap_physics.node import PhysicsNode
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    floors = []
+    graph = InProcessGraph(record=lambda topic, msg, qos: floors.append(msg)
+                           if topic == topics.PHYSICS_FLOOR else None)
+    node = PhysicsNode(context=context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in node_kwargs.items()])
+    frames = []
+    publish_frame = node._publish_frame
+    node._publish_frame = lambda f: (frames.append(f), publish_frame(f))
+    graph.add(node)
+    try:
+        for i, (pose, c) in enumerate(zip(poses, contacts)):
+            stamp = 1_000_000_000 + i * 33_333_333
+            if rotations is not None:
+                graph.publish(topics.CAMERA_MOTION, camera_motion_to_odometry(
+                    'rotating', matrix_to_quat(rotations[i]), np.array([0.0, 0.3, 0.0]),
+                    make_header(stamp, frame + '_start'), frame))
+            graph.publish(topics.LIFTER_CONTACTS, contacts_to_msg(c, make_header(stamp, frame)))
+            graph.publish(topics.LIFTER_MOTION, pose_to_motion(pose, make_header(stamp, frame)))
+            graph.flush()
+        node.flush()
+        graph.flush()
+        return frames, floors, node
+    finally:
+        node.destroy_node()
+        context.try_shutdown()
+
+
+@pytest.fixture(scope='module')
+def panning():
+    """A recorded walk seen by a static camera, and by the same camera panning about the
+    world's vertical (0.4 rad/s, the camera centre fixed): camera-frame poses and the
+    rotation of each frame's camera into the first one."""
+    from mocap_physics.training.evaluate import load_gt_bag
+    clip = load_gt_bag(BAG)
+    n = 60
+    up = clip.to_world.rotation.T @ np.array([0.0, 0.0, 1.0])  # world up in the camera frame
+    static = [Pose(clip.skeleton, clip.gt_rotations[i], clip.gt_root_positions[i])
+              for i in range(n)]
+    turns = [_rot(up, 0.4 * i / clip.fps) for i in range(n)]
+    # the current camera sees p_current = Q^T p_first
+    panned = [rotate_pose(p, Q.T) for p, Q in zip(static, turns)]
+    return static, panned, turns, clip.labels[:n].astype(float), up
+
+
+def _feet(frames):
+    from mocap_core.skeleton import JOINT_INDEX
+    idx = [JOINT_INDEX[j] for j in ('left_ankle', 'left_toe', 'right_ankle', 'right_toe')]
+    return np.array([f.result.pose.joint_positions()[idx] for f in frames])
+
+
+def test_a_panning_camera_taken_out_gives_the_static_cameras_physics(panning):
+    """Derotated, the panned input is simulated exactly as the static camera's (frame
+    ``floor_start``); the floor published per frame is the floor seen from that frame's
+    camera; without the estimate the same input gives feet that move with the pan."""
+    static, panned, turns, contacts, up = panning
+    ref, ref_floors, _ = _run({}, static, contacts, None)
+    der, der_floors, node = _run({'derotate_camera': True}, panned, contacts, turns)
+    raw, _, _ = _run({}, panned, contacts, None)
+    assert len(ref) == len(der) == len(raw) == len(static)
+    assert {f.frame_id for f in der} == {'floor_start'} and {f.frame_id for f in ref} == {'floor'}
+    assert np.abs(_feet(der) - _feet(ref)).max() < 1e-6
+    assert np.abs(_feet(raw) - _feet(ref)).max() > 0.1
+    assert node.rotation_own_frames == len(static) and node.rotation_held_frames == 0
+
+    def normals(msgs):
+        from mocap_core.rotations import quat_to_matrix
+        q = np.array([[m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
+                       m.transform.rotation.w] for m in msgs])
+        return quat_to_matrix(q)[:, :, 2]              # the floor's z axis in the camera
+    n_ref, n_der = normals(ref_floors), normals(der_floors)
+    assert len(n_der) == len(turns)
+    # the static camera's floor normal, seen from each panned camera
+    expect = np.einsum('fji,fj->fi', np.array(turns), n_ref)
+    assert np.abs(n_der - expect).max() < 1e-6
+    assert np.degrees(np.arccos(np.clip(n_ref[-1] @ up, -1, 1))) < 10.0
+
+
+def test_without_an_estimate_the_first_image_is_held(panning):
+    """No camera-motion estimate at all: the frames are taken as seen from the first image
+    (identity, counted as held) and the output is in floor_start."""
+    static, _, _, contacts, _ = panning
+    der, _, node = _run({'derotate_camera': True}, static[:20], contacts[:20], None)
+    ref, _, _ = _run({}, static[:20], contacts[:20], None)
+    assert np.abs(_feet(der) - _feet(ref)).max() < 1e-6
+    assert node.rotation_held_frames == 20 and node.rotation_own_frames == 0
