@@ -39,7 +39,7 @@ Lifter = Union[MotioNet, VTM]
 #: 82.5 / 45.2 mm MPJPE / PA-MPJPE (median over clips) against 122.1 / 78.2 for
 #: ``motionet_windowed.pt``, the default until 2026-11-26, which is still shipped;
 #: ``weights/README.md`` has the whole comparison and why not the strict-split weights.
-DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered.pt'}
+DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered_v2.pt'}
 
 
 def default_weights(mode: str, model: str = 'motionet') -> Path:
