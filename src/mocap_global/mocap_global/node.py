@@ -198,6 +198,13 @@ PARAMETERS = (
     ParamSpec('foot_lock', True, "With the vertical from the input: contact points standing "
               "on the floor (below lock_height) stay where they touched down in the world; "
               "GMR's translation moves the body only while no foot stands"),
+    ParamSpec('fusion_moving_lock_time_constant_s', 0.5, 'With foot_lock: fused frames of a '
+              'camera that turns without walking (estimate rotating, its position measured '
+              'over the floor, or fuse_rotating) keep the foot lock, and the locked root is '
+              'pulled towards the fused one with this time constant, s; 0 = they follow the '
+              'fused root. Not for a walking camera (estimate moving: its path is the '
+              'person\'s) nor a known camera pose (camera_pose_topic), followed as they are',
+              min_value=0.0, read_only=True),
     ParamSpec('heading_smoothing', 7, 'With the vertical from the input: frames on each '
               'side over which the heading offset between the world and the input frame is '
               'averaged (the later ones from the look-ahead; 0 = GMR\'s heading per frame)',
@@ -387,7 +394,11 @@ class GMRNode(Node):
                          p['tilt_correction'], fusion, model_up, p['device'],
                          chunk=p['chunk'], floor_input=on_floor,
                          foot_lock=p['foot_lock'], lock_height=p['lock_height'],
-                         heading_smoothing=p['heading_smoothing'])
+                         heading_smoothing=p['heading_smoothing'],
+                         # a known camera pose carries no estimate noise: followed as it is
+                         moving_lock_time_constant_s=(
+                             0.0 if self.camera_mode == 'known'
+                             else p['fusion_moving_lock_time_constant_s']))
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera-motion estimate of each stamp (the last ``MAX_CAMERA_FRAMES``)."""
@@ -502,8 +513,9 @@ class GMRNode(Node):
             return InputAnchor(False)
         R0 = cm[1]
         C = np.zeros(3) if position is None else position
+        walking = state.startswith('moving')
         if not on_floor:
-            return InputAnchor(True, R0, C, static=state == 'static')
+            return InputAnchor(True, R0, C, static=state == 'static', translating=walking)
         if self.floor is None:
             # no floor yet: the camera's motion cannot be put into the floor frame
             return InputAnchor(state == 'static', static=state == 'static')
@@ -511,7 +523,7 @@ class GMRNode(Node):
         # of the first image as for this one
         _, A, b = self.floor
         return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b),
-                           static=state == 'static')
+                           static=state == 'static', translating=walking)
 
     def _derotated_anchor(self, cm, state: str, position: Optional[np.ndarray]
                           ) -> InputAnchor:
@@ -533,7 +545,8 @@ class GMRNode(Node):
         at = self.camera_motion.get(f_stamp)
         A_start = (at[1] if at is not None else cm[1]) @ A
         return InputAnchor(True, np.eye(3), A_start.T @ position,
-                           static=standing and state == 'static')
+                           static=standing and state == 'static',
+                           translating=state.startswith('moving'))
 
     @property
     def online(self) -> Optional[OnlineGMR]:

@@ -28,7 +28,10 @@ root only while no point stands. The body then moves in the world by its own leg
 physics put its feet, and its feet do not skate in the world output; GMR still gives the
 heading. A fused frame (a static or turning camera) is not locked: its root follows the
 fused position, which follows the input root, whose feet are the physics' own; the lock
-would keep GMR's drift instead (measured in docs/global.md).
+would keep GMR's drift instead (measured in docs/global.md). With
+``moving_lock_time_constant_s`` > 0, the fused frames of a camera that turns without
+walking stay locked, and the locked root is pulled towards the fused one with that time
+constant (a walking camera's frames follow the fused root: its path is the person's).
 
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
@@ -115,12 +118,15 @@ class InputAnchor:
     translates or its motion is unknown; the input root does not locate the person in the
     world. ``static``: the camera stands still in this frame, so the map is the same as in
     the frame before (no estimate noise in it): fused with the static time constants of
-    :class:`StaticCameraFusion`."""
+    :class:`StaticCameraFusion`. ``translating``: the camera walks or drives (its position
+    measured over the floor); such frames follow the fused root even with
+    ``moving_lock_time_constant_s``."""
 
     fixed: bool
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     static: bool = False
+    translating: bool = False
 
     def apply(self, R_in: np.ndarray, T_in: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """An input root pose (R (3, 3), T (3,)) in the fixed frame."""
@@ -267,6 +273,11 @@ class OnlineGMR:
             the world and the input frame is averaged over the frames k - n .. k + n, n =
             min(h, frames available on both sides) (module docstring, heading); 0: GMR's
             heading of each frame.
+        moving_lock_time_constant_s: with ``foot_lock`` and ``floor_input``, > 0: fused
+            frames of a camera that turns but does not walk (anchors with ``static`` and
+            ``translating`` False) keep the foot lock, and the locked root is pulled towards
+            the fused one with this time constant (s); 0: such frames follow the fused root
+            (module docstring, foot lock).
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
@@ -274,7 +285,8 @@ class OnlineGMR:
                  fusion: Optional[StaticCameraFusion] = None,
                  input_up: Optional[np.ndarray] = None, device: str = 'cpu',
                  chunk: int = 1, floor_input: bool = False, foot_lock: bool = False,
-                 lock_height: float = 0.02, heading_smoothing: int = 0) -> None:
+                 lock_height: float = 0.02, heading_smoothing: int = 0,
+                 moving_lock_time_constant_s: float = 0.0) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -293,6 +305,10 @@ class OnlineGMR:
         self.foot_lock = bool(foot_lock)
         self.lock_height = float(lock_height)
         self.heading_smoothing = int(heading_smoothing)
+        self.moving_lock_time_constant_s = float(moving_lock_time_constant_s)
+        if not self.moving_lock_time_constant_s >= 0:
+            raise ValueError('moving_lock_time_constant_s must be >= 0, got '
+                             f'{moving_lock_time_constant_s}')
         if self.heading_smoothing < 0:
             raise ValueError(f'heading_smoothing must be >= 0, got {heading_smoothing}')
         if self.cfg.root_input == 'up' and input_up is None:
@@ -560,7 +576,17 @@ class OnlineGMR:
         self._R, self._T = R, T                         # the accumulation stays GMR's
         if self.floor_input:
             R, T = self._on_floor(self._heading_offset(R, out, pos), T, pose)
-            if self.foot_lock and fused:
+            anchor = self._anchors_in[pos]
+            moving = anchor is not None and not anchor.static and not anchor.translating
+            if self.foot_lock and fused and moving and self.moving_lock_time_constant_s > 0:
+                # a moving camera's fused root carries the noise of the estimate of its
+                # motion: the feet stay locked (steps follow the fused root while no point
+                # stands), and the locked root is pulled towards the fused one
+                T_lock = self._lock_feet(k, R, T, T_gmr, pose)
+                g = 1.0 - math.exp(-max(dt, 0.0) / self.moving_lock_time_constant_s)
+                T = np.array([T_lock[0] + g * (T[0] - T_lock[0]),
+                              T_lock[1] + g * (T[1] - T_lock[1]), T[2]])
+            elif self.foot_lock and fused:
                 # the fused root follows the input's, whose feet are the physics' own: no
                 # lock (it would keep GMR's drift); it starts afresh when the fusion stops
                 self._standing = {}

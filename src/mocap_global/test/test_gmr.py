@@ -784,3 +784,53 @@ def test_static_camera_frames_are_the_floor_input_moved_rigidly():
     # the same anchors said to turn: GMR's own steps, pulled with 0.15 s, are not rigid
     fusion, pts = run(False)
     assert np.abs(pts - (pts_in @ fusion.W_R.T + fusion.W_t)).max() > 0.005
+
+
+def test_a_moving_cameras_fused_frames_keep_the_foot_lock():
+    """Fused frames of a camera that turns (anchors not static: a translation measured over
+    the floor, noisy frame to frame) follow that noise with their feet unless
+    ``moving_lock_time_constant_s`` keeps the lock: then the standing points stay put and
+    the root still follows the anchors' slow drift. A walking camera's are not locked."""
+    from mocap_global.online import InputAnchor
+
+    poses = []
+    for p in _poses(80, seed=7):
+        low = min(c[2] for c in p.contact_positions().values())
+        poses.append(Pose(p.skeleton, p.rotations, p.root_position - [0, 0, low]))
+    rng = np.random.default_rng(3)
+    drift = np.array([0.01, 0.0, 0.0])               # the camera walks 1 cm per frame
+    anchors = [InputAnchor(True, np.eye(3), i * drift + rng.normal(0, 0.02, 3) * [1, 1, 0],
+                           static=False) for i in range(len(poses))]
+
+    def run(tau, walking=False):
+        fusion = StaticCameraFusion(30.0, input_up=EZ)
+        online = OnlineGMR(_small_model(), lookahead=3, fusion=fusion, floor_input=True,
+                           foot_lock=True, moving_lock_time_constant_s=tau)
+        frames = []
+        for i, (p, a) in enumerate(zip(poses, anchors)):
+            if walking:
+                a = InputAnchor(True, a.rotation, a.translation, translating=True)
+            frames += online.push(i * 33_333_333, p, a)[0]
+        frames += online.flush()
+        assert len(frames) == len(poses) and all(f.fused for f in frames[1:])
+        pts = np.array([[f.pose.contact_positions()[n] for n in CONTACT_POINT_NAMES]
+                        for f in frames])
+        stand = (pts[1:, :, 2] < 0.02) & (pts[:-1, :, 2] < 0.02)
+        skate = np.linalg.norm(np.diff(pts[..., :2], axis=0), axis=-1)[stand].mean()
+        roots = np.array([f.pose.root_position for f in frames])
+        return skate, roots
+
+    loose, roots_loose = run(0.0)
+    locked, roots_locked = run(0.5)
+    assert locked < 0.3 * loose, (locked, loose)
+    # a walking camera's frames (the estimate says it translates) follow the fused root
+    assert run(0.5, walking=True)[0] == pytest.approx(loose)
+    # both follow the anchored input's path over the clip (input root plus the anchors'
+    # translation, here about 3.5 m) within a tenth of it
+    want = np.linalg.norm((poses[-1].root_position + anchors[-1].translation -
+                           poses[0].root_position - anchors[0].translation)[:2])
+    for roots, tol in ((roots_loose, 0.1), (roots_locked, 0.1)):
+        moved = np.linalg.norm(roots[-1, :2] - roots[0, :2])
+        assert abs(moved - want) < tol * want, (moved, want)
+    with pytest.raises(ValueError, match='moving_lock_time_constant_s'):
+        OnlineGMR(_small_model(), lookahead=3, moving_lock_time_constant_s=-1.0)

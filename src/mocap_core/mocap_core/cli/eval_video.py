@@ -69,6 +69,31 @@ def _read_output(bag: Path) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
     return {t: (np.asarray(s, dtype=np.int64), np.asarray(v)) for t, (s, v) in acc.items()}
 
 
+def _camera_state_groups(bag: Path, first: int, fps: float, n: int) -> Optional[List[str]]:
+    """(n,) :func:`~mocap_core.render.evaluate.camera_state_group` of each rendered frame
+    from the camera-motion estimate the input bag carried (``unknown`` where it has none), or
+    None without any."""
+    from ..bag_io import BagReader, deserialize
+    from ..render.evaluate import camera_state_group
+    from ..ros_conversions import (odometry_to_camera_motion, odometry_to_camera_position,
+                                   stamp_to_ns)
+    from .. import topics as T
+    groups = ['unknown'] * n
+    seen = False
+    with BagReader(bag) as reader:
+        if T.CAMERA_MOTION not in reader.topics:
+            return None
+        for m in reader.messages(topics=[T.CAMERA_MOTION]):
+            msg = deserialize(m.data, m.msgtype)
+            i = int(round((stamp_to_ns(msg.header.stamp) - first) * fps / 1e9))
+            if 0 <= i < n:
+                state = odometry_to_camera_motion(msg)[0]
+                groups[i] = camera_state_group(state, odometry_to_camera_position(msg)
+                                               is not None)
+                seen = True
+    return groups if seen else None
+
+
 def _index(stamps: np.ndarray, first: int, fps: float) -> np.ndarray:
     return np.round((stamps - first) * fps / 1e9).astype(int)
 
@@ -248,6 +273,12 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     cm = out / 'camera_motion.json'
     if cm.exists():
         score.root.setdefault('camera', {}).update(json.loads(cm.read_text()))
+    if (out / 'input_bag').exists() and 'world' in roots and 'contacts' in gt:
+        from ..render.evaluate import skating_by_camera_state
+        groups = _camera_state_groups(out / 'input_bag', first, fps, len(gt['contacts']))
+        if groups is not None:
+            score.world_skating_by_state = skating_by_camera_state(
+                *roots['world'], gt['contacts'], groups)
     fs, fv = data[T.PHYSICS_FLOOR]
     if len(fv) and 'camera_R' in gt and 'physics' in score.root:
         from ..render.evaluate import floor_errors

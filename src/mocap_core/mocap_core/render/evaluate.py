@@ -149,6 +149,56 @@ def foot_scores(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
     }
 
 
+#: Groups of :func:`skating_by_camera_state`, in report order: what the world stage does with
+#: a frame of each (camera_mode auto, fuse_translating on)
+CAMERA_STATE_GROUPS = ('static', 'translation measured', 'turning or moving, not measured',
+                       'unknown', 'state changes')
+
+
+def camera_state_group(state: str, translation_known: bool) -> str:
+    """The :data:`CAMERA_STATE_GROUPS` entry of a frame's camera-motion estimate: ``static``
+    (fused with the static-camera constants), ``translation measured`` (a turning or moving
+    camera whose position was measured over the floor: fused towards it),
+    ``turning or moving, not measured`` (GMR and the foot lock alone), ``unknown``."""
+    if state == 'static':
+        return 'static'
+    if state == 'unknown':
+        return 'unknown'
+    return 'translation measured' if translation_known else 'turning or moving, not measured'
+
+
+def skating_by_camera_state(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
+                            groups: Sequence[str]) -> Dict[str, List[float]]:
+    """A stage's foot skating (as :func:`foot_scores`) split by the camera-motion estimate's
+    state of each rendered frame.
+
+    Args:
+        joints: (N, 18, 3) the stage's joints in its output frame, m. index: (N,) rendered
+            frame of each. contacts: (F, 4) true contacts. groups: (F,) the
+            :func:`camera_state_group` of each rendered frame.
+    Returns: ``{group: [sum of the displacements (mm), their number]}`` for pooling over
+    clips; a step between two frames of different groups counts as ``state changes``.
+    """
+    joints = np.asarray(joints, dtype=float)
+    idx = np.asarray(index, dtype=int)
+    c = np.asarray(contacts, dtype=bool)
+    out: Dict[str, List[float]] = {}
+    feet = joints[:, _FOOT_JOINTS, :2]
+    for k in range(1, len(idx)):
+        i, j = idx[k - 1], idx[k]
+        if j != i + 1 or i < 0 or j >= min(len(c), len(groups)):
+            continue
+        both = c[i] & c[j]
+        if not both.any():
+            continue
+        g = groups[j] if groups[i] == groups[j] else 'state changes'
+        step = 1000 * np.linalg.norm(feet[k] - feet[k - 1], axis=-1)[both]
+        acc = out.setdefault(g, [0.0, 0.0])
+        acc[0] += float(step.sum())
+        acc[1] += float(len(step))
+    return out
+
+
 def floor_errors(quats: np.ndarray, translations: np.ndarray, index: np.ndarray,
                  gt: Dict[str, np.ndarray]) -> Dict[str, float]:
     """The physics stage's floor estimate against the true floor (z = 0 of the world).
@@ -268,6 +318,8 @@ class ClipScore:
     #: the view of every rendered frame
     detector_swaps: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     all_views: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
+    #: the world output's skating by the camera-motion state (:func:`skating_by_camera_state`)
+    world_skating_by_state: Dict[str, List[float]] = field(default_factory=dict)
 
     def summary(self) -> Dict[str, float]:
         s = self.swaps[self.swaps >= 0]
@@ -446,6 +498,15 @@ def aggregate(scores: List[ClipScore]) -> dict:
         d = det[(det_views == v) & (det >= 0)]
         r['detector_swap_rate'] = float(d.mean()) if len(d) else float('nan')
     out['by_view'] = by_view
+    pooled: Dict[str, List[float]] = {}
+    for sc in scores:
+        for g, (total, n) in sc.world_skating_by_state.items():
+            acc = pooled.setdefault(g, [0.0, 0.0])
+            acc[0] += total
+            acc[1] += n
+    out['world_skating_by_camera_state'] = {
+        g: {'steps': int(pooled[g][1]), 'mm': pooled[g][0] / pooled[g][1]}
+        for g in CAMERA_STATE_GROUPS if g in pooled and pooled[g][1] > 0}
     for name, attr in (('by_group', 'group'), ('by_height', 'height'),
                        ('by_camera', 'camera')):
         groups: Dict[str, List[dict]] = {}
@@ -560,6 +621,18 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                 + ' | '.join(f"{_f(100 * r.get(f'camera_state_{k}', float('nan')), '{:.0f}')} %"
                              for k in ('static', 'rotating', 'moving'))
                 + f" | {_f(r.get('camera_rotation_error_deg_s'), '{:.2f}')} |")
+    by_state = agg.get('world_skating_by_camera_state') or {}
+    if by_state:
+        lines += ['', '## World skating by the camera-motion estimate (pooled over frames)', '',
+                  'What the world stage does with a frame depends on the estimate: static '
+                  'frames follow the physics output (static-camera fusion), frames whose '
+                  'camera position was measured over the floor are pulled towards it, the '
+                  'others are GMR\'s with the foot lock. Ankle and toe joints while the '
+                  'ground truth says that heel or toe is on the floor.', '',
+                  '| camera-motion estimate | steps | world skating (mm/frame) |',
+                  '|---|---|---|']
+        for g, r in by_state.items():
+            lines.append(f"| {g} | {r['steps']} | {_f(r['mm'])} |")
     return '\n'.join(lines) + '\n'
 
 
