@@ -535,9 +535,7 @@ class GMRNode(Node):
         it by ``A^T C`` (A the floor's axes in the first camera frame, C the camera's
         position there); other frames are GMR's."""
         standing = cm is not None and state in ('static', 'rotating')
-        if position is None:
-            return InputAnchor(standing, static=standing)
-        if self.floor is None:
+        if position is None or self.floor is None:
             return InputAnchor(standing, static=standing)
         f_stamp, A, _ = self.floor
         # the floor message is in the current camera frame of its stamp: turn it into the

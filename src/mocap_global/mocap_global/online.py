@@ -577,9 +577,9 @@ class OnlineGMR:
         if self.floor_input:
             R, T = self._on_floor(self._heading_offset(R, out, pos), T, pose)
             anchor = self._anchors_in[pos]
-            moving = anchor is not None and not anchor.static and not anchor.translating
-            if self.foot_lock and fused and moving and self.moving_lock_time_constant_s > 0:
-                # a moving camera's fused root carries the noise of the estimate of its
+            turning = anchor is not None and not anchor.static and not anchor.translating
+            if self.foot_lock and fused and turning and self.moving_lock_time_constant_s > 0:
+                # a turning camera's fused root carries the noise of the estimate of its
                 # motion: the feet stay locked (steps follow the fused root while no point
                 # stands), and the locked root is pulled towards the fused one
                 T_lock = self._lock_feet(k, R, T, T_gmr, pose)

@@ -73,9 +73,9 @@ class CameraRotations:
         R = self._by_stamp.get(stamp)
         if R is not None:
             return R, True
-        before = [s for s in self._by_stamp if s < stamp]
-        if before:
-            return self._by_stamp[before[-1]], False
+        before = next((s for s in reversed(self._by_stamp) if s < stamp), None)
+        if before is not None:
+            return self._by_stamp[before], False
         return np.eye(3), False
 
 

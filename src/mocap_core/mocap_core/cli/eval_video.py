@@ -78,19 +78,21 @@ def _camera_state_groups(bag: Path, first: int, fps: float, n: int) -> Optional[
     from ..ros_conversions import (odometry_to_camera_motion, odometry_to_camera_position,
                                    stamp_to_ns)
     from .. import topics as T
-    groups = ['unknown'] * n
-    seen = False
+    stamps, found = [], []
     with BagReader(bag) as reader:
         if T.CAMERA_MOTION not in reader.topics:
             return None
         for m in reader.messages(topics=[T.CAMERA_MOTION]):
             msg = deserialize(m.data, m.msgtype)
-            i = int(round((stamp_to_ns(msg.header.stamp) - first) * fps / 1e9))
-            if 0 <= i < n:
-                state = odometry_to_camera_motion(msg)[0]
-                groups[i] = camera_state_group(state, odometry_to_camera_position(msg)
-                                               is not None)
-                seen = True
+            stamps.append(stamp_to_ns(msg.header.stamp))
+            found.append(camera_state_group(odometry_to_camera_motion(msg)[0],
+                                            odometry_to_camera_position(msg) is not None))
+    groups = ['unknown'] * n
+    seen = False
+    for i, g in zip(_index(np.asarray(stamps, dtype=np.int64), first, fps), found):
+        if 0 <= i < n:
+            groups[i] = g
+            seen = True
     return groups if seen else None
 
 

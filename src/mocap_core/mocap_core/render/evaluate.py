@@ -116,6 +116,21 @@ _FOOT_JOINTS = [JOINT_INDEX[n] for n in ('left_ankle', 'left_toe', 'right_ankle'
                                           'right_toe')]
 
 
+def _steps_in_contact(joints: np.ndarray, idx: np.ndarray, contacts: np.ndarray
+                      ) -> Tuple[np.ndarray, np.ndarray]:
+    """Horizontal steps (N - 1, 4) m of the ankle and toe joints between consecutive output
+    frames, and where they count as skating (N - 1, 4): the true contact of the same column
+    (the ankle moves with the heel label, the toe joint with the toe's) in both rendered
+    frames, which follow each other."""
+    feet = np.asarray(joints, dtype=float)[:, _FOOT_JOINTS, :2]
+    c = np.asarray(contacts, dtype=bool)
+    ok = (idx >= 0) & (idx < len(c))
+    lab = np.zeros((len(idx), 4), dtype=bool)
+    lab[ok] = c[idx[ok]]
+    both = lab[1:] & lab[:-1] & (np.diff(idx) == 1)[:, None]
+    return np.linalg.norm(np.diff(feet, axis=0), axis=-1), both
+
+
 def foot_scores(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
                 fps: float) -> Dict[str, float]:
     """Feet of one stage against its own floor (module docstring).
@@ -132,14 +147,7 @@ def foot_scores(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
     feet = joints[:, _FOOT_JOINTS]                       # (N, 4, 3): ankle, toe, ankle, toe
     depth = np.maximum(0.0, -feet[..., 2].min(axis=1))
     late = idx >= int(round(fps))
-    c = np.asarray(contacts, dtype=bool)
-    ok = (idx >= 0) & (idx < len(c))
-    lab = np.zeros((len(idx), 4), dtype=bool)
-    lab[ok] = c[idx[ok]]
-    # the same columns: the ankle moves with the heel label, the toe joint with the toe's
-    consecutive = np.diff(idx) == 1
-    both = lab[1:] & lab[:-1] & consecutive[:, None]
-    step = np.linalg.norm(np.diff(feet[..., :2], axis=0), axis=-1)
+    step, both = _steps_in_contact(joints, idx, contacts)
     return {
         'penetration_after_1s_mm': float(1000 * depth[late].max()) if late.any()
         else float('nan'),
@@ -179,23 +187,17 @@ def skating_by_camera_state(joints: np.ndarray, index: np.ndarray, contacts: np.
     Returns: ``{group: [sum of the displacements (mm), their number]}`` for pooling over
     clips; a step between two frames of different groups counts as ``state changes``.
     """
-    joints = np.asarray(joints, dtype=float)
     idx = np.asarray(index, dtype=int)
-    c = np.asarray(contacts, dtype=bool)
+    step, both = _steps_in_contact(joints, idx, contacts)
     out: Dict[str, List[float]] = {}
-    feet = joints[:, _FOOT_JOINTS, :2]
-    for k in range(1, len(idx)):
-        i, j = idx[k - 1], idx[k]
-        if j != i + 1 or i < 0 or j >= min(len(c), len(groups)):
-            continue
-        both = c[i] & c[j]
-        if not both.any():
+    for k in np.flatnonzero(both.any(axis=1)):
+        i, j = idx[k], idx[k + 1]
+        if j >= len(groups):
             continue
         g = groups[j] if groups[i] == groups[j] else 'state changes'
-        step = 1000 * np.linalg.norm(feet[k] - feet[k - 1], axis=-1)[both]
         acc = out.setdefault(g, [0.0, 0.0])
-        acc[0] += float(step.sum())
-        acc[1] += float(len(step))
+        acc[0] += float(1000 * step[k][both[k]].sum())
+        acc[1] += float(both[k].sum())
     return out
 
 
