@@ -51,6 +51,7 @@ def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0
 #: The configurations compared side by side (the same frames, interleaved frame by frame).
 CONFIGS = {
     'whole_body': dict(dynamics='whole_body'),
+    'whole_body_full_qp': dict(dynamics='whole_body', wbid_condensed=False),
     'whole_body_proxqp': dict(dynamics='whole_body', wbid_solver='proxqp'),
     'paper': dict(dynamics='paper'),
 }

@@ -229,7 +229,8 @@ class PhysicsCycle:
                                     residual_moment_bound=p.residual_moment_bound,
                                     smoothness=p.force_smoothness,
                                     slide_threshold=p.slide_threshold,
-                                    slide_time=p.slide_time, solver=p.wbid_solver)
+                                    slide_time=p.slide_time, solver=p.wbid_solver,
+                                    condensed=p.wbid_condensed)
         self._kp, self._kd = self.params.gains(model.nv)
         self.dynet = None
         if self._dynet_net is not None:
@@ -267,11 +268,8 @@ class PhysicsCycle:
     def _valid_q(self, q: np.ndarray) -> bool:
         if q.shape != (self.model.nq,) or not np.all(np.isfinite(q)):
             return False
-        for j, iq in enumerate(self.model.idx_q):
-            off = 3 if j == 0 else 0
-            if np.linalg.norm(q[iq + off:iq + off + 4]) < 1e-6:
-                return False
-        return True
+        quats = q[self.model.quaternion_q_index]
+        return bool(np.all(np.einsum('ij,ij->i', quats, quats) >= 1e-12))
 
     def _contact_mask(self, probs: Optional[Sequence[float]]) -> Tuple[np.ndarray, str]:
         n = len(self.model.contact_names)
@@ -578,10 +576,11 @@ class PhysicsCycle:
         anchor, anchored = self._anchor.copy(), self._anchored.copy()
         w_s = p.stance_gain
         feet = m.contact_feet
+        lower = np.tril_indices(m.nv, -1)
         for _ in range(n_sub):
             pin.computeAllTerms(model, data, q, v)
-            M = np.triu(data.M)
-            M = M + np.triu(M, 1).T
+            M = data.M.copy()                   # Pinocchio fills the upper triangle
+            M[lower] = M.T[lower]
             h = data.nle.copy()
             pin.forwardKinematics(model, data, q, v, zeros)   # data.a: drift terms
             pin.updateFramePlacements(model, data)
@@ -722,7 +721,7 @@ class PhysicsCycle:
             idx = [c for c, f in enumerate(m.contact_feet) if f == foot]
             point = pos[idx].mean(axis=0)
             f = forces[idx].sum(axis=0)
-            moment = sum(np.cross(pos[c] - point, forces[c]) for c in idx)
+            moment = np.cross(pos[idx] - point, forces[idx]).sum(axis=0)
             fz = forces[idx, 2].sum()
             if fz > 1e-9:
                 cop = (pos[idx] * forces[idx, 2:3]).sum(axis=0) / fz
@@ -754,27 +753,28 @@ def stick_rows(contact_feet: Sequence[str], Jc: np.ndarray, xy: np.ndarray,
     one rigid body, so their velocities along the line joining them are (nearly) dependent:
     with both stuck, the horizontal rows are the heel's x, y and the toe's velocity across
     that line (planar position and yaw of the foot), otherwise x, y of the one point."""
-    rows = [Jc[c, 2] for c in np.flatnonzero(stick)] if vertical else []
-    vals = [zdot[c] for c in np.flatnonzero(stick)] if vertical else []
+    held = np.flatnonzero(stick).tolist()
+    rows = [Jc[c, 2] for c in held] if vertical else []
+    vals = [zdot[c] for c in held] if vertical else []
     feet = contact_feet
-    done = np.zeros(len(stick), dtype=bool)
-    for c in np.flatnonzero(stick):
-        if done[c]:
+    done = set()
+    for c in held:
+        if c in done:
             continue
-        mates = [k for k in np.flatnonzero(stick) if k != c and feet[k] == feet[c]
-                 and not done[k]]
         rows += [Jc[c, 0], Jc[c, 1]]
         vals += [target[c, 0], target[c, 1]]
-        done[c] = True
-        for k in mates:
-            line = xy[k] - xy[c]
-            length = np.linalg.norm(line)
+        done.add(c)
+        for k in held:
+            if k == c or feet[k] != feet[c] or k in done:
+                continue
+            lx, ly = float(xy[k, 0] - xy[c, 0]), float(xy[k, 1] - xy[c, 1])
+            length = (lx * lx + ly * ly) ** 0.5
             if length < 1e-3:
                 continue
-            perp = np.array([-line[1], line[0]]) / length
-            rows.append(perp @ Jc[k, :2])
-            vals.append(perp @ target[k])
-            done[k] = True
+            px, py = -ly / length, lx / length
+            rows.append(px * Jc[k, 0] + py * Jc[k, 1])
+            vals.append(px * target[k, 0] + py * target[k, 1])
+            done.add(k)
     return np.array(rows), np.array(vals)
 
 

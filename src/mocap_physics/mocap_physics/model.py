@@ -83,6 +83,8 @@ class PhysicsModel:
         contact_names: ``CONTACT_POINT_NAMES`` (heel, toe; left, right).
         contact_frame_ids: Pinocchio frame id of each contact point.
         idx_q, idx_v: start of each skeleton joint's block in q and v.
+        quaternion_q_index: (J, 4) int, the indices in q of each joint's quaternion (x, y, z,
+            w; the root's after its position).
     """
 
     def __init__(self, skeleton: Skeleton, body_mass: float = 70.0) -> None:
@@ -138,6 +140,8 @@ class PhysicsModel:
         self.contact_frame_ids = tuple(frame_ids)
         self.idx_q = tuple(model.idx_qs[jid] for jid in joint_ids)
         self.idx_v = tuple(model.idx_vs[jid] for jid in joint_ids)
+        self.quaternion_q_index = np.array([np.arange(4) + iq + (3 if j == 0 else 0)
+                                            for j, iq in enumerate(self.idx_q)], dtype=int)
         #: Foot each contact belongs to ('left' / 'right').
         self.contact_feet = tuple(n.split('_')[0] for n in self.contact_names)
         total = pin.computeTotalMass(model)

@@ -208,6 +208,9 @@ PARAMETERS = (
               min_value=0.0, read_only=True),
     ParamSpec('wbid_solver', _D.wbid_solver, 'whole_body: QP solver, osqp (deterministic) or '
               'proxqp (faster; last bits vary between runs)', read_only=True),
+    ParamSpec('wbid_condensed', _D.wbid_condensed, 'whole_body: solve the QP over the contact '
+              'forces and the residual alone, the accelerations in closed form (the same '
+              'optimum, faster); false: the QP over all variables', read_only=True),
     ParamSpec('root_residual', _D.root_residual, 'paper: share of the residual direct root '
               'actuation that is applied: 1 = paper; 0 = root driven by contact forces and '
               'gravity only', min_value=0.0, max_value=1.0, read_only=True),
@@ -288,6 +291,7 @@ class PhysicsNode(Node):
             residual_horizontal_weight=p['residual_horizontal_weight'],
             residual_bound=p['residual_bound'],
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
+            wbid_condensed=p['wbid_condensed'],
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
             stance_height=p['stance_height'], slide_time=p['slide_time'],
             velocity_feedforward=p['velocity_feedforward'])

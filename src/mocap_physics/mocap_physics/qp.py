@@ -54,6 +54,11 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
+try:
+    import daqp
+except ImportError:  # pragma: no cover - OSQP (then Clarabel) solve the dual alone
+    daqp = None
+
 #: Inscribed pyramid: |lambda_t|_inf <= mu lambda_n / sqrt(2) => |lambda_t|_2 <= mu lambda_n.
 PYRAMID_FACTOR = 1.0 / np.sqrt(2.0)
 
@@ -289,6 +294,22 @@ class PenetrationQP:
         return entry
 
     @staticmethod
+    def _daqp(P: np.ndarray, q: np.ndarray, m_eq: int):
+        """The dual with DAQP: y_I >= 0 as simple bounds, the last ``m_eq`` variables free.
+        Returns (y, OSQP-style status value or None, status text)."""
+        n = len(q)
+        lower = np.zeros(n)
+        lower[n - m_eq:] = -1e30
+        try:
+            y, _, flag, _ = daqp.solve(P, q, np.zeros((0, n)), np.full(n, 1e30), lower,
+                                       np.zeros(n, dtype=np.int32))
+        except Exception as exc:  # noqa: BLE001 - a solver error is a failure
+            return None, None, f'daqp error: {exc}'
+        if flag < 1 or not np.all(np.isfinite(y)):
+            return None, None, f'daqp {flag}'
+        return np.asarray(y, dtype=float), osqp.SolverStatus.OSQP_SOLVED, 'daqp solved'
+
+    @staticmethod
     def _clarabel(P: np.ndarray, q: np.ndarray, m_eq: int):
         """The dual with Clarabel (interior point): the fallback when OSQP does not converge
         (ill-conditioned rows, e.g. heel and toe of one foot). Returns (y, status text)."""
@@ -362,19 +383,24 @@ class PenetrationQP:
         WinvGt = G.T.copy() if solve_metric is None else solve_metric(G.T)
         D = G @ WinvGt
         D = 0.5 * (D + D.T)
-        D[np.diag_indices_from(D)] += 1e-10 * max(np.trace(D), 1e-12)
-        solver, rows, cols = self._solver(m, m_eq)
+        D.flat[::D.shape[0] + 1] += 1e-10 * max(np.trace(D), 1e-12)
         t0 = time.perf_counter()
-        try:
-            x0 = np.concatenate([np.maximum(-slack, 0.0), -eq_res])
-            solver.update(q=q, Px=scale * D[rows, cols])
-            solver.warm_start(x=x0 / max(np.diag(scale * D).max(), 1e-12))
-            res = solver.solve(raise_error=False)
-            status_val = res.info.status_val
-            y = np.asarray(res.x, dtype=float)
-            status_text = _status_name(status_val)
-        except Exception as exc:
-            status_val, y, status_text = None, None, f'error: {exc}'
+        status_val, y, status_text = None, None, 'daqp missing'
+        if daqp is not None:
+            # DAQP first: a dual active-set solver, exact on its active set, deterministic
+            y, status_val, status_text = self._daqp(scale * D, q, m_eq)
+        if status_val not in _OSQP_OK:
+            solver, rows, cols = self._solver(m, m_eq)
+            try:
+                x0 = np.concatenate([np.maximum(-slack, 0.0), -eq_res])
+                solver.update(q=q, Px=scale * D[rows, cols])
+                solver.warm_start(x=x0 / max(np.diag(scale * D).max(), 1e-12))
+                res = solver.solve(raise_error=False)
+                status_val = res.info.status_val
+                y = np.asarray(res.x, dtype=float)
+                status_text = f'{status_text}, then {_status_name(status_val)}'
+            except Exception as exc:
+                status_val, y, status_text = None, None, f'{status_text}, then error: {exc}'
         if status_val not in _OSQP_OK or y is None or not np.all(np.isfinite(y)):
             # second chance: Clarabel on the same dual (scaled the same way)
             try:
@@ -393,7 +419,9 @@ class PenetrationQP:
             return PenetrationResult(v.copy(), np.zeros(m + m_eq), ok=False, status=status_text,
                                      solved=True, solve_time=dt, max_violation=viol0)
         y[:m] = np.maximum(y[:m], 0.0)
-        y = self._refine(y, scale * D, q, m_eq) * scale  # solver's var: y/scale
+        if not status_text.startswith('daqp solved'):   # DAQP is exact on its active set
+            y = self._refine(y, scale * D, q, m_eq)
+        y = y * scale                                   # the solver's variable: y / scale
         v_new = v + WinvGt @ y
         viol = float(max(0.0, -(A @ v_new - b).min(initial=0.0),
                          np.abs(E @ v_new - e).max(initial=0.0)))

@@ -67,11 +67,16 @@ import numpy as np
 
 import osqp
 import scipy.sparse as sp
+from scipy.linalg import lapack
 
 try:
     from proxsuite import proxqp
 except ImportError:  # pragma: no cover - optional (solver='proxqp')
     proxqp = None
+try:
+    import daqp
+except ImportError:  # pragma: no cover - the condensed QP then runs on OSQP
+    daqp = None
 
 from .qp import _OSQP_OK, PYRAMID_FACTOR, _status_name
 
@@ -112,6 +117,9 @@ class WbidResult:
     solves: int = 0
 
 
+_EX, _EY, _EZ = np.eye(3)
+
+
 def stance_rows(feet: Sequence[str], stance: np.ndarray, xy: np.ndarray,
                 free_tangent: np.ndarray) -> Tuple[list, list]:
     """The (point, direction) pairs of the stance acceleration rows.
@@ -125,23 +133,23 @@ def stance_rows(feet: Sequence[str], stance: np.ndarray, xy: np.ndarray,
         two lists of the same length: the contact index of each row and its world direction
         (3,) (unit x, y, z, or the horizontal normal of the heel-toe line).
     """
-    ex, ey, ez = np.eye(3)
+    ex, ey, ez = _EX, _EY, _EZ
     idx: list = []
     dirs: list = []
-    done = np.zeros(len(stance), dtype=bool)
-    for c in np.flatnonzero(stance):
-        if done[c]:
+    held = np.flatnonzero(stance).tolist()
+    done = set()
+    for c in held:
+        if c in done:
             continue
-        done[c] = True
+        done.add(c)
         idx.append(c)
         dirs.append(ez)
-        mates = [k for k in np.flatnonzero(stance) if k != c and feet[k] == feet[c]
-                 and not done[k]]
+        mates = [k for k in held if k != c and feet[k] == feet[c] and k not in done]
         if not free_tangent[c]:
             idx += [c, c]
             dirs += [ex, ey]
         for k in mates:
-            done[k] = True
+            done.add(k)
             idx.append(k)
             dirs.append(ez)
             if free_tangent[k]:
@@ -150,20 +158,20 @@ def stance_rows(feet: Sequence[str], stance: np.ndarray, xy: np.ndarray,
                 idx += [k, k]
                 dirs += [ex, ey]
                 continue
-            line = xy[k] - xy[c]
-            length = float(np.linalg.norm(line))
+            lx, ly = float(xy[k, 0] - xy[c, 0]), float(xy[k, 1] - xy[c, 1])
+            length = (lx * lx + ly * ly) ** 0.5
             if length < 1e-3:
                 continue
             idx.append(k)
-            dirs.append(np.array([-line[1], line[0], 0.0]) / length)
+            dirs.append(np.array([-ly / length, lx / length, 0.0]))
     return idx, dirs
 
 
 class WholeBodyID:
     """The whole-body inverse-dynamics QP (module docstring), one instance per cycle.
 
-    One dense ProxQP solver is kept per problem size (number of stance rows, sliding points
-    and stance points) and warm-started from its previous solution.
+    One solver is kept per problem structure (stance rows, sliding points) and warm-started
+    from its previous solution.
 
     Args:
         nv: velocity dimension of the model. num_contacts: C.
@@ -180,6 +188,10 @@ class WholeBodyID:
         solver: 'osqp' (default: deterministic, bit-identical runs) or 'proxqp' (ProxQP's
             dense solver: faster, but its result varies in the last bits from run to run;
             the comparison is in ``docs/physics.md``).
+        condensed: solve the QP over the forces and the residual alone, ``qdd`` eliminated
+            in closed form (default; the same optimum, about 2x faster); False: the QP over
+            all variables (kept for comparison, and used when the dynamics rows are
+            dependent).
     """
 
     def __init__(self, nv: int, num_contacts: int = 4, friction: float = 0.8,
@@ -188,12 +200,13 @@ class WholeBodyID:
                  residual_moment_bound: float = 0.5, smoothness: float = 1e-2,
                  force_regularization: float = 1e-4, slide_threshold: float = 0.05,
                  slide_time: float = 0.0, eps: float = 1e-7, max_iter: int = 1000,
-                 solver: str = 'osqp') -> None:
+                 solver: str = 'osqp', condensed: bool = True) -> None:
         if solver not in SOLVERS:
             raise ValueError(f'solver must be one of {SOLVERS}, got {solver!r}')
         if solver == 'proxqp' and proxqp is None:
             raise WbidUnavailable('solver proxqp needs proxsuite (pip install proxsuite)')
         self.solver = solver
+        self.condensed = bool(condensed)
         #: OSQP's tolerance (an ADMM solver: polishing gives the accuracy of an active set)
         self.osqp_eps = 1e-5
         if not friction > 0 or residual_weight <= 0 or force_regularization <= 0:
@@ -217,6 +230,9 @@ class WholeBodyID:
         self.max_iter = int(max_iter)
         self._prev = np.zeros((self.num_contacts, 3))
         self._solvers: dict = {}
+        self._rows_cache: dict = {}
+        self._feet_key: Optional[tuple] = None
+        self._by_foot: dict = {}
 
     def reset(self) -> None:
         """Forget the previous forces (smoothness term) and the warm starts."""
@@ -259,13 +275,14 @@ class WholeBodyID:
             # a foot slides when its total friction is saturated: one point of a rigid foot
             # at its own pyramid's edge is held by the other one
             sat = np.zeros(self.num_contacts, dtype=bool)
-            for foot in set(feet):
-                pts = np.array([c for c in range(self.num_contacts)
-                                if feet[c] == foot and stance[c]], dtype=int)
+            by_foot = self._foot_points(feet)
+            for pts in by_foot.values():
+                pts = pts[stance[pts]]
                 if len(pts) == 0:
                     continue
                 f = lam[pts].sum(axis=0)
-                if f[2] > 1e-6 and np.abs(f[:2]).max() >= self.mu_pyramid * f[2] * (1 - 1e-3):
+                if f[2] > 1e-6 and max(abs(f[0]), abs(f[1])) >= \
+                        self.mu_pyramid * f[2] * (1 - 1e-3):
                     sat[pts] = True
             # ... and holding it needed the residual: the feet-fixed solution leaned on a
             # root force the floor could not give (a body that can follow its target with
@@ -274,8 +291,7 @@ class WholeBodyID:
             # foot could give, a real pull lasts)
             need = float(np.linalg.norm((R @ r1[:3])[:2])) / (body_mass * gravity)
             a = 1.0 if self.slide_time <= 0.0 or dt <= 0.0 else dt / (self.slide_time + dt)
-            for foot in set(feet):
-                pts = [c for c in range(self.num_contacts) if feet[c] == foot]
+            for foot, pts in by_foot.items():
                 if not stance[pts].any():          # a foot in the air starts afresh
                     self._need.pop(foot, None)
                     continue
@@ -318,133 +334,233 @@ class WholeBodyID:
         return WbidResult(qdd, tau, lam, r, stance, sliding, saturated, True, status,
                           elapsed, solves)
 
+    def _foot_points(self, feet: Sequence[str]) -> dict:
+        """{foot: (n,) int indices of its contact points}, cached per ``feet``."""
+        key = tuple(feet)
+        if self._feet_key != key:
+            self._feet_key = key
+            self._by_foot = {f: np.array([c for c, g in enumerate(key) if g == f], dtype=int)
+                             for f in sorted(set(key))}
+        return self._by_foot
+
     # ------------------------------------------------------------------------------------
     def _solve(self, M, h, a_des, Jc, drift, stance, a_ref, xy, sliding, slide_dir, feet,
                body_mass, gravity, R):
-        """Build and solve the QP; returns (qdd, lambda N, r, status) or None on failure."""
+        """Build and solve the QP; returns (qdd, lambda N, r, status) or None on failure.
+
+        The problem is built in two parts: the dynamics rows ``E qdd + F y = e`` (the six
+        root rows of the equation of motion, then the stance rows; ``y = [lambda / (m g),
+        r_w / (m g)]``) and what concerns ``y`` alone (its diagonal weights, the kinetic
+        friction equalities of sliding points, the pyramid and the residual bounds).
+        """
         nv = self.nv
         C = self.num_contacts
         mg = body_mass * gravity
         act = np.flatnonzero(stance)
         k = len(act)
-        n = nv + 3 * k + 6
-        o_l, o_r = nv, nv + 3 * k
+        ny = 3 * k + 6
         row_c, row_d = stance_rows(feet, stance, xy, sliding)
         n_slide = int(np.sum(sliding & stance))
-        n_eq = 6 + len(row_c) + 2 * n_slide
-        # -- objective -------------------------------------------------------------------
-        H = np.zeros((n, n))
-        g = np.zeros(n)
+        n_dyn = 6 + len(row_c)
+        # -- the weights of qdd and of y -------------------------------------------------
         # (floored: the lightest DoFs, e.g. the toes, would make the problem ill-conditioned)
         w = np.maximum(np.diag(M) / body_mass, 1e-3)
-        H[np.arange(nv), np.arange(nv)] = w
-        g[:nv] = -w * a_des
-        lam_diag = self.smoothness + self.force_regularization
-        il = np.arange(o_l, o_r)
-        H[il, il] = lam_diag
-        prev = (self._prev[act] / mg).reshape(-1)
-        g[o_l:o_r] = -self.smoothness * prev
-        ir = np.arange(o_r, n)
-        H[ir, ir] = self.residual_weight
-        H[ir[:2], ir[:2]] = self.residual_horizontal_weight
-        # -- equalities ------------------------------------------------------------------
-        A = np.zeros((n_eq, n))
-        b = np.zeros(n_eq)
-        A[:6, :nv] = M[:6] / body_mass
-        for i, c in enumerate(act):
-            A[:6, o_l + 3 * i:o_l + 3 * i + 3] = -gravity * Jc[c, :, :6].T
+        hy = np.empty(ny)
+        hy[:3 * k] = self.smoothness + self.force_regularization
+        hy[3 * k:] = self.residual_weight
+        hy[3 * k:3 * k + 2] = self.residual_horizontal_weight
+        gy = np.zeros(ny)
+        gy[:3 * k] = -self.smoothness * (self._prev[act] / mg).reshape(-1)
+        # -- dynamics rows ---------------------------------------------------------------
+        E = np.empty((n_dyn, nv))
+        F = np.zeros((n_dyn, ny))
+        e = np.empty(n_dyn)
+        E[:6] = M[:6] / body_mass
+        F[:6, :3 * k] = -gravity * Jc[act, :, :6].transpose(2, 0, 1).reshape(6, 3 * k)
         # r in world axes; the free-flyer's generalised force is in the root frame
-        A[:3, o_r:o_r + 3] = -gravity * R.T
-        A[3:6, o_r + 3:] = -gravity * R.T
-        b[:6] = -h[:6] / body_mass
-        row = 6
-        for c, d in zip(row_c, row_d):
-            A[row, :nv] = d @ Jc[c]
-            b[row] = d @ (a_ref[c] - drift[c])
-            row += 1
-        for i, c in enumerate(act):
-            if not sliding[c]:
-                continue
-            # kinetic friction: lambda_t = mu' lambda_z * direction (inside the pyramid)
-            for axis in (0, 1):
-                A[row, o_l + 3 * i + axis] = 1.0
-                A[row, o_l + 3 * i + 2] = -self.mu_pyramid * slide_dir[c, axis]
-                row += 1
-        # -- inequalities: pyramid (stance points not sliding) and residual bounds --------
-        stick = [i for i, c in enumerate(act) if not sliding[c]]
-        n_in = 5 * len(stick) + len(act) - len(stick) + 6
-        Cm = np.zeros((n_in, n))
-        lo = np.full(n_in, -1e20)
-        up = np.full(n_in, 1e20)
-        row = 0
-        mu = self.mu_pyramid
-        for i, c in enumerate(act):
-            j = o_l + 3 * i
-            Cm[row, j + 2] = 1.0
-            lo[row] = 0.0
-            row += 1
-            if sliding[c]:
-                continue
-            for axis in (0, 1):
-                Cm[row, j + axis] = 1.0
-                Cm[row, j + 2] = -mu
-                up[row] = 0.0
-                row += 1
-                Cm[row, j + axis] = -1.0
-                Cm[row, j + 2] = -mu
-                up[row] = 0.0
-                row += 1
-        for i in range(6):
-            Cm[row, o_r + i] = 1.0
-            bound = self.residual_bound if i < 3 else self.residual_moment_bound
-            lo[row], up[row] = -bound, bound
-            row += 1
-        key = (k, len(row_c), n_slide, n_in, tuple(row_c), tuple(np.flatnonzero(sliding)))
-        if self.solver == 'osqp':
-            x = self._run_osqp(key, H, g, A, b, Cm, lo, up, nv, 6 + len(row_c))
-            status = 'solved' if x is not None else 'failed'
-        else:
-            x, status = self._run_proxqp(key, H, g, A, b, Cm, lo, up)
+        F[:3, 3 * k:3 * k + 3] = -gravity * R.T
+        F[3:6, 3 * k + 3:] = -gravity * R.T
+        e[:6] = -h[:6] / body_mass
+        if row_c:
+            d = np.asarray(row_d)
+            E[6:] = np.einsum('ri,rin->rn', d, Jc[row_c])
+            e[6:] = np.einsum('ri,ri->r', d, a_ref[row_c] - drift[row_c])
+        # -- rows on y alone: kinetic friction (equalities), pyramid and bounds ------------
+        A_y, S_y, lo, up = self._y_rows(act, sliding, slide_dir)
+        key = (k, len(row_c), n_slide, tuple(row_c), tuple(np.flatnonzero(sliding)))
+        x = None
+        if self.condensed and daqp is not None:
+            x, status = self._solve_condensed(key, w, a_des, E, F, e, hy, gy, A_y, lo, up,
+                                              2 * n_slide)
+        if x is None:      # the full QP: asked for, or dependent rows, or a failure
+            x, status = self._solve_full(key, w, a_des, E, F, e, hy, gy, A_y, S_y, lo, up,
+                                         n_slide)
         if x is None:
             return None
         qdd = x[:nv].copy()
         lam = np.zeros((C, 3))
-        lam[act] = x[o_l:o_r].reshape(k, 3) * mg
+        lam[act] = x[nv:nv + 3 * k].reshape(k, 3) * mg
         # solver tolerance must not put a force outside the pyramid (or, sliding, the cone)
         lam[:, 2] = np.maximum(lam[:, 2], 0.0)
         bound = self.mu_pyramid * lam[:, 2]
         lam[:, 0] = np.clip(lam[:, 0], -bound, bound)
         lam[:, 1] = np.clip(lam[:, 1], -bound, bound)
-        r_world = x[o_r:] * mg
+        r_world = x[nv + 3 * k:] * mg
         r = np.concatenate([R.T @ r_world[:3], R.T @ r_world[3:]])   # root frame
         return qdd, lam, r, status
 
-    def _run_osqp(self, key, H, g, A, b, Cm, lo, up, nv, n_dense):
-        """OSQP on the stacked constraints; one solver per key, values updated in place."""
-        Aall = np.vstack([A, Cm])
-        lower = np.concatenate([b, np.where(lo <= -1e19, -np.inf, lo)])
-        upper = np.concatenate([b, np.where(up >= 1e19, np.inf, up)])
+    def _y_rows(self, act, sliding, slide_dir):
+        """The rows on y alone: (A (m, ny), S (m, ny) bool, lower (m,), upper (m,)).
+
+        First the kinetic friction equalities of the sliding points (2 each), then per stance
+        point lambda_z >= 0 and, not sliding, the four pyramid faces, then the residual
+        bounds. S holds the structural non-zeros, so that a solver's sparsity pattern keeps
+        them. Cached per stance set when nothing slides (the rows are then constant).
+        """
+        k = len(act)
+        slide_pts = [i for i, c in enumerate(act) if sliding[c]]
+        cache_key = (k, tuple(slide_pts))
+        if not slide_pts and cache_key in self._rows_cache:
+            return self._rows_cache[cache_key]
+        n_slide = len(slide_pts)
+        ny = 3 * k + 6
+        m = 2 * n_slide + 5 * (k - n_slide) + n_slide + 6
+        A = np.zeros((m, ny))
+        S = np.zeros((m, ny), dtype=bool)
+        lo = np.empty(m)
+        up = np.empty(m)
+        row = 0
+        mu = self.mu_pyramid
+        for i in slide_pts:
+            # kinetic friction: lambda_t = mu' lambda_z * direction (inside the pyramid)
+            for axis in (0, 1):
+                A[row, 3 * i + axis] = 1.0
+                A[row, 3 * i + 2] = -mu * slide_dir[act[i], axis]
+                S[row, [3 * i + axis, 3 * i + 2]] = True
+                lo[row] = up[row] = 0.0
+                row += 1
+        for i in range(k):
+            j = 3 * i
+            A[row, j + 2] = 1.0
+            S[row, j + 2] = True
+            lo[row], up[row] = 0.0, np.inf
+            row += 1
+            if i in slide_pts:
+                continue
+            for axis in (0, 1):
+                for sign in (1.0, -1.0):
+                    A[row, j + axis] = sign
+                    A[row, j + 2] = -mu
+                    S[row, [j + axis, j + 2]] = True
+                    lo[row], up[row] = -np.inf, 0.0
+                    row += 1
+        for i in range(6):
+            A[row, 3 * k + i] = 1.0
+            S[row, 3 * k + i] = True
+            bound = self.residual_bound if i < 3 else self.residual_moment_bound
+            lo[row], up[row] = -bound, bound
+            row += 1
+        if not slide_pts:
+            self._rows_cache[cache_key] = (A, S, lo, up)
+        return A, S, lo, up
+
+    def _solve_condensed(self, key, w, a_des, E, F, e, hy, gy, A_y, lo, up, n_eq):
+        """The QP over ``y`` alone: qdd eliminated in closed form (module docstring).
+
+        For a given ``y`` the best ``qdd`` under ``E qdd = e - F y`` is
+        ``a_des + W^-1 E^T mu`` with ``K mu = c - F y``, ``K = E W^-1 E^T``,
+        ``c = e - E a_des``, and its cost ``1/2 (F y - c)^T K^-1 (F y - c)``. Returns
+        (x = [qdd, y], status) or (None, 'singular') when K is not safely positive definite
+        (dependent dynamics rows: the full QP is solved instead), (None, 'failed').
+        """
+        winv = 1.0 / w
+        K = (E * winv) @ E.T
+        c = e - E @ a_des
+        # (LAPACK directly: numpy's and scipy's checked wrappers cost more than the solve)
+        L, info = lapack.dpotrf(K, lower=1, clean=0)
+        piv = np.abs(L.diagonal())
+        if info != 0 or not np.all(np.isfinite(piv)) or piv.min() ** 2 < 1e-10 * piv.max() ** 2:
+            return None, 'singular'
+        sol, info = lapack.dpotrs(L, np.column_stack([F, c]), lower=1)
+        if info != 0:
+            return None, 'singular'
+        KF, Kc = sol[:, :-1], sol[:, -1]
+        P = F.T @ KF
+        P = 0.5 * (P + P.T)
+        P.flat[::P.shape[0] + 1] += hy
+        q = gy - F.T @ Kc
+        if self.solver == 'osqp':     # the deterministic choice: DAQP on the small problem
+            y = self._run_daqp(P, q, A_y, lo, up, n_eq)
+        else:
+            y, _ = self._run_proxqp(('condensed',) + key, P, q, A_y[:n_eq], lo[:n_eq],
+                                    A_y[n_eq:], np.maximum(lo[n_eq:], -1e20),
+                                    np.minimum(up[n_eq:], 1e20))
+        if y is None:
+            return None, 'failed'
+        qdd = a_des + winv * (E.T @ (Kc - KF @ y))
+        return np.concatenate([qdd, y]), 'solved'
+
+    def _solve_full(self, key, w, a_des, E, F, e, hy, gy, A_y, S_y, lo, up, n_slide):
+        """The QP over ``x = [qdd, y]`` (returns (x, status) or (None, 'failed'))."""
+        nv, ny = E.shape[1], F.shape[1]
+        n = nv + ny
+        H = np.concatenate([w, hy])
+        g = np.concatenate([-w * a_des, gy])
+        n_dyn = E.shape[0]
+        A = np.zeros((n_dyn + A_y.shape[0], n))
+        A[:n_dyn, :nv] = E
+        A[:n_dyn, nv:] = F
+        A[n_dyn:, nv:] = A_y
+        S = np.zeros(A.shape, dtype=bool)
+        S[:n_dyn, :nv] = True                   # equation-of-motion and stance rows
+        S[:6, nv:] = True                       # root rows: forces and residual
+        S[n_dyn:, nv:] = S_y
+        lower = np.concatenate([e, lo])
+        upper = np.concatenate([e, up])
+        if self.solver == 'osqp':
+            x = self._run_osqp(('full',) + key, H, g, A, S, lower, upper)
+            return x, ('solved' if x is not None else 'failed')
+        n_eq = n_dyn + 2 * n_slide
+        return self._run_proxqp(key, np.diag(H), g, A[:n_eq], lower[:n_eq], A[n_eq:],
+                                np.where(np.isinf(lower[n_eq:]), -1e20, lower[n_eq:]),
+                                np.where(np.isinf(upper[n_eq:]), 1e20, upper[n_eq:]))
+
+    def _run_daqp(self, P, q, A, lower, upper, n_eq):
+        """DAQP (a dual active-set solver: exact on its active set, deterministic) on the
+        small dense condensed problem; the first ``n_eq`` rows are equalities."""
+        sense = np.zeros(len(lower), dtype=np.int32)
+        sense[:n_eq] = 5
+        x, _, flag, _ = daqp.solve(P, q, A, np.minimum(upper, 1e30), np.maximum(lower, -1e30),
+                                   sense)
+        self.last_status = f'daqp {flag}'
+        if flag < 1 or not np.all(np.isfinite(x)):
+            return None
+        return np.asarray(x, dtype=float)
+
+    def _run_osqp(self, key, P, q, A, S, lower, upper):
+        """OSQP, one solver per key with the values updated in place.
+
+        P: (n,) the diagonal of the objective. A: (m, n) with S (m, n) bool its structural
+        non-zeros (fixed per key). Returns x or None.
+        """
         entry = self._solvers.get(('osqp',) + key)
         fresh = entry is None
+        n = len(q)
         if fresh:
-            mask = Aall != 0.0
-            mask[:n_dense, :nv] = True          # equation-of-motion and stance rows
-            mask[:6, nv:] = True                # root rows: forces and residual
-            cols, rows = np.nonzero(mask.T)     # column-major order
-            indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=Aall.shape[1]))])
-            A_sp = sp.csc_matrix((Aall[rows, cols], rows, indptr), shape=Aall.shape)
-            n = H.shape[0]
-            P_sp = sp.csc_matrix((np.diag(H).copy(), np.arange(n), np.arange(n + 1)),
-                                 shape=(n, n))
+            cols, rows = np.nonzero(S.T)        # column-major order
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=n))])
+            A_sp = sp.csc_matrix((A[rows, cols], rows, indptr), shape=A.shape)
+            P_sp = sp.csc_matrix((P.copy(), np.arange(n), np.arange(n + 1)), shape=(n, n))
             solver = osqp.OSQP()
-            solver.setup(P=P_sp, q=g, A=A_sp, l=lower, u=upper, verbose=False,
-                         eps_abs=self.osqp_eps, eps_rel=self.osqp_eps, max_iter=self.max_iter * 4,
-                         polishing=True, warm_starting=True, adaptive_rho=True)
+            solver.setup(P=P_sp, q=q, A=A_sp, l=lower, u=upper, verbose=False,
+                         eps_abs=self.osqp_eps, eps_rel=self.osqp_eps,
+                         max_iter=self.max_iter * 4, polishing=True, warm_starting=True,
+                         adaptive_rho=True)
             entry = (solver, rows, cols)
             self._solvers[('osqp',) + key] = entry
         else:
             solver, rows, cols = entry
-            solver.update(Px=np.diag(H).copy(), q=g, Ax=Aall[rows, cols], l=lower, u=upper)
+            solver.update(Px=P.copy(), q=q, Ax=A[rows, cols], l=lower, u=upper)
         try:
             res = solver.solve(raise_error=False)
         except Exception:  # noqa: BLE001 - an OSQP error is a solver failure
@@ -460,7 +576,7 @@ class WholeBodyID:
         if not ok:
             self._solvers.pop(('osqp',) + key, None)
             if not fresh:     # a warm start from a very different problem: one cold retry
-                return self._run_osqp(key, H, g, A, b, Cm, lo, up, nv, n_dense)
+                return self._run_osqp(key, P, q, A, S, lower, upper)
             return None
         return x
 

@@ -185,17 +185,23 @@ def test_penetration_with_stick_rows_matches_cvxpy(model, metric):
 
 
 def test_penetration_clarabel_second_chance(model, monkeypatch):
-    """OSQP not converging: Clarabel solves the same dual."""
+    """DAQP missing and OSQP not converging: Clarabel solves the same dual, to the same
+    velocity as DAQP (the first solver)."""
+    import mocap_physics.qp as qp_module
     q = model.pose_to_q(Pose.rest(model.skeleton))
     q[2] -= 0.004
     J = _contact_jacobians(model, q)
     v = np.zeros(model.nv)
     v[2] = -1.0
+    first = PenetrationQP().solve(v, J[:, 2, :], np.full(4, 0.1))
+    assert first.ok and first.status == 'daqp solved', first.status
+    monkeypatch.setattr(qp_module, 'daqp', None)
     qp = PenetrationQP(max_iter=1)
     res = qp.solve(v, J[:, 2, :], np.full(4, 0.1))
     assert res.ok, res.status
     assert qp.second_chances == 1 and 'clarabel' in res.status
     assert np.all(J[:, 2, :] @ res.velocity >= 0.1 - 1e-6)
+    np.testing.assert_allclose(res.velocity, first.velocity, atol=1e-5)
 
 
 def test_grf_moment_weight(model):

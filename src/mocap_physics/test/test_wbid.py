@@ -190,15 +190,16 @@ def test_unsupported_target_is_held_by_the_bounded_residual(skeleton, bound):
         assert r.contact_heights.min() < 0.005               # landed on its feet
 
 
-def test_dynamics_hold_with_the_solution(skeleton):
-    """The QP's accelerations, torques, forces and residual satisfy the equation of motion
-    M qdd + h = S^T tau + J^T lambda + S_root^T r (checked with Pinocchio's RNEA)."""
+def _problem(skeleton, seed: int = 0, pull: float = 0.0):
+    """One sub-step's problem from a standing cycle with a perturbed velocity: (model,
+    q, v, M, h, Jc, drift, pos, vel, a_des, rotation). ``pull``: a horizontal root
+    acceleration added to the desired one, m/s^2."""
     cyc = PhysicsCycle(skeleton)
     m = cyc.model
     rest = Pose.rest(skeleton)
     cyc.step(rest, 0.0, [1, 1, 1, 1])
     q, v = cyc.state
-    v = v + np.random.default_rng(0).normal(scale=0.2, size=m.nv)
+    v = v + np.random.default_rng(seed).normal(scale=0.2, size=m.nv)
     model, data = m.model, m.data
     pin.computeAllTerms(model, data, q, v)
     M = np.triu(data.M) + np.triu(data.M, 1).T
@@ -212,11 +213,21 @@ def test_dynamics_hold_with_the_solution(skeleton):
     pos = np.array([data.oMf[f].translation for f in m.contact_frame_ids])
     vel = np.array([pin.getFrameVelocity(model, data, f, lwa).linear
                     for f in m.contact_frame_ids])
-    a_des = np.random.default_rng(1).normal(scale=2.0, size=m.nv)
-    wb = WholeBodyID(m.nv)
+    a_des = np.random.default_rng(seed + 1).normal(scale=2.0, size=m.nv)
+    a_des[0] += pull
+    return m, q, v, M, h, Jc, drift, pos, vel, a_des, data.oMi[1].rotation.copy()
+
+
+@pytest.mark.parametrize('condensed', [True, False])
+def test_dynamics_hold_with_the_solution(skeleton, condensed):
+    """The QP's accelerations, torques, forces and residual satisfy the equation of motion
+    M qdd + h = S^T tau + J^T lambda + S_root^T r (checked with Pinocchio's RNEA)."""
+    m, q, v, M, h, Jc, drift, pos, vel, a_des, R = _problem(skeleton)
+    model, data = m.model, m.data
+    wb = WholeBodyID(m.nv, condensed=condensed)
     stance = np.ones(4, dtype=bool)
     res = wb.solve(M, h, a_des, Jc, drift, stance, np.zeros((4, 3)), pos[:, :2], vel,
-                   m.contact_feet, m.body_mass, root_rotation=data.oMi[1].rotation)
+                   m.contact_feet, m.body_mass, root_rotation=R)
     assert res.ok
     tau_full = np.concatenate([res.residual, res.tau])
     rnea = pin.rnea(model, data, q, v, res.qdd)
@@ -229,6 +240,34 @@ def test_dynamics_hold_with_the_solution(skeleton):
     # pinocchio's forward dynamics of those torques and forces gives the same accelerations
     a = pin.aba(model, data, q, v, tau_full + JtL)
     np.testing.assert_allclose(a, res.qdd, atol=1e-2)
+
+
+@pytest.mark.parametrize('stance, pull', [
+    ((1, 1, 1, 1), 0.0), ((1, 0, 1, 1), 0.0), ((0, 0, 1, 0), 0.0), ((0, 0, 0, 0), 0.0),
+    ((1, 1, 1, 1), 60.0), ((1, 1, 0, 0), 60.0)])
+def test_condensed_qp_finds_the_full_qps_optimum(skeleton, stance, pull):
+    """Eliminating qdd in closed form changes the problem's size, not its solution: the same
+    accelerations, forces and residual (up to the solver's tolerance) as the QP over all
+    variables, with some points lifted, and with a pull that saturates the friction (a foot
+    then slides, solved twice)."""
+    m, q, v, M, h, Jc, drift, pos, vel, a_des, R = _problem(skeleton, seed=4, pull=pull)
+    stance = np.asarray(stance, dtype=bool)
+    a_ref = np.random.default_rng(9).normal(scale=0.3, size=(4, 3))
+    out = []
+    for condensed in (True, False):
+        wb = WholeBodyID(m.nv, condensed=condensed)
+        res = wb.solve(M, h, a_des, Jc, drift, stance, a_ref, pos[:, :2], vel,
+                       m.contact_feet, m.body_mass, root_rotation=R)
+        assert res.ok
+        out.append(res)
+    cond, full = out
+    np.testing.assert_array_equal(cond.sliding, full.sliding)
+    if pull:
+        assert cond.sliding.any() or np.abs(cond.residual[:3]).max() > 1.0
+    W = m.weight
+    np.testing.assert_allclose(cond.forces, full.forces, atol=2e-3 * W)
+    np.testing.assert_allclose(cond.residual, full.residual, atol=2e-3 * W)
+    np.testing.assert_allclose(cond.qdd, full.qdd, atol=2e-2 * max(1.0, np.abs(full.qdd).max()))
 
 
 def test_stance_rows_of_a_rigid_foot():
