@@ -276,6 +276,8 @@ def quat_slerp(a: Array, b: Array, t: Array) -> Array:
 # --------------------------------------------------------------------------
 def quat_to_matrix(q: Array) -> Array:
     """Rotation matrix of a (not necessarily unit) quaternion.  ``(..., 4) -> (..., 3, 3)``."""
+    if type(q) is np.ndarray and q.dtype == np.float64 and q.ndim >= 1 and q.shape[-1] == 4:
+        return _quat_to_matrix_np(q)          # the common case, without the generic stacks
     xp, (q,) = _prep(q)
     _check_last(q, 4, 'q')
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -288,6 +290,27 @@ def quat_to_matrix(q: Array) -> Array:
         xp.stack([xy + wz, 1.0 - (xx + zz), yz - wx], axis=-1),
         xp.stack([xz - wy, yz + wx, 1.0 - (xx + yy)], axis=-1),
     ], axis=-2)
+
+
+def _quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
+    """:func:`quat_to_matrix` for a float64 NumPy array, written into one output array."""
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    s = 2.0 / (x * x + y * y + z * z + w * w)
+    xs, ys, zs = s * x, s * y, s * z
+    xx, yy, zz = xs * x, ys * y, zs * z
+    xy, xz, yz = xs * y, xs * z, ys * z
+    wx, wy, wz = xs * w, ys * w, zs * w
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1.0 - (yy + zz)
+    R[..., 0, 1] = xy - wz
+    R[..., 0, 2] = xz + wy
+    R[..., 1, 0] = xy + wz
+    R[..., 1, 1] = 1.0 - (xx + zz)
+    R[..., 1, 2] = yz - wx
+    R[..., 2, 0] = xz - wy
+    R[..., 2, 1] = yz + wx
+    R[..., 2, 2] = 1.0 - (xx + yy)
+    return R
 
 
 def matrix_to_quat(R: Array) -> Array:
