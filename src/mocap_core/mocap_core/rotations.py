@@ -352,8 +352,11 @@ def axis_angle_to_quat(v: Array) -> Array:
     Uses ``sin(theta/2)/theta`` with a Taylor expansion for tiny angles, so the
     result and its gradient are exact and finite at ``v = 0``.
     """
-    xp, (v,) = _prep(v)
-    _check_last(v, 3, 'v')
+    if type(v) is np.ndarray and v.dtype == np.float64 and v.ndim >= 1 and v.shape[-1] == 3:
+        xp = _NP                              # the common case, without the generic checks
+    else:
+        xp, (v,) = _prep(v)
+        _check_last(v, 3, 'v')
     th2 = _dot(xp, v, v)
     small = th2 < 1e-6
     th = xp.sqrt(xp.where(small, xp.ones_like(th2), th2))

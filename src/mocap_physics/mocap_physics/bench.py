@@ -51,6 +51,7 @@ def synthetic_motion(skeleton: Skeleton, n: int, fps: float, seed: int = 0
 #: The configurations compared side by side (the same frames, interleaved frame by frame).
 CONFIGS = {
     'whole_body': dict(dynamics='whole_body'),
+    'whole_body_k4': dict(dynamics='whole_body', substeps=4),
     'whole_body_full_qp': dict(dynamics='whole_body', wbid_condensed=False),
     'whole_body_proxqp': dict(dynamics='whole_body', wbid_solver='proxqp'),
     'paper': dict(dynamics='paper'),
@@ -61,7 +62,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(prog='mocap bench physics', description=__doc__.split('\n')[0])
     ap.add_argument('--frames', type=int, default=600)
     ap.add_argument('--fps', type=float, default=30.0)
-    ap.add_argument('--substeps', type=int, default=6)
+    ap.add_argument('--substeps', type=int, default=None,
+                    help="sub-steps of every configuration (default: each one's own, else the "
+                         "node's default)")
     ap.add_argument('--root-residual', type=float, default=1.0)
     ap.add_argument('--configs', nargs='+', default=list(CONFIGS), choices=list(CONFIGS),
                     help='configurations, run side by side on the same frames (default all)')
@@ -71,9 +74,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     onlines = {}
     for name in args.configs:
         try:
-            onlines[name] = OnlinePhysics(PhysicsParams(substeps=args.substeps,
-                                                        root_residual=args.root_residual,
-                                                        **CONFIGS[name]), skeleton=sk)
+            cfg = dict(CONFIGS[name])
+            if args.substeps is not None:
+                cfg['substeps'] = args.substeps
+            onlines[name] = OnlinePhysics(PhysicsParams(root_residual=args.root_residual,
+                                                        **cfg), skeleton=sk)
         except Exception as exc:  # noqa: BLE001 - e.g. proxsuite missing: skip that one
             print(f'{name}: skipped ({exc})', file=sys.stderr)
     times = {name: ([], [], []) for name in onlines}
@@ -91,7 +96,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         cyc = online.cycle
         total, grf, pen = (np.array(x[10:]) * 1e3 for x in times[name])  # skip warm-up
         results[name] = {
-            'frames': int(total.size), 'substeps': args.substeps,
+            'frames': int(total.size), 'substeps': online.cycle.params.substeps,
             'ms_per_frame_median': float(np.median(total)),
             'ms_per_frame_p95': float(np.percentile(total, 95)),
             'ms_per_frame_max': float(total.max()),
@@ -104,12 +109,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     if args.json:
         print(json.dumps(results, indent=2))
         return 0
-    print(f'physics per frame, k = {args.substeps}, {args.frames} frames, configurations '
-          'interleaved frame by frame:')
+    print(f'physics per frame, {args.frames} frames, configurations interleaved frame by '
+          'frame:')
     for name, o in results.items():
         ratio = (f", {o['ms_per_frame_median'] / base['ms_per_frame_median']:.2f}x whole_body"
                  if base and name != 'whole_body' else '')
-        print(f"  {name:18s} median {o['ms_per_frame_median']:.2f} ms, p95 "
+        print(f"  {name:22s} k = {o['substeps']}: median {o['ms_per_frame_median']:.2f} ms, p95 "
               f"{o['ms_per_frame_p95']:.2f} ms, max {o['ms_per_frame_max']:.2f} ms{ratio}; "
               f"dynamics QP median {o['qp_ms_median']:.2f} ms, penetration QP median "
               f"{o['penetration_qp_ms_median']:.2f} ms; fallbacks {o['fallbacks']}, QP "

@@ -50,7 +50,7 @@ class PhysicsParams:
     force_smoothness: float = 0.01        # w_s of the whole-body QP (forces between sub-steps)
     wbid_solver: str = 'osqp'             # 'osqp' (deterministic) or 'proxqp' (mocap_physics.wbid)
     wbid_condensed: bool = True           # the QP over forces and residual, qdd in closed form
-    substeps: int = 6                     # k of the paper
+    substeps: int = 6                     # k of the paper (4: measured, docs/physics.md)
     frame_period: float = 1.0 / 30.0      # s, used when frames carry no stamps
     max_substep: float = 1.0 / 120.0      # s; longer frames get more sub-steps
     kp_root: float = 400.0                # root translation and orientation, s^-2

@@ -61,6 +61,11 @@ def friction_cone_marker(header, apexes: np.ndarray, friction: float,
     return marker_array([friction_cone_spec(apexes, friction, color)], header).markers[0]
 
 
+#: The last floor converted by :func:`floor_transform_msg` and its inverse's rotation (x, y,
+#: z, w) and translation.
+_FLOOR_CACHE: dict = {}
+
+
 def floor_transform_msg(header, floor, child_frame_id: str):
     """geometry_msgs/TransformStamped of the floor frame in the source (camera) frame:
     ``header.frame_id`` = source frame, ``child_frame_id`` = the floor frame, transform =
@@ -68,9 +73,10 @@ def floor_transform_msg(header, floor, child_frame_id: str):
     ``rotation * p_floor + translation`` in the camera frame), as tf2 would store it."""
     from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 
-    inv = floor.inverse()
-    q = inv.quaternion()
-    t = inv.translation
+    if _FLOOR_CACHE.get('floor') is not floor:       # a floor is fixed between two fits
+        inv = floor.inverse()
+        _FLOOR_CACHE.update(floor=floor, q=inv.quaternion(), t=inv.translation)
+    q, t = _FLOOR_CACHE['q'], _FLOOR_CACHE['t']
     return TransformStamped(
         header=header, child_frame_id=child_frame_id,
         transform=Transform(translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),

@@ -51,10 +51,17 @@ Losing balance: the residual is the only force that can hold a body whose target
 not support. Its weights make it expensive and its bounds limit it; :class:`WbidResult` says
 whether a bound was reached so that the cycle can count it.
 
-Solvers: OSQP (default; deterministic, every run bit-identical) or ProxQP's dense solver
-(``solver='proxqp'``: about 1.5x faster here, but its result varies in the last bits from
-run to run, which would break the bit-identical output of ``mocap process``). One solver is
-kept per problem structure (stance rows, sliding points) and warm-started.
+Solution: by default (``condensed``) ``qdd`` is eliminated in closed form. For fixed
+``y = [lambda / (m g), r_w / (m g)]`` the dynamics rows read ``E qdd = e - F y`` and the best
+``qdd`` is ``a_des + W^-1 E^T mu`` with ``K mu = c - F y`` (``K = E W^-1 E^T``, ``c = e - E
+a_des``, ``W = diag(w)``) at a cost of ``1/2 (F y - c)^T K^-1 (F y - c)``. What remains is a
+dense QP over ``y`` alone (at most 18 variables), solved with DAQP (a dual active-set solver:
+exact on its active set, deterministic, so ``mocap process`` stays bit-identical). It has the
+same optimum as the QP over all variables, which is kept (``condensed=False``, or when ``K``
+is not safely positive definite, or DAQP fails) and solved with OSQP (deterministic) or
+ProxQP's dense solver (``solver='proxqp'``, which then also solves the condensed QP; its result
+varies in the last bits from run to run). One OSQP or ProxQP solver is kept per problem
+structure and warm-started.
 """
 
 from __future__ import annotations

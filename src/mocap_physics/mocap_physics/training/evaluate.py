@@ -540,7 +540,7 @@ solver, true by construction of the friction pyramid). With clean input the inpu
 ground truth, so its errors are 0 and the error goals there only show what the physics
 costs (the PD tracking delay); the lifter-noise tables are the ones the goals are meant for.
 Times are per frame on this machine's CPU while other work ran (median, p95), the cycle with
-k = 6 sub-steps (plus the floor fit for "est. floor").'''
+k = 6 sub-steps (4 in the "k = 4" column; plus the floor fit for "est. floor").'''
 
 
 def _fmt(fmt: str, v) -> str:
