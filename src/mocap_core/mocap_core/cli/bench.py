@@ -262,13 +262,20 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
         elapsed = time.monotonic() - t0
         first = 'composed' if 'composed' in procs else 'keypoints'
         procs[first].send_signal(signal.SIGINT)
-        procs[first].wait(15)
+        try:
+            procs[first].wait(15)
+            stopped = True
+        except subprocess.TimeoutExpired:     # reported, then killed by _stop
+            stopped = False
+            print(f'  warning: {first} did not stop within 15 s of SIGINT (killed; log '
+                  f'{logs[first]})', flush=True)
         time.sleep(2.0)
     finally:
         _stop(procs.values())
         listener.close()
     lifter_latency = 0 if config['lifter_mode'] == 'causal' else 14
     result = {'config': config, 'seconds': elapsed, 'stages': {}, 'nodes': {},
+              'stopped_on_sigint': stopped,
               'lookahead_frames': lifter_latency + config['lookahead']}
     warm = 2.0
     for stage, samples in listener.samples.items():
@@ -439,6 +446,9 @@ def write_report(res: Dict, out: Path) -> None:
                   '|---|---|---|']
         for n, v in live['nodes'].items():
             lines.append(f"| {n} | {v['cpu_percent']:.0f} | {v['peak_mib']:.0f} |")
+        if not live.get('stopped_on_sigint', True):
+            lines += ['', '**The first process did not stop within 15 s of SIGINT** (it was '
+                      'killed).']
     lines.append('')
     out.write_text('\n'.join(lines))
 
