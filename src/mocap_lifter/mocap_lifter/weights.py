@@ -33,13 +33,14 @@ Lifter = Union[MotioNet, VTM]
 
 
 #: Shipped files that are the default of a (model, mode) other than ``<model>_<mode>.pt``.
-#: Windowed MotioNet: the weights fine-tuned with wide cameras, detector-placed keypoints and
-#: rendered BlazePose windows (stage 3). On the rendered benchmark (the real detector on
-#: people, motions, scenes and cameras never trained on; 58 clips, 2026-11-26) they reach
-#: 82.5 / 45.2 mm MPJPE / PA-MPJPE (median over clips) against 122.1 / 78.2 for
-#: ``motionet_windowed.pt``, the default until 2026-11-26, which is still shipped;
-#: ``weights/README.md`` has the whole comparison and why not the strict-split weights.
-DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered_v2.pt'}
+#: Windowed MotioNet: stage 5 (session 32), the weights fine-tuned with wide cameras,
+#: detector-placed keypoints and the real detector's output on 464 rendered training clips.
+#: On the rendered benchmark (the real detector on people, motions, scenes and cameras never
+#: trained on; 58 clips, 2026-11-26) they reach 79.4 / 43.1 mm MPJPE / PA-MPJPE (median over
+#: clips; pooled 103.0 / 60.5) against 122.1 / 78.2 for ``motionet_windowed.pt``, the
+#: default until 2026-11-26, which is still shipped with the stage-3 and stage-4 weights;
+#: ``weights/README.md`` has the whole comparison.
+DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered_v3.pt'}
 
 
 def default_weights(mode: str, model: str = 'motionet') -> Path:
