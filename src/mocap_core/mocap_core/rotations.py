@@ -296,10 +296,9 @@ def _quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
     """:func:`quat_to_matrix` for a float64 NumPy array, written into one output array."""
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     s = 2.0 / (x * x + y * y + z * z + w * w)
-    xs, ys, zs = s * x, s * y, s * z
-    xx, yy, zz = xs * x, ys * y, zs * z
-    xy, xz, yz = xs * y, xs * z, ys * z
-    wx, wy, wz = xs * w, ys * w, zs * w
+    xx, yy, zz = s * x * x, s * y * y, s * z * z      # the generic path's order of operations
+    xy, xz, yz = s * x * y, s * x * z, s * y * z
+    wx, wy, wz = s * w * x, s * w * y, s * w * z
     R = np.empty(q.shape[:-1] + (3, 3))
     R[..., 0, 0] = 1.0 - (yy + zz)
     R[..., 0, 1] = xy - wz

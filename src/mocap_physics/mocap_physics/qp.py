@@ -389,6 +389,15 @@ class PenetrationQP:
         if daqp is not None:
             # DAQP first: a dual active-set solver, exact on its active set, deterministic
             y, status_val, status_text = self._daqp(scale * D, q, m_eq)
+            if y is not None:
+                # an ill-conditioned dual (dependent rows) can end off the constraints:
+                # then the other solvers have their turn
+                v_try = v + WinvGt @ (np.concatenate([np.maximum(y[:m], 0.0), y[m:]]) * scale)
+                off = max(0.0, -(A @ v_try - b).min(initial=0.0),
+                          np.abs(E @ v_try - e).max(initial=0.0))
+                if off > max(self.tolerance, 1e-4):
+                    status_val, y = None, None
+                    status_text = f'daqp solved off the constraints ({off:.1e} m/s)'
         if status_val not in _OSQP_OK:
             solver, rows, cols = self._solver(m, m_eq)
             try:

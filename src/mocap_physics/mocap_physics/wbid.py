@@ -238,6 +238,8 @@ class WholeBodyID:
         self._prev = np.zeros((self.num_contacts, 3))
         self._solvers: dict = {}
         self._rows_cache: dict = {}
+        #: the last solver's status text
+        self.last_status = ''
         self._feet_key: Optional[tuple] = None
         self._by_foot: dict = {}
 
@@ -468,6 +470,8 @@ class WholeBodyID:
             lo[row], up[row] = -bound, bound
             row += 1
         if not slide_pts:
+            # shared by every later call: the callers and the solvers only read them (DAQP
+            # needs writeable buffers, so they are not flagged read-only)
             self._rows_cache[cache_key] = (A, S, lo, up)
         return A, S, lo, up
 
@@ -537,8 +541,12 @@ class WholeBodyID:
         small dense condensed problem; the first ``n_eq`` rows are equalities."""
         sense = np.zeros(len(lower), dtype=np.int32)
         sense[:n_eq] = 5
-        x, _, flag, _ = daqp.solve(P, q, A, np.minimum(upper, 1e30), np.maximum(lower, -1e30),
-                                   sense)
+        try:
+            x, _, flag, _ = daqp.solve(P, q, A, np.minimum(upper, 1e30),
+                                       np.maximum(lower, -1e30), sense)
+        except Exception as exc:  # noqa: BLE001 - a solver error: the full QP is solved
+            self.last_status = f'daqp error: {exc}'
+            return None
         self.last_status = f'daqp {flag}'
         if flag < 1 or not np.all(np.isfinite(x)):
             return None

@@ -204,6 +204,25 @@ def test_penetration_clarabel_second_chance(model, monkeypatch):
     np.testing.assert_allclose(res.velocity, first.velocity, atol=1e-5)
 
 
+def test_penetration_daqp_off_the_constraints_falls_back(model, monkeypatch):
+    """A DAQP answer that leaves a constraint violated is not taken: OSQP solves the dual
+    (with the exact refinement on its support) and the rows hold."""
+    import osqp
+
+    q = model.pose_to_q(Pose.rest(model.skeleton))
+    q[2] -= 0.004
+    J = _contact_jacobians(model, q)
+    v = np.zeros(model.nv)
+    v[2] = -1.0
+    good = PenetrationQP().solve(v, J[:, 2, :], np.full(4, 0.1))
+    monkeypatch.setattr(PenetrationQP, '_daqp', staticmethod(
+        lambda P, q, m_eq: (np.zeros(len(q)), osqp.SolverStatus.OSQP_SOLVED, 'daqp solved')))
+    res = PenetrationQP().solve(v, J[:, 2, :], np.full(4, 0.1))
+    assert res.ok and 'off the constraints' in res.status, res.status
+    assert np.all(J[:, 2, :] @ res.velocity >= 0.1 - 1e-6)
+    np.testing.assert_allclose(res.velocity, good.velocity, atol=1e-5)
+
+
 def test_grf_moment_weight(model):
     """w_m = 1 is eq. 8; a smaller w_m lets the root moment go unexplained first."""
     q = model.pose_to_q(Pose.rest(model.skeleton))

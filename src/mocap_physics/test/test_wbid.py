@@ -232,6 +232,7 @@ def test_dynamics_hold_with_the_solution(skeleton, condensed):
     res = wb.solve(M, h, a_des, Jc, drift, stance, np.zeros((4, 3)), pos[:, :2], vel,
                    m.contact_feet, m.body_mass, root_rotation=R)
     assert res.ok
+    assert (wb.last_status == 'daqp 1') == condensed
     tau_full = np.concatenate([res.residual, res.tau])
     rnea = pin.rnea(model, data, q, v, res.qdd)
     JtL = np.einsum('cin,ci->n', Jc, res.forces)
@@ -262,6 +263,12 @@ def test_condensed_qp_finds_the_full_qps_optimum(skeleton, stance, pull):
         res = wb.solve(M, h, a_des, Jc, drift, stance, a_ref, pos[:, :2], vel,
                        m.contact_feet, m.body_mass, root_rotation=R)
         assert res.ok
+        # each instance ran the path it was asked for (no silent fallback)
+        full_keys = [key for key in wb._solvers if key[:2] == ('osqp', 'full')]
+        if condensed:
+            assert wb.last_status == 'daqp 1' and not full_keys
+        else:
+            assert full_keys
         out.append(res)
     cond, full = out
     np.testing.assert_array_equal(cond.sliding, full.sliding)
@@ -279,7 +286,9 @@ def test_without_daqp_the_full_qp_is_solved(skeleton, monkeypatch):
     m, q, v, M, h, Jc, drift, pos, vel, a_des, R = _problem(skeleton, seed=2)
     args = (M, h, a_des, Jc, drift, np.ones(4, bool), np.zeros((4, 3)), pos[:, :2], vel,
             m.contact_feet, m.body_mass)
-    cond = WholeBodyID(m.nv).solve(*args, root_rotation=R)
+    wb_cond = WholeBodyID(m.nv)
+    cond = wb_cond.solve(*args, root_rotation=R)
+    assert wb_cond.last_status == 'daqp 1' and not wb_cond._solvers
     monkeypatch.setattr(wbid_module, 'daqp', None)
     wb = WholeBodyID(m.nv)
     full = wb.solve(*args, root_rotation=R)
