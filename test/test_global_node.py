@@ -97,7 +97,10 @@ def listener(peer):
     types = {'motion': MultiDOFJointTrajectory, 'joints3d': PointCloud2,
              'joint_states': JointState, 'odom': Odometry, 'path': PathMsg,
              'markers': MarkerArray}
-    return peer, {name: peer.subscribe(cls, f'/mocap/world/{name}')
+    from mocap_core.qos import STREAM_QOS, input_qos
+
+    deep = input_qos(STREAM_QOS, 1000)     # the node's outputs are as deep (output_queue_depth)
+    return peer, {name: peer.subscribe(cls, f'/mocap/world/{name}', deep)
                   for name, cls in types.items()}
 
 
@@ -113,12 +116,14 @@ def test_node_publishes_the_world_motion_of_a_played_bag(processes, ros2_cmd, li
     peer, got = listener
     b, Rw, Tw = _world_groundtruth()
     stamps = b['stamps']
-    # deep queues (the node's input, the player's publishers): every frame even when a loaded
-    # machine slows the node below the bag's rate (the live defaults favour latency)
+    # deep queues (the node's input and outputs, the player's publishers): every frame even
+    # when a loaded machine slows the node, or this listener, below the bag's rate (the live
+    # defaults favour latency)
     node, log = processes.start(ros2_cmd + [
         'run', 'mocap_global', 'gmr', '--ros-args', '-p',
         'motion_topic:=/mocap/groundtruth/motion', '-p', f'weights:={_weights(tmp_path)}',
-        '-p', 'lookahead:=10', '-p', 'queue_depth:=1000'], 'gmr')
+        '-p', 'lookahead:=10', '-p', 'queue_depth:=1000', '-p', 'output_queue_depth:=1000'],
+        'gmr')
     processes.wait_for_text(log, 'gmr ready', 90, node)
     # no fixed delays: every subscription of the test has matched the node's publisher, and the
     # player waits until the node's input has matched before its first message

@@ -134,6 +134,10 @@ PARAMETERS = (
               max_value=1.0),
     ParamSpec('queue_depth', 100, 'Input messages queued while a frame is processed (older '
               'ones are lost when the queue is full)', min_value=1, read_only=True),
+    ParamSpec('output_queue_depth', 30, 'History of the per-frame output topics (reliable): a '
+              'subscriber that falls further behind than this (e.g. a recorder on a loaded '
+              'machine) loses the oldest messages; raise it to keep every one', min_value=1,
+              read_only=True),
     ParamSpec('chunk', 1, 'Frames emitted per network pass: 1 for live use; more (offline, '
               'e.g. mocap process) is faster per frame and adds chunk - 1 frames of delay',
               min_value=1, max_value=64, read_only=True),
@@ -284,16 +288,17 @@ class GMRNode(Node):
         self.intervals: List[float] = []
         self.rate_checked = False
         self.nonfinite_reported = 0
+        out_qos = input_qos(STREAM_QOS, p['output_queue_depth'])
         self.pub = {
             'motion': self.create_publisher(MultiDOFJointTrajectory, topics.WORLD_MOTION,
-                                            STREAM_QOS),
-            'joints3d': self.create_publisher(PointCloud2, topics.WORLD_JOINTS3D, STREAM_QOS),
+                                            out_qos),
+            'joints3d': self.create_publisher(PointCloud2, topics.WORLD_JOINTS3D, out_qos),
             'joint_states': self.create_publisher(JointState, topics.WORLD_JOINT_STATES,
-                                                  STREAM_QOS),
-            'odom': self.create_publisher(Odometry, topics.WORLD_ODOM, STREAM_QOS),
-            'path': self.create_publisher(PathMsg, topics.WORLD_PATH, STREAM_QOS),
-            'markers': self.create_publisher(MarkerArray, topics.WORLD_MARKERS, STREAM_QOS),
-            'floor': self.create_publisher(TransformStamped, topics.WORLD_FLOOR, STREAM_QOS),
+                                                  out_qos),
+            'odom': self.create_publisher(Odometry, topics.WORLD_ODOM, out_qos),
+            'path': self.create_publisher(PathMsg, topics.WORLD_PATH, out_qos),
+            'markers': self.create_publisher(MarkerArray, topics.WORLD_MARKERS, out_qos),
+            'floor': self.create_publisher(TransformStamped, topics.WORLD_FLOOR, out_qos),
         }
         self.combined = CombinedPublishers(self, 'world')
         self.input_frame = ''
