@@ -364,7 +364,7 @@ class PhysicsNode(Node):
                             'floor frame)' if self.derotate else 'off')
         self.diag.watch('motion', self.pub_motion)
         # frames whose contacts are late go after at most contacts_wait_s plus half of it
-        # (each tick of a timer is a turn of the executor: 100 Hz cost 3 % of a core)
+        # (each tick of a timer is a turn of the executor, which costs CPU even when idle)
         self.create_timer(min(max(0.5 * p['contacts_wait_s'], 0.01), 0.05),
                           guarded(self, self.on_timer, 'process'))
         self.diag.on_publish(guarded(self, self.refresh_diagnostics, 'diagnostics'))

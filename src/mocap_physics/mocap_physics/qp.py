@@ -386,18 +386,26 @@ class PenetrationQP:
         D.flat[::D.shape[0] + 1] += 1e-10 * max(np.trace(D), 1e-12)
         t0 = time.perf_counter()
         status_val, y, status_text = None, None, 'daqp missing'
+        def violation(vel: np.ndarray) -> float:
+            return float(max(0.0, -(A @ vel - b).min(initial=0.0),
+                             np.abs(E @ vel - e).max(initial=0.0)))
+
+        tol = max(self.tolerance, 1e-4)
+        exact = None                    # (velocity, impulses, violation) of a DAQP answer
         if daqp is not None:
             # DAQP first: a dual active-set solver, exact on its active set, deterministic
             y, status_val, status_text = self._daqp(scale * D, q, m_eq)
             if y is not None:
                 # an ill-conditioned dual (dependent rows) can end off the constraints:
                 # then the other solvers have their turn
-                v_try = v + WinvGt @ (np.concatenate([np.maximum(y[:m], 0.0), y[m:]]) * scale)
-                off = max(0.0, -(A @ v_try - b).min(initial=0.0),
-                          np.abs(E @ v_try - e).max(initial=0.0))
-                if off > max(self.tolerance, 1e-4):
+                y = np.concatenate([np.maximum(y[:m], 0.0), y[m:]]) * scale
+                v_try = v + WinvGt @ y
+                off = violation(v_try)
+                if off > tol:
                     status_val, y = None, None
                     status_text = f'daqp solved off the constraints ({off:.1e} m/s)'
+                else:
+                    exact = (v_try, y, off)
         if status_val not in _OSQP_OK:
             solver, rows, cols = self._solver(m, m_eq)
             try:
@@ -427,14 +435,14 @@ class PenetrationQP:
             self.failures += 1
             return PenetrationResult(v.copy(), np.zeros(m + m_eq), ok=False, status=status_text,
                                      solved=True, solve_time=dt, max_violation=viol0)
-        y[:m] = np.maximum(y[:m], 0.0)
-        if not status_text.startswith('daqp solved'):   # DAQP is exact on its active set
-            y = self._refine(y, scale * D, q, m_eq)
-        y = y * scale                                   # the solver's variable: y / scale
-        v_new = v + WinvGt @ y
-        viol = float(max(0.0, -(A @ v_new - b).min(initial=0.0),
-                         np.abs(E @ v_new - e).max(initial=0.0)))
-        if viol > max(self.tolerance, 1e-4):
+        if exact is not None:                           # DAQP is exact on its active set
+            v_new, y, viol = exact
+        else:
+            y[:m] = np.maximum(y[:m], 0.0)
+            y = self._refine(y, scale * D, q, m_eq) * scale   # the solver's variable: y / scale
+            v_new = v + WinvGt @ y
+            viol = violation(v_new)
+        if viol > tol:
             self.failures += 1
             return PenetrationResult(v_new, y, ok=False, status=f'{status_text} (violation '
                                      f'{viol:.2e} m/s)', solved=True, solve_time=dt,

@@ -184,15 +184,21 @@ def test_penetration_with_stick_rows_matches_cvxpy(model, metric):
         assert len(res.impulses) == len(b) + len(e) and np.all(res.impulses[:len(b)] >= 0)
 
 
+def _sinking_feet(model):
+    """The rest pose 4 mm below the floor, falling at 1 m/s: (contact Jacobians (4, 3, nv),
+    velocity (nv,))."""
+    q = model.pose_to_q(Pose.rest(model.skeleton))
+    q[2] -= 0.004
+    v = np.zeros(model.nv)
+    v[2] = -1.0
+    return _contact_jacobians(model, q), v
+
+
 def test_penetration_clarabel_second_chance(model, monkeypatch):
     """DAQP missing and OSQP not converging: Clarabel solves the same dual, to the same
     velocity as DAQP (the first solver)."""
     import mocap_physics.qp as qp_module
-    q = model.pose_to_q(Pose.rest(model.skeleton))
-    q[2] -= 0.004
-    J = _contact_jacobians(model, q)
-    v = np.zeros(model.nv)
-    v[2] = -1.0
+    J, v = _sinking_feet(model)
     first = PenetrationQP().solve(v, J[:, 2, :], np.full(4, 0.1))
     assert first.ok and first.status == 'daqp solved', first.status
     monkeypatch.setattr(qp_module, 'daqp', None)
@@ -209,11 +215,7 @@ def test_penetration_daqp_off_the_constraints_falls_back(model, monkeypatch):
     (with the exact refinement on its support) and the rows hold."""
     import osqp
 
-    q = model.pose_to_q(Pose.rest(model.skeleton))
-    q[2] -= 0.004
-    J = _contact_jacobians(model, q)
-    v = np.zeros(model.nv)
-    v[2] = -1.0
+    J, v = _sinking_feet(model)
     good = PenetrationQP().solve(v, J[:, 2, :], np.full(4, 0.1))
     monkeypatch.setattr(PenetrationQP, '_daqp', staticmethod(
         lambda P, q, m_eq: (np.zeros(len(q)), osqp.SolverStatus.OSQP_SOLVED, 'daqp solved')))
