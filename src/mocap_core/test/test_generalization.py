@@ -214,6 +214,12 @@ def test_stage_change_from_the_lifter_is_paired_by_frame():
     noisy = _paired_with_lifter(lifter + rng.normal(0, 0.02, G.shape), idx, lifter, idx, G,
                                 30.0)
     assert noisy['pa_mpjpe_change'] > 5.0 and noisy['jitter_vs_lifter'] > 1.5
+    # against the truth: the truth itself gives 1, the noisy lifter far more, the moving
+    # average less than the lifter
+    truth = _paired_with_lifter(G, idx, lifter, idx, G, 30.0)
+    assert truth['jitter_vs_truth'] == pytest.approx(1.0) and truth['jitter'] > 0
+    assert same['jitter_vs_truth'] > 3.0
+    assert sm['jitter_vs_truth'] < 0.3 * same['jitter_vs_truth']
 
 
 def test_world_jitter_is_compared_in_an_inertial_frame():
@@ -237,9 +243,10 @@ def test_world_jitter_is_compared_in_an_inertial_frame():
     gt = {'camera_R': R, 'camera_position': position}
     idx = np.arange(F)
     np.testing.assert_allclose(camera_to_world(C, idx, gt), W, atol=1e-12)
-    r = _paired_with_lifter(W, idx, C, idx, C, 30.0, camera_to_world(C, idx, gt))
+    r = _paired_with_lifter(W, idx, C, idx, C, 30.0, camera_to_world(C, idx, gt), W)
     assert r['jitter_vs_lifter'] == pytest.approx(1.0)
     assert r['jitter_vs_lifter_camera_frame'] < 0.5
+    assert r['jitter_vs_truth'] == pytest.approx(1.0)     # the truth in the world, too
 
 
 def test_video_runs_compared_side_by_side(tmp_path):

@@ -59,6 +59,7 @@ from mocap_core.urdf import skeleton_to_urdf
 
 from .intrinsics import StreamIntrinsics
 from .online import LiftedFrame, OnlineLifter, PeopleStep, PeopleStreams
+from .output_smoothing import DEFAULT_OUTPUT_SIGMA
 from .weights import MODELS, architecture, default_weights, load_weights
 
 PARAMETERS = (
@@ -93,6 +94,12 @@ PARAMETERS = (
               'are not yet there, so with chunk > 1 the output differs from frame-by-frame '
               'lifting (by up to ~1 cm); one-sided (a lag) in causal mode', min_value=0.0,
               max_value=10.0, read_only=True),
+    ParamSpec('output_sigma', -1.0, 'Gaussian smoothing of the lifted frames (rotations, '
+              'root) along time, sigma in frames, delaying the output by ceil(2 sigma) '
+              'frames (-1: 2 frames in windowed mode, off in causal mode; 0: off). On rendered '
+              'people through the real detector it cuts the jitter from 7.8x to 1.5x the '
+              'true motion\'s for 2 mm of MPJPE (docs/lifter.md); frame by frame and in chunks '
+              'the output is the same', min_value=-1.0, max_value=10.0, read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,
               read_only=True),
@@ -142,11 +149,14 @@ class LifterNode(Node):
         model = load_weights(path, p['device'], causal=(mode == 'causal'))
         if architecture(model) != arch:
             raise ValueError(f'{path} holds {architecture(model)} weights but model:={arch}')
+        output_sigma = p['output_sigma'] if p['output_sigma'] >= 0 else (
+            DEFAULT_OUTPUT_SIGMA if mode == 'windowed' else 0.0)
+
         def make_lifter() -> OnlineLifter:
             return OnlineLifter(model, mode, None if p['latency'] < 0 else p['latency'],
                                 p['skeleton_frames'], p['max_gap_s'], p['device'],
                                 chunk=p['chunk'], flip=p['test_time_flip'],
-                                smooth=p['smooth_sigma'])
+                                smooth=p['smooth_sigma'], output_sigma=output_sigma)
 
         lifter = make_lifter()
         self.people = PeopleStreams(make_lifter, StreamIntrinsics(p['horizontal_fov_deg']),
@@ -171,7 +181,9 @@ class LifterNode(Node):
         self.combined = CombinedPublishers(self, 'lifter', with_contacts=True)
         self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
         self.diag.set_value('model', f'{arch} ({mode})')
-        self.diag.set_value('latency_frames', lifter.latency)
+        self.diag.set_value('latency_frames', lifter.delay)
+        self.diag.set_value('output_smoothing', f'sigma {output_sigma:g} frames'
+                            if output_sigma > 0 else 'off')
         # frame by frame through the streaming encoder where exact (default look-ahead, no
         # smoothing, chunk 1), otherwise a network pass over the context window per frame
         self.diag.set_value('inference', 'streaming (one new column per layer and frame)'
@@ -190,7 +202,7 @@ class LifterNode(Node):
         self.diag.watch('contacts', self.pub['contacts'])
         self.get_logger().info(f'lifter ready: {arch} {path} ({mode}, receptive field '
                                f'{model.cfg.receptive_field()} frames, latency '
-                               f'{lifter.latency} frames)')
+                               f'{lifter.delay} frames)')
 
     def on_info(self, msg: CameraInfo) -> None:
         try:

@@ -54,6 +54,7 @@ from .features import (average_quaternions, lifter_features, mirror_features,
                        smooth_keypoints, unmirror_rotations)
 from .intrinsics import StreamIntrinsics
 from .model import NUM_CONTACTS, MotioNet
+from .output_smoothing import FrameSmoother
 from .streaming import StreamingEncoder
 
 
@@ -87,12 +88,16 @@ class OnlineLifter:
             (twice the network time; 42.8 -> 39.9 mm MPJPE on the validation split).
         streaming: lift frame by frame with :class:`~mocap_lifter.streaming.StreamingEncoder`
             where that is exact (module docstring); False: always the window pass.
+        output_sigma: Gaussian smoothing of the lifted frames along time (sigma in frames;
+            0 = off): :class:`~mocap_lifter.output_smoothing.FrameSmoother`, which delays the
+            output by ``ceil(2 * output_sigma)`` frames more (:attr:`delay`).
     """
 
     def __init__(self, model: MotioNet, mode: str = 'causal', latency: Optional[int] = None,
                  skeleton_frames: int = 90, max_gap_s: float = 1.0,
                  device: str = 'cpu', chunk: int = 1, flip: bool = False,
-                 smooth: float = 0.0, streaming: bool = True) -> None:
+                 smooth: float = 0.0, streaming: bool = True,
+                 output_sigma: float = 0.0) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -115,6 +120,9 @@ class OnlineLifter:
         if smooth < 0:
             raise ValueError(f'smooth must be >= 0, got {smooth}')
         self.smooth = float(smooth)
+        if output_sigma < 0:
+            raise ValueError(f'output_sigma must be >= 0, got {output_sigma}')
+        self._smoother = FrameSmoother(output_sigma) if output_sigma > 0 else None
         self._stream: Optional[StreamingEncoder] = None
         if streaming and self.chunk == 1 and self.smooth == 0 and device == 'cpu' \
                 and context_frames is None and isinstance(model, MotioNet):
@@ -122,6 +130,12 @@ class OnlineLifter:
             if enc.lag == self.latency:
                 self._stream = enc
         self.reset()
+
+    @property
+    def delay(self) -> int:
+        """Frames between a pushed frame and its output: the look-ahead plus the output
+        smoothing's radius."""
+        return self.latency + (self._smoother.radius if self._smoother is not None else 0)
 
     @property
     def streaming(self) -> bool:
@@ -144,6 +158,8 @@ class OnlineLifter:
         self._lengths_at: Dict[int, torch.Tensor] = {}
         if self._stream is not None:
             self._stream.reset()
+        if self._smoother is not None:
+            self._smoother.reset()
 
     def push(self, stamp_ns: int, keypoints: np.ndarray, intrinsics: CameraIntrinsics,
              ) -> Tuple[List[LiftedFrame], str]:
@@ -174,27 +190,36 @@ class OnlineLifter:
         self._stamps.append(int(stamp_ns))
         self.frames_seen += 1
         streamed = self._stream_push() if self._stream is not None else None
-        if self.chunk > 1 and self.lengths is None and self.pending() > self.latency:
+        if self.chunk > 1 and self.lengths is None and self._unlifted() > self.latency:
             # where frame-by-frame lifting would emit a frame (and update the skeleton)
             with torch.no_grad():
                 lengths = self._estimate_lengths(*self._features()[:2])
             self._lengths_at[self.frames_seen] = lengths
             if self.frames_seen >= self.skeleton_frames:
                 self.lengths = lengths
-        if self.pending() >= self.latency + self.chunk:
-            frames.extend(self._infer([-self.pending() + j for j in range(self.chunk)],
-                                      streamed))
+        if self._unlifted() >= self.latency + self.chunk:
+            lifted = self._infer([-self._unlifted() + j for j in range(self.chunk)], streamed)
+            frames.extend(lifted if self._smoother is None else self._smoother.push(lifted))
         return frames, event
 
     def pending(self) -> int:
-        """Frames received but not yet returned (windowed mode waits for look-ahead)."""
+        """Frames received but not yet returned (windowed mode waits for look-ahead, the
+        output smoothing for its radius)."""
+        return self._unlifted() + (self._smoother.pending() if self._smoother else 0)
+
+    def _unlifted(self) -> int:
+        """Frames received but not yet through the network."""
         return sum(1 for s in self._stamps if s > self._last_emitted)
 
     def flush(self) -> List[LiftedFrame]:
         """Return the frames still waiting for look-ahead, computed with the future frames
-        that exist (the end of a stream, or before a long pause)."""
-        n = self.pending()
-        return self._infer([-n + j for j in range(n)]) if n else []
+        that exist (the end of a stream, or before a long pause), and those waiting in the
+        output smoothing."""
+        n = self._unlifted()
+        frames = self._infer([-n + j for j in range(n)]) if n else []
+        if self._smoother is not None:
+            frames = self._smoother.push(frames) + self._smoother.flush()
+        return frames
 
     def _stream_push(self) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Give the streaming encoder the newest frame (with the window's features, see

@@ -40,7 +40,7 @@ Lifter = Union[MotioNet, VTM]
 #: clips; pooled 103.0 / 60.5) against 122.1 / 78.2 for ``motionet_windowed.pt``, the
 #: default until 2026-11-26, which is still shipped with the stage-3 and stage-4 weights;
 #: ``weights/README.md`` has the whole comparison.
-DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered_v3.pt'}
+DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered_v4.pt'}
 
 
 def default_weights(mode: str, model: str = 'motionet') -> Path:

@@ -148,7 +148,8 @@ def test_online_lifter_windowed_emits_every_frame_once_in_order():
     assert [f.stamp_ns for f in got] == stamps and online.pending() == 0
 
 
-@pytest.mark.parametrize('mode', ['windowed', 'causal', 'vtm', 'windowed_flip'])
+@pytest.mark.parametrize('mode', ['windowed', 'causal', 'vtm', 'windowed_flip',
+                                  'windowed_smoothed'])
 def test_online_lifter_chunks_give_the_same_frames_later(mode):
     """chunk = 8 lifts eight frames per network pass: the same poses as frame by frame (the
     network is convolutional; VTM lifts each frame from its frame-by-frame window), emitted in
@@ -163,7 +164,8 @@ def test_online_lifter_chunks_give_the_same_frames_later(mode):
     else:
         model = MotioNet(LifterConfig(**SMALL, causal=mode == 'causal')).eval()
     flip = mode.endswith('_flip')     # test-time flip keeps the equivalence
-    mode = mode.replace('_flip', '')
+    sigma = 2.0 if mode.endswith('_smoothed') else 0.0    # so does the output smoothing
+    mode = mode.replace('_flip', '').replace('_smoothed', '')
     intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
     rng = np.random.default_rng(5)
     kp = np.concatenate([rng.uniform(200, 400, (50, 23, 2)), np.ones((50, 23, 1))], -1)
@@ -171,7 +173,8 @@ def test_online_lifter_chunks_give_the_same_frames_later(mode):
     runs = {}
     for chunk in (1, 8):
         # the skeleton is estimated over 30 frames (changing every frame), then held
-        online = OnlineLifter(model, mode, skeleton_frames=30, chunk=chunk, flip=flip)
+        online = OnlineLifter(model, mode, skeleton_frames=30, chunk=chunk, flip=flip,
+                              output_sigma=sigma)
         got, sizes = [], []
         for i in range(50):
             frames, _ = online.push(stamps[i], kp[i], intr)
@@ -179,7 +182,11 @@ def test_online_lifter_chunks_give_the_same_frames_later(mode):
             sizes.append(len(frames))
         got += online.flush()
         assert [f.stamp_ns for f in got] == stamps
-        assert set(sizes) <= {0, chunk}
+        # the output smoothing holds its radius back: the first chunk comes out shorter
+        radius = online.delay - online.latency
+        assert radius == (4 if sigma else 0)
+        assert set(sizes) <= {0, chunk - radius, chunk} if chunk > 1 else set(sizes) <= {0, 1}
+        assert online.delay <= 50 - sum(sizes) < online.delay + chunk
         runs[chunk] = got
     for a, b in zip(runs[1], runs[8]):
         np.testing.assert_allclose(a.pose.joint_positions(), b.pose.joint_positions(),

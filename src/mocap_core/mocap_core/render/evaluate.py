@@ -339,10 +339,13 @@ class ClipScore:
 
 def _paired_with_lifter(stage: np.ndarray, stage_idx: np.ndarray, lifter: np.ndarray,
                         lifter_idx: np.ndarray, G: np.ndarray, fps: float,
-                        lifter_world: Optional[np.ndarray] = None) -> Dict[str, float]:
+                        lifter_world: Optional[np.ndarray] = None,
+                        truth_world: Optional[np.ndarray] = None) -> Dict[str, float]:
     """A stage's change from the lifter on the frames both have: ``pa_mpjpe_change`` (mm,
     stage minus lifter PA-MPJPE) and, over the longest run of consecutive frames,
-    ``jitter_vs_lifter`` (mean joint acceleration, stage over lifter).
+    ``jitter_vs_lifter`` (mean joint acceleration, stage over lifter), ``jitter`` (the
+    stage's, m/s^2) and ``jitter_vs_truth`` (stage over the true motion's on the same frames:
+    ``G`` in the camera frame, or ``truth_world`` (F, J, 3) with ``lifter_world``).
 
     PA-MPJPE does not depend on the frame the joints are in; acceleration does not depend
     on a *fixed* rigid frame, but a moving camera's frame accelerates. The physics output
@@ -366,10 +369,15 @@ def _paired_with_lifter(stage: np.ndarray, stage_idx: np.ndarray, lifter: np.nda
     if len(run) >= 10:
         a_s = acceleration(stage[si[run]], fps)
         a_l = acceleration(lifter[li[run]], fps)
+        a_g = acceleration(G[frames[run]], fps)
         if lifter_world is not None:
             out['jitter_vs_lifter_camera_frame'] = a_s / max(a_l, 1e-9)
             a_l = acceleration(lifter_world[li[run]], fps)
+            a_g = acceleration(truth_world[frames[run]], fps) if truth_world is not None \
+                else float('nan')
         out['jitter_vs_lifter'] = a_s / max(a_l, 1e-9)
+        out['jitter'] = a_s
+        out['jitter_vs_truth'] = a_s / max(a_g, 1e-9)
     return out
 
 
@@ -444,8 +452,9 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
                 procrustes_align(full[ok], g_s) - g_s, axis=-1).mean())
             world_lifter = camera_to_world(P, idx, gt) if stage == 'world' \
                 and 'camera_R' in gt else None
-            root[stage].update(_paired_with_lifter(full[ok], sidx[ok], P, idx, G, fps,
-                                                   world_lifter))
+            root[stage].update(_paired_with_lifter(
+                full[ok], sidx[ok], P, idx, G, fps, world_lifter,
+                gt.get('joints_world') if world_lifter is not None else None))
             if 'contacts' in gt:
                 root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
             if stage == 'world':
@@ -572,7 +581,8 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"{_f(m.get('physics_floor_height_mm'))} mm |",
              *[f"| {st} PA-MPJPE | {_f(m.get(f'{st}_pa_mpjpe'))} mm (change from the lifter "
                f"on the same frames {_f(m.get(f'{st}_pa_mpjpe_change'), '{:+.1f}')} mm; "
-               f"jitter {_f(m.get(f'{st}_jitter_vs_lifter'), '{:.2f}')}× the lifter's) |"
+               f"jitter {_f(m.get(f'{st}_jitter_vs_lifter'), '{:.2f}')}× the lifter's, "
+               f"{_f(m.get(f'{st}_jitter_vs_truth'), '{:.2f}')}× the truth's) |"
                for st in ('physics', 'world')],
              *[f"| {st} feet: deepest ankle/toe joint below its own floor after 1 s / "
                f"frames more than 5 mm below / skating in contact | "
@@ -640,13 +650,17 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
 
 #: Rows of :func:`comparison_markdown`: (label, median key, format).
 COMPARISON_ROWS = (
+    ('lifter MPJPE (mm)', 'mpjpe', '{:.1f}'),
     ('lifter PA-MPJPE (mm)', 'pa_mpjpe', '{:.1f}'),
+    ("lifter jitter / the truth's", 'jitter_ratio', '{:.2f}'),
     ('physics PA-MPJPE change from the lifter, same frames (mm)', 'physics_pa_mpjpe_change',
      '{:+.1f}'),
     ('world PA-MPJPE change from the lifter, same frames (mm)', 'world_pa_mpjpe_change',
      '{:+.1f}'),
     ("physics jitter / the lifter's", 'physics_jitter_vs_lifter', '{:.2f}'),
+    ("physics jitter / the truth's", 'physics_jitter_vs_truth', '{:.2f}'),
     ("world jitter / the lifter's", 'world_jitter_vs_lifter', '{:.2f}'),
+    ("world jitter / the truth's", 'world_jitter_vs_truth', '{:.2f}'),
     ("world jitter / the lifter's, lifter in its moving camera frame",
      'world_jitter_vs_lifter_camera_frame', '{:.2f}'),
     ('physics feet: deepest ankle/toe below its floor after 1 s (mm)',

@@ -156,6 +156,10 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--smooth', type=float, default=0.0, metavar='SIGMA',
                    help='Gaussian smoothing of the keypoints along time before lifting '
                    '(frames; the node parameter smooth_sigma)')
+    p.add_argument('--output-sigma', type=float, default=0.0, metavar='SIGMA',
+                   help='Gaussian smoothing of the lifted output along time (frames; the node '
+                   'parameter output_sigma, 2 in windowed mode by default; applied here to the '
+                   'positions and root)')
     p.add_argument('--rendered', nargs='?', const='', default=None, metavar='DIR',
                    help='also lift the rendered validation clips (mocap data render; default '
                    'folder ~/.cache/mocap/render) from the detector, from clean projections '
@@ -280,7 +284,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     noises = ('none', 'motionet') if args.noise == 'both' else (args.noise,)
     t0 = time.time()
     results = [evaluate(model, val, n, args.device, placement=pl, families=families,
-                        flip=args.flip, smooth=args.smooth)
+                        flip=args.flip, smooth=args.smooth, output_sigma=args.output_sigma)
                for pl in placements for n in noises]
     seconds = time.time() - t0
     baseline = {n: baseline_mean_pose(train_for_baseline, val, n) for n in noises}
@@ -290,7 +294,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     real = None
     if real_dirs:
         real = evaluate_real(model, [Path(d) for d in real_dirs], device=args.device,
-                             flip=args.flip, smooth=args.smooth)
+                             flip=args.flip, smooth=args.smooth,
+                             output_sigma=args.output_sigma)
         real['groundtruth'] = groundtruth_plausibility(val)
         s = real['summary']
         print(f"real OpenPose ({real['sequences']} sequences, {real['frames']} frames): jitter "
@@ -299,7 +304,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"{s['skating_mm']:.1f} mm/frame (ground truth "
               f"{real['groundtruth']['skating_mm']:.1f})")
     extra = {'baseline_mean_pose': baseline, 'weights': str(weights),
-             'eval_seconds': round(seconds, 1), 'flip': args.flip, 'smooth': args.smooth}
+             'eval_seconds': round(seconds, 1), 'flip': args.flip, 'smooth': args.smooth,
+             'output_sigma': args.output_sigma}
     if args.rendered is not None:
         from mocap_core.render.batch import DEFAULT_OUT
         from mocap_core.render.clip import iter_done
@@ -320,7 +326,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         rendered = {}
         for inputs in ('detector', 'projected') + (('placed',) if placed else ()):
             r = evaluate_rendered(model, dirs, inputs, args.device, flip=args.flip,
-                                  smooth=args.smooth, placement=placed)
+                                  smooth=args.smooth, placement=placed,
+                                  output_sigma=args.output_sigma)
             rendered[inputs] = {k: r[k] for k in ('clips', 'frames', 'summary')}
             s = r['summary']
             print(f"rendered ({inputs:9s}, {r['clips']} clips): MPJPE {s['mpjpe_mm']:.1f} mm "
