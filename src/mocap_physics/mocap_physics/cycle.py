@@ -97,6 +97,12 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 LANDING_SPEED = 0.5
 
 
+
+#: :meth:`PhysicsCycle.change_frame`: the largest change (rotation angle, deg; translation, m)
+#: that keeps the foot-stick anchors and the solvers' memory.
+SMALL_FRAME_CHANGE_DEG = 2.0
+SMALL_FRAME_CHANGE_M = 0.05
+
 class InvalidInput(ValueError):
     """The cycle cannot run on this input (no skeleton yet, malformed target, ...)."""
 
@@ -187,7 +193,10 @@ class PhysicsCycle:
         """Re-express the state in a new floor frame: ``p_new = rotation p_old +
         translation`` (e.g. a refined floor estimate). Only the root placement in q changes
         (Pinocchio's free-flyer velocity is in the root's own frame); the pose is lifted out
-        of the new floor if needed, and the foot-stick anchors are dropped."""
+        of the new floor if needed. A small change (at most :data:`SMALL_FRAME_CHANGE_DEG`
+        and :data:`SMALL_FRAME_CHANGE_M`: a step of a floor being blended in) carries the
+        foot-stick anchors over (their floor points moved by the change) and keeps the
+        solvers' memory of the last forces; a larger one drops both."""
         R = np.asarray(rotation, dtype=float)
         t = np.asarray(translation, dtype=float).reshape(3)
         M = pin.SE3(R, t)
@@ -200,8 +209,12 @@ class PhysicsCycle:
             self._q = self._lift(moved(self._q))
         if self._target_prev is not None:
             self._target_prev = moved(self._target_prev)
-        self._anchored[:] = False
-        self._reset_solvers()
+        angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+        if angle <= SMALL_FRAME_CHANGE_DEG and np.linalg.norm(t) <= SMALL_FRAME_CHANGE_M:
+            self._anchor = self._anchor @ R[:2, :2].T + t[:2]
+        else:
+            self._anchored[:] = False
+            self._reset_solvers()
         self.stats.frame_changes += 1
 
     def set_skeleton(self, skeleton: Skeleton) -> bool:

@@ -152,6 +152,20 @@ class FloorFrame:
         """(normal, offset) of the floor in the source frame: ``normal . p + offset = 0``."""
         return self.normal, float(self.rotation[2] @ np.zeros(3) + self.translation[2])
 
+    def interpolate(self, other: 'FloorFrame', s: float) -> 'FloorFrame':
+        """The frame a fraction ``s`` in [0, 1] of the way from ``self`` (0) to ``other``
+        (1): the rotation along the shortest arc (slerp), the translation on a straight
+        line; the source frame is ``other``'s."""
+        from scipy.spatial.transform import Rotation, Slerp
+
+        s = float(np.clip(s, 0.0, 1.0))
+        if s >= 1.0:
+            return other
+        rots = Rotation.from_matrix(np.stack([self.rotation, other.rotation]))
+        R = Slerp([0.0, 1.0], rots)([s]).as_matrix()[0]
+        t = (1.0 - s) * self.translation + s * other.translation
+        return FloorFrame(R, t, other.source_frame)
+
     def difference(self, other: 'FloorFrame') -> Tuple[float, float]:
         """(angle between the floor normals in rad, height difference of the source origin
         in m): how much the floor plane itself differs (the in-plane axes may differ)."""
@@ -334,12 +348,15 @@ class FloorTrackerParams:
     min_change_deg: float = 0.5       # a new fit replaces the frame only when the floor
     min_change_m: float = 0.01        # moved by more than this
     freeze_after: int = 0             # frames after which the frame is fixed (0: never)
+    blend_frames: int = 15            # frames over which a new fit is blended in (0: at once)
 
     def validate(self) -> None:
         bad = []
         for name in ('window', 'min_frames', 'update_every'):
             if int(getattr(self, name)) < 1:
                 bad.append(f'{name}={getattr(self, name)} (>= 1)')
+        if int(self.blend_frames) < 0:
+            bad.append(f'blend_frames={self.blend_frames} (>= 0)')
         if self.prior not in ('body', 'camera'):
             bad.append(f"prior={self.prior!r} ('body' or 'camera')")
         for name in ('prior_weight_m', 'inlier_threshold', 'min_change_deg', 'min_change_m'):
@@ -367,11 +384,22 @@ class FloorTracker:
     :meth:`~mocap_physics.cycle.PhysicsCycle.change_frame`), and never after
     ``freeze_after`` frames (when > 0).
 
+    A replacement is blended in over ``blend_frames`` frames (a smoothstep in time: the
+    rotation along its arc, the translation on a line): everything expressed in the floor
+    frame would otherwise jump at each re-fit. A step of a few millimetres every 15 frames was
+    most of the physics output's jitter on rendered clips once the lifter's output was
+    smooth (docs/physics.md). A new fit during a blend starts a new blend from where the
+    frame is. The provisional floor is blended out too: replacing it at once made the
+    physics output jitter a third more on rendered clips (one large step early in short
+    clips) and did not bring the floor closer one second in.
+
     Attributes:
         frame: the current :class:`FloorFrame` (None before the first frame).
+        target: the frame of the latest fit (``frame`` once a blend is over).
         fit: the :class:`PlaneFit` it came from.
         ready: at least ``min_frames`` frames with contacts were seen.
-        changes: number of times the frame was replaced.
+        changes: number of fits that replaced the frame.
+        adopted: whether the last :meth:`update` adopted a new fit.
     """
 
     def __init__(self, params: Optional[FloorTrackerParams] = None,
@@ -387,8 +415,11 @@ class FloorTracker:
         self.frames = 0
         self.contact_frames = 0
         self.frame: Optional[FloorFrame] = None
+        self.target: Optional[FloorFrame] = None
         self.fit: Optional[PlaneFit] = None
         self.changes = 0
+        self.adopted = False
+        self._blend: Optional[Tuple[FloorFrame, int]] = None   # (start frame, frames done)
         self._since_fit = 0
         self._rng = np.random.default_rng(0)
 
@@ -454,23 +485,33 @@ class FloorTracker:
         except ValueError:
             up = None
         self.add(pts, probabilities, up)
+        self.adopted = False
         p = self.params
         frozen = p.freeze_after > 0 and self.frames > p.freeze_after and self.frame is not None
         due = self.frame is None or (self._since_fit >= p.update_every) or \
             (self.fit is not None and self.fit.source == 'prior' and self.ready)
-        if frozen or not due:
+        if due and not frozen:
+            self._since_fit = 0
+            fit = self.estimate()
+            new = None if fit is None else fit.frame(source_frame=self.source_frame)
+            if new is not None and self.target is not None:
+                angle, dh = new.difference(self.target)
+                if np.degrees(angle) < p.min_change_deg and dh < p.min_change_m:
+                    new = None
+            if new is not None:
+                self.fit, self.target, self.adopted = fit, new, True
+                if self.frame is None or p.blend_frames == 0:
+                    changed = self.frame is not None
+                    self.frame, self._blend = new, None
+                    self.changes += int(changed)
+                    return self.frame, changed
+                self.changes += 1
+                self._blend = (self.frame, 0)
+        if self._blend is None:
             return self.frame, False
-        self._since_fit = 0
-        fit = self.estimate()
-        if fit is None:
-            return self.frame, False
-        new = fit.frame(source_frame=self.source_frame)
-        if self.frame is not None:
-            angle, dh = new.difference(self.frame)
-            if np.degrees(angle) < p.min_change_deg and dh < p.min_change_m:
-                return self.frame, False
-        changed = self.frame is not None
-        self.frame, self.fit = new, fit
-        if changed:
-            self.changes += 1
-        return self.frame, changed
+        start, done = self._blend
+        done += 1
+        u = done / p.blend_frames
+        self.frame = start.interpolate(self.target, u * u * (3.0 - 2.0 * u))
+        self._blend = (start, done) if done < p.blend_frames else None
+        return self.frame, True

@@ -62,8 +62,8 @@ below the camera): p_floor = R p_camera + (0, 0, camera height).
     re-fitted every ``floor_update_every`` frames (RANSAC + least squares regularised towards
     the body's mean up direction). It starts provisional (the body's up direction through
     the lowest foot point) and is replaced when a fit moves it by more than 0.5 deg or
-    1 cm; the simulation state is carried over into the new frame. ``floor_freeze_after``
-    > 0 fixes it after that many frames.
+    1 cm, blended in over ``floor_blend_frames`` frames; the simulation state is carried
+    over into each new frame. ``floor_freeze_after`` > 0 fixes it after that many frames.
   * ``camera_params``: a level floor ``camera_height`` m below a camera pitched down by
     ``camera_pitch_deg`` (no roll).
   * ``input``: the input already is in a floor frame (e.g. ground-truth motion in
@@ -244,6 +244,10 @@ PARAMETERS = (
               read_only=True),
     ParamSpec('floor_freeze_after', _F.freeze_after, 'floor_source estimate: frames after '
               'which the floor is fixed (0 = keep refining)', min_value=0, read_only=True),
+    ParamSpec('floor_blend_frames', _F.blend_frames, 'floor_source estimate: frames over '
+              'which a re-fitted floor replaces the last one (smoothstep; 0 = at once: the '
+              'outputs, in the floor frame, then jump at every re-fit)', min_value=0,
+              read_only=True),
     ParamSpec('camera_height', 1.5, 'floor_source camera_params: camera height above the '
               'floor, m', min_value=0.0, read_only=True),
     ParamSpec('camera_pitch_deg', 0.0, 'floor_source camera_params: camera pitch down from '
@@ -396,7 +400,8 @@ class PhysicsNode(Node):
             return FloorTracker(FloorTrackerParams(
                 window=p['floor_window'], update_every=p['floor_update_every'],
                 contact_threshold=p['floor_contact_threshold'], prior=p['floor_prior'],
-                freeze_after=p['floor_freeze_after']))     # validates them
+                freeze_after=p['floor_freeze_after'],
+                blend_frames=p['floor_blend_frames']))     # validates them
         raise ValueError(f"floor_source {p['floor_source']!r}: use "
                          f"{', '.join(FLOOR_SOURCES[:-1])} or {FLOOR_SOURCES[-1]}")
 

@@ -254,9 +254,10 @@ class OnlinePhysics:
         if changed and self.floor is not None:
             delta = new.compose(self.floor.inverse())
             self.cycle.change_frame(delta.rotation, delta.translation)
+        if changed and tracker.adopted:
             self._notify('floor_change', 'floor re-estimated: camera height %.3f m, normal %s '
                          '(%d inliers of %d points)' % (
-                             new.height, np.round(new.normal, 4).tolist(),
+                             tracker.target.height, np.round(tracker.target.normal, 4).tolist(),
                              tracker.fit.inliers, tracker.fit.points), 'info')
         self.floor = new
         return True

@@ -147,11 +147,64 @@ def test_tracker_provisional_then_refined_and_frozen():
             # a change re-expresses the frame: the previous one is a different plane
             assert f is tracker.frame
     assert tracker.ready and any(changes)
-    assert not any(changes[95:])               # frozen after 90 frames
+    # frozen after 90 frames (a fit adopted before that is still blended in)
+    assert not any(changes[90 + tracker.params.blend_frames:])
     # NaN and unknown contacts are ignored without error
     bad = Pose(Skeleton.default(), poses[0].rotations, poses[0].root_position)
     tracker.add(np.full((4, 3), np.nan), [1, 1, 1, 1])
     tracker.update(bad, None)
+
+
+def test_interpolate_goes_along_the_arc_and_the_line():
+    a = FloorFrame.from_camera_height_pitch(1.5, np.radians(10.0))
+    b = FloorFrame.from_camera_height_pitch(1.7, np.radians(30.0))
+    assert a.interpolate(b, 0.0).rotation == pytest.approx(a.rotation)
+    assert a.interpolate(b, 1.0) is b
+    half = a.interpolate(b, 0.5)
+    assert half.height == pytest.approx(1.6)
+    # the rotation half-way: 10 deg from each end
+    ang = [np.degrees(np.arccos(np.clip((np.trace(half.rotation @ x.rotation.T) - 1) / 2,
+                                        -1, 1))) for x in (a, b)]
+    assert ang == pytest.approx([10.0, 10.0], abs=1e-6)
+
+
+def test_a_new_fit_is_blended_in_without_a_jump():
+    """A re-fit that moves the floor: with blending the frame moves there over
+    ``blend_frames`` updates (each step a small part of the move), without it in one step;
+    both end on the same frame."""
+    R, c = _camera(25.0, 3.0)
+    poses, probs = _walk_in_camera(R, c, frames=120)
+    runs = {}
+    for blend in (0, 15):
+        tracker = FloorTracker(FloorTrackerParams(blend_frames=blend))
+        frames, changed, adopted = [], [], []
+        for pose, p in zip(poses, probs):
+            f, ch = tracker.update(pose, p)
+            frames.append(f)
+            changed.append(ch)
+            adopted.append(tracker.adopted)
+        runs[blend] = (frames, changed, adopted, tracker)
+    f0, ch0, ad0, t0 = runs[0]
+    f15, ch15, ad15, t15 = runs[15]
+    assert t0.changes == t15.changes >= 1 and ad0 == ad15
+    # the largest frame-to-frame move of a floor point under the person
+    probe = np.mean([pose.root_position for pose in poses], axis=0)
+
+    def steps(frames):
+        pts = np.array([f.transform_points(probe) for f in frames[1:]])
+        return np.linalg.norm(np.diff(pts, axis=0), axis=-1)
+
+    # every adoption, the provisional floor's replacement too, is spread over 15 frames
+    jump, blended = steps(f0).max(), steps(f15).max()
+    assert jump > 0.01                           # a re-fit moves the floor by centimetres
+    assert blended < 0.2 * jump
+    for first in [i for i, a in enumerate(ad15) if a][1:]:
+        assert all(ch15[first:first + 15]) and ch0[first]
+        assert not any(ch0[first + 1:first + 15])
+    np.testing.assert_allclose(f15[-1].rotation, f0[-1].rotation, atol=1e-9)
+    np.testing.assert_allclose(f15[-1].translation, f0[-1].translation, atol=1e-9)
+    with pytest.raises(ValueError, match='blend_frames'):
+        FloorTracker(FloorTrackerParams(blend_frames=-1))
 
 
 def test_from_plane_and_body_up():

@@ -111,6 +111,33 @@ def test_change_frame_keeps_the_pose(skeleton):
                                atol=0.05)
 
 
+def test_a_small_frame_change_carries_the_anchors_a_large_one_drops_them(skeleton):
+    """A step of a floor being blended in (1 deg, 2 cm) moves the foot-stick anchors with the
+    frame, so the stuck feet stay where they are in the world; a large change (the 90 deg
+    turn above) drops them."""
+    from mocap_core.rotations import axis_angle_to_matrix
+
+    def standing(cyc):
+        targets = _jittered_standing(skeleton, n=20, seed=3)
+        for i, t in enumerate(targets):
+            r = cyc.step(t, i / FPS, [1, 1, 1, 1])
+        assert r.contact_stuck.all()
+        return targets
+
+    cyc = PhysicsCycle(skeleton, PhysicsParams(stick_release=0.2))
+    standing(cyc)
+    anchors = cyc._anchor.copy()
+    R = axis_angle_to_matrix(np.radians([0.0, 0.0, 1.0]))
+    t = np.array([0.02, -0.01, 0.0])
+    cyc.change_frame(R, t)
+    assert cyc._anchored.all()
+    np.testing.assert_allclose(cyc._anchor, anchors @ R[:2, :2].T + t[:2], atol=1e-12)
+    big = PhysicsCycle(skeleton, PhysicsParams(stick_release=0.2))
+    standing(big)
+    big.change_frame(np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]), np.array([0.3, -0.2, 0]))
+    assert not big._anchored.any()
+
+
 def test_friction_cone_lines_lie_on_the_cone():
     apex = np.array([[0.1, 0.2, 0.0], [0.5, -0.1, 0.0]])
     pts = friction_cone_lines(apex, 0.8, height=0.1, segments=8)
