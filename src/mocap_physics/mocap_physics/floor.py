@@ -36,12 +36,13 @@ from typing import Deque, Optional, Sequence, Tuple
 import numpy as np
 
 from mocap_core.pose import Pose
-from mocap_core.rotations import matrix_to_quat, quat_multiply
+from mocap_core.rotations import matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix
 from mocap_core.skeleton import CONTACT_POINT_NAMES
 
 #: The camera optical frame's "up" (-y): the prior of the floor normal when nothing better
 #: is known (a camera held roughly level).
 CAMERA_UP = np.array([0.0, -1.0, 0.0])
+_EYE3 = np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,7 @@ class FloorFrame:
     def __post_init__(self) -> None:
         R = np.asarray(self.rotation, dtype=float)
         t = np.asarray(self.translation, dtype=float).reshape(3)
-        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) \
+        if R.shape != (3, 3) or not np.abs(R @ R.T - _EYE3).max() <= 1e-6 \
                 or np.linalg.det(R) < 0:
             raise ValueError('floor rotation must be a proper 3x3 rotation matrix')
         if not np.all(np.isfinite(t)):
@@ -156,13 +157,24 @@ class FloorFrame:
         """The frame a fraction ``s`` in [0, 1] of the way from ``self`` (0) to ``other``
         (1): the rotation along the shortest arc (slerp), the translation on a straight
         line; the source frame is ``other``'s."""
-        from scipy.spatial.transform import Rotation, Slerp
-
         s = float(np.clip(s, 0.0, 1.0))
         if s >= 1.0:
             return other
-        rots = Rotation.from_matrix(np.stack([self.rotation, other.rotation]))
-        R = Slerp([0.0, 1.0], rots)([s]).as_matrix()[0]
+        rel = other.rotation @ self.rotation.T                # self -> other
+        angle = float(np.arccos(np.clip((np.trace(rel) - 1.0) / 2.0, -1.0, 1.0)))
+        sin = np.sin(angle)
+        if angle < 1e-12:
+            R = self.rotation
+        elif sin < 1e-6:            # a half turn: the axis is ill-defined here, take slerp
+            q = quat_slerp(matrix_to_quat(self.rotation), matrix_to_quat(other.rotation), s)
+            R = quat_to_matrix(q)
+        else:                       # Rodrigues: a fraction s of the relative turn
+            axis = np.array([rel[2, 1] - rel[1, 2], rel[0, 2] - rel[2, 0],
+                             rel[1, 0] - rel[0, 1]]) / (2.0 * sin)
+            K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                          [-axis[1], axis[0], 0.0]])
+            a = s * angle
+            R = (np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)) @ self.rotation
         t = (1.0 - s) * self.translation + s * other.translation
         return FloorFrame(R, t, other.source_frame)
 

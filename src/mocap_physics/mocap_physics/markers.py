@@ -73,7 +73,7 @@ def floor_transform_msg(header, floor, child_frame_id: str):
     ``rotation * p_floor + translation`` in the camera frame), as tf2 would store it."""
     from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 
-    if _FLOOR_CACHE.get('floor') is not floor:       # a floor is fixed between two fits
+    if _FLOOR_CACHE.get("floor") is not floor:   # the same floor until a fit is blended in
         inv = floor.inverse()
         _FLOOR_CACHE.update(floor=floor, q=inv.quaternion(), t=inv.translation)
     q, t = _FLOOR_CACHE['q'], _FLOOR_CACHE['t']

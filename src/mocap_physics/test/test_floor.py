@@ -166,6 +166,18 @@ def test_interpolate_goes_along_the_arc_and_the_line():
     ang = [np.degrees(np.arccos(np.clip((np.trace(half.rotation @ x.rotation.T) - 1) / 2,
                                         -1, 1))) for x in (a, b)]
     assert ang == pytest.approx([10.0, 10.0], abs=1e-6)
+    # any relative turn: the same rotations as scipy's slerp; a half turn (two shortest
+    # arcs): a fraction s of the half turn away from the start
+    from scipy.spatial.transform import Rotation, Slerp
+    c = FloorFrame(Rotation.from_rotvec([0.1, 0.3, -0.2]).as_matrix() @ a.rotation, [0, 0, 1])
+    ref = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([a.rotation, c.rotation])))
+    for s in (0.0, 0.3, 0.77):
+        np.testing.assert_allclose(a.interpolate(c, s).rotation, ref([s]).as_matrix()[0],
+                                   atol=1e-9)
+    d = FloorFrame(Rotation.from_rotvec([np.pi, 0.0, 0.0]).as_matrix() @ a.rotation)
+    for s in (0.3, 0.77):
+        R = a.interpolate(d, s).rotation
+        assert Rotation.from_matrix(R @ a.rotation.T).magnitude() == pytest.approx(s * np.pi)
 
 
 def test_a_new_fit_is_blended_in_without_a_jump():
