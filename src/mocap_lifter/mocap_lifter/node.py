@@ -97,8 +97,8 @@ PARAMETERS = (
     ParamSpec('output_sigma', -1.0, 'Gaussian smoothing of the lifted frames (rotations, '
               'root) along time, sigma in frames, delaying the output by ceil(2 sigma) '
               'frames (-1: 2 frames in windowed mode, off in causal mode; 0: off). On rendered '
-              'people through the real detector it cuts the jitter from 7.8x to 1.5x the '
-              'true motion\'s for 2 mm of MPJPE (docs/lifter.md); frame by frame and in chunks '
+              'people through the real detector it cuts the jitter from 7.4x to 1.7x the '
+              'true motion\'s for 0.4 mm of MPJPE (docs/lifter.md); frame by frame and in chunks '
               'the output is the same', min_value=-1.0, max_value=10.0, read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,

@@ -54,6 +54,8 @@ def smooth_along_time(x: np.ndarray, sigma: float, radius: Optional[int] = None
     den = np.zeros(T)
     for k, wk in zip(range(-r, r + 1), w):
         lo, hi = max(0, -k), min(T, T - k)        # frames i with i + k inside
+        if hi <= lo:                              # |k| >= T: no such frame
+            continue
         num[lo:hi] += wk * x[lo + k:hi + k]
         den[lo:hi] += wk
     return num / den.reshape((T,) + (1,) * (x.ndim - 1))

@@ -367,8 +367,11 @@ class FloorTrackerParams:
         for name in ('window', 'min_frames', 'update_every'):
             if int(getattr(self, name)) < 1:
                 bad.append(f'{name}={getattr(self, name)} (>= 1)')
-        if int(self.blend_frames) < 0:
-            bad.append(f'blend_frames={self.blend_frames} (>= 0)')
+        if not 0 <= int(self.blend_frames) <= int(self.update_every):
+            # a new fit restarts the blend from rest: more frames than between two fits
+            # would stall and restart it, a jerk at every fit
+            bad.append(f'blend_frames={self.blend_frames} (0 to update_every, '
+                       f'{self.update_every})')
         if self.prior not in ('body', 'camera'):
             bad.append(f"prior={self.prior!r} ('body' or 'camera')")
         for name in ('prior_weight_m', 'inlier_threshold', 'min_change_deg', 'min_change_m'):
@@ -394,7 +397,7 @@ class FloorTracker:
     replaced only when a fit moves the floor by more than ``min_change_deg`` /
     ``min_change_m`` (the caller re-expresses its state in the new frame,
     :meth:`~mocap_physics.cycle.PhysicsCycle.change_frame`), and never after
-    ``freeze_after`` frames (when > 0).
+    ``freeze_after`` frames (when > 0; a blend in progress then still completes).
 
     A replacement is blended in over ``blend_frames`` frames (a smoothstep in time: the
     rotation along its arc, the translation on a line): everything expressed in the floor
@@ -408,7 +411,7 @@ class FloorTracker:
     Attributes:
         frame: the current :class:`FloorFrame` (None before the first frame).
         target: the frame of the latest fit (``frame`` once a blend is over).
-        fit: the :class:`PlaneFit` it came from.
+        fit: the :class:`PlaneFit` of ``target``.
         ready: at least ``min_frames`` frames with contacts were seen.
         changes: number of fits that replaced the frame.
         adopted: whether the last :meth:`update` adopted a new fit.

@@ -243,11 +243,12 @@ PARAMETERS = (
               'feet cannot determine: body (mean ankles-to-neck direction) or camera (-y)',
               read_only=True),
     ParamSpec('floor_freeze_after', _F.freeze_after, 'floor_source estimate: frames after '
-              'which the floor is fixed (0 = keep refining)', min_value=0, read_only=True),
+              'which no new fit is taken (0 = keep refining; a blend in progress completes)',
+              min_value=0, read_only=True),
     ParamSpec('floor_blend_frames', _F.blend_frames, 'floor_source estimate: frames over '
               'which a re-fitted floor replaces the last one (smoothstep; 0 = at once: the '
-              'outputs, in the floor frame, then jump at every re-fit)', min_value=0,
-              read_only=True),
+              'outputs, in the floor frame, then jump at every re-fit; at most '
+              'floor_update_every)', min_value=0, read_only=True),
     ParamSpec('camera_height', 1.5, 'floor_source camera_params: camera height above the '
               'floor, m', min_value=0.0, read_only=True),
     ParamSpec('camera_pitch_deg', 0.0, 'floor_source camera_params: camera pitch down from '

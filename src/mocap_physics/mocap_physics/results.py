@@ -90,7 +90,8 @@ class CycleStats:
     penetration_solves: int = 0
     model_builds: int = 0
     cone_violations: int = 0
-    frame_changes: int = 0
+    frame_changes: int = 0          # re-expressions of the state in a new floor frame (every
+                                    # step of a blended re-fit: FloorTracker.changes counts fits)
     stick_failures: int = 0
     residual_saturations: int = 0   # whole-body sub-steps whose root residual hit its bound
     sliding_substeps: int = 0       # whole-body sub-steps with a stance point sliding

@@ -127,11 +127,20 @@ def test_a_small_frame_change_carries_the_anchors_a_large_one_drops_them(skeleto
     cyc = PhysicsCycle(skeleton, PhysicsParams(stick_release=0.2))
     standing(cyc)
     anchors = cyc._anchor.copy()
-    R = axis_angle_to_matrix(np.radians([0.0, 0.0, 1.0]))
-    t = np.array([0.02, -0.01, 0.0])
-    cyc.change_frame(R, t)
+    # the old and new floor frames of a camera, as OnlinePhysics re-expresses the state: a
+    # tilt of 1 deg and a floor 2 cm lower, delta = new o old^-1
+    old = FloorFrame.from_camera_height_pitch(1.5, np.radians(20.0))
+    new = FloorFrame(axis_angle_to_matrix(np.radians([0.6, -0.8, 0.3])) @ old.rotation,
+                     old.translation + np.array([0.01, -0.02, 0.02]))
+    delta = new.compose(old.inverse())
+    cyc.change_frame(delta.rotation, delta.translation)
     assert cyc._anchored.all()
-    np.testing.assert_allclose(cyc._anchor, anchors @ R[:2, :2].T + t[:2], atol=1e-12)
+    # each anchor is the same point of the camera's world, seen in the new floor frame
+    # (to within the height a 1-deg tilt gives a floor point: the anchors are 2D)
+    points = np.c_[anchors, np.zeros(len(anchors))]
+    same = new.transform_points(old.inverse().transform_points(points))
+    np.testing.assert_allclose(cyc._anchor, same[:, :2], atol=1e-3)
+    assert np.abs(cyc._anchor - anchors).max() > 0.01     # they did move
     big = PhysicsCycle(skeleton, PhysicsParams(stick_release=0.2))
     standing(big)
     big.change_frame(np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]), np.array([0.3, -0.2, 0]))

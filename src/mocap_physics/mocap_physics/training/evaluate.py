@@ -284,7 +284,8 @@ def run_clip(clip: Clip, params: PhysicsParams, floor: str = 'gt',
     st = online.cycle.stats
     res = RunResult(out_rot, out_root, heights, forces, resid, any_force, times,
                     st.cone_violations, st.fallbacks, st.grf_failures,
-                    st.penetration_failures, st.stick_failures, st.frame_changes)
+                    st.penetration_failures, st.stick_failures,
+                    online.tracker.changes if online.tracker is not None else 0)
     if online.tracker is not None:
         est = clip.to_world.compose(frame.inverse())   # estimated floor frame -> world
         n_est = est.rotation[:, 2]                      # its z axis in world
