@@ -1,7 +1,7 @@
 """The lifter on a CUDA device (the node's ``device:=cuda``): the same frames as on the CPU.
 
 Skipped without a CUDA device (the CI machine has none). On a machine with one, the shipped
-default weights lift the committed CMU walk's keypoints frame by frame and in chunks, with
+default weights lift 120 frames of smoothly moving keypoints frame by frame and in chunks, with
 test-time flip and the output smoothing, on both devices; the poses agree to float32
 rounding (an NVIDIA H200, session 33: 0.12 mm frame by frame, 0.16 mm in chunks).
 """
