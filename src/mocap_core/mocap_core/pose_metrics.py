@@ -34,8 +34,10 @@ def n_mpjpe_mm(pred: np.ndarray, gt: np.ndarray) -> float:
     return float(1000 * np.linalg.norm(scale * p - g, axis=-1).mean())
 
 
-def procrustes_align(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """Per-frame similarity transform of (N, J, 3) ``pred`` onto ``gt`` (Umeyama)."""
+def _umeyama(pred: np.ndarray, gt: np.ndarray):
+    """Per-frame least-squares similarity of (N, J, 3) ``pred`` onto ``gt``: (rotation
+    (N, 3, 3) ``r`` with ``p @ r`` onto ``g``, scale (N,), centroids (N, 1, 3) of pred and
+    gt)."""
     mp, mg = pred.mean(axis=1, keepdims=True), gt.mean(axis=1, keepdims=True)
     p, g = pred - mp, gt - mg
     h = np.einsum('nji,njk->nik', p, g)
@@ -45,7 +47,24 @@ def procrustes_align(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     fix[:, -1] = d
     r = np.einsum('nij,nj,njk->nik', u, fix, vt)  # p @ r maps onto g
     scale = (s * fix).sum(axis=1) / np.maximum((p ** 2).sum(axis=(1, 2)), 1e-12)
-    return scale[:, None, None] * np.einsum('nji,nik->njk', p, r) + mg
+    return r, scale, mp, mg
+
+
+def procrustes_align(pred: np.ndarray, gt: np.ndarray, scale: bool = True) -> np.ndarray:
+    """Per-frame similarity transform of (N, J, 3) ``pred`` onto ``gt`` (Umeyama); with
+    ``scale`` False a rigid one (rotation and translation only)."""
+    r, s, mp, mg = _umeyama(pred, gt)
+    if not scale:
+        s = np.ones_like(s)
+    return s[:, None, None] * np.einsum('nji,nik->njk', pred - mp, r) + mg
+
+
+def alignment_angle_deg(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """(N,) angle (degrees) of the rotation that best aligns each frame of (N, J, 3)
+    ``pred`` with ``gt``: the error of the body's global orientation."""
+    r = _umeyama(pred, gt)[0]
+    cos = (np.trace(r, axis1=1, axis2=2) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
 def pa_mpjpe_mm(pred: np.ndarray, gt: np.ndarray) -> float:

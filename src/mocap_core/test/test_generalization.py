@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from mocap_core.data.detector_placement import (DetectorPlacement, fit_detector_placement,
                                                 leg_length)
@@ -148,6 +149,18 @@ def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
     moved = gt['joints_world'][:, 0] @ Rz.T + [5.0, -2.0, 0.3]
     r = score_clip(meta['clip'], meta, gt, J, idx, {'physics': (moved, idx)}).summary()
     assert r['physics_root_error'] < 1e-6
+    # a lifter whose body is turned by 20 deg about its pelvis: all of its MPJPE is the
+    # global orientation's (RA-MPJPE 0, orientation error 20 deg); one also 10 % too large
+    # keeps only the scale's share after the rigid alignment
+    Ry = Rotation.from_rotvec([0.0, np.radians(20.0), 0.0]).as_matrix()
+    turned = (J - J[:, :1]) @ Ry.T + J[:, :1]
+    t = score_clip(meta['clip'], meta, gt, turned, idx).summary()
+    assert t['mpjpe'] > 50 and t['ra_mpjpe'] < 1e-6 and t['pa_mpjpe'] < 1e-6
+    assert abs(t['orientation_deg'] - 20.0) < 1e-3
+    big = score_clip(meta['clip'], meta, gt, 1.1 * (turned - J[:, :1]) + J[:, :1], idx)
+    b = big.summary()
+    assert b['mpjpe'] > t['mpjpe'] and 5 < b['ra_mpjpe'] < b['mpjpe'] and b['pa_mpjpe'] < 1e-6
+    assert aggregate([big])['by_view']['front']['ra_mpjpe'] == pytest.approx(b['ra_mpjpe'])
     agg = aggregate([perfect, score_clip(meta['clip'], meta, gt, swapped, idx)])
     assert agg['clips'] == 2 and agg['by_view']['front']['frames'] == 2 * len(J)
     # the detector's own swaps: none as placed; every scored frame with its legs exchanged

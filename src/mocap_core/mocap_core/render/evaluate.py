@@ -7,7 +7,10 @@ Metrics (positions in metres in, millimetres out):
 
 * lifter (camera optical frame): MPJPE (pelvis-aligned), PA-MPJPE (per-frame similarity
   alignment), MRPE (pelvis position), MBLE (mean bone-length error against the rendered
-  body's bones);
+  body's bones); where the MPJPE comes from: RA-MPJPE (per-frame rigid alignment, rotation
+  and translation, no scale), so that MPJPE - RA-MPJPE is the share of the body's global
+  orientation and RA-MPJPE - PA-MPJPE that of its scale, and the orientation error itself
+  (the angle of the aligning rotation, degrees);
 * jitter: mean joint acceleration magnitude (m/s^2) of the output and of the ground truth,
   and their ratio;
 * left/right leg swaps: a frame counts as swapped when the lifter's legs (hip, knee, ankle,
@@ -45,7 +48,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..camera import optical_to_world, project_pinhole
-from ..pose_metrics import procrustes_align
+from ..pose_metrics import alignment_angle_deg, procrustes_align
 from ..skeleton import JOINT_INDEX, KEYPOINT_INDEX, PARENTS
 
 #: Frames whose true left and right legs are closer than this (m, mean over knee, ankle,
@@ -322,6 +325,10 @@ class ClipScore:
     all_views: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
     #: the world output's skating by the camera-motion state (:func:`skating_by_camera_state`)
     world_skating_by_state: Dict[str, List[float]] = field(default_factory=dict)
+    #: (scored,) mm per frame after a rigid alignment (no scale), and the angle (degrees) of
+    #: that alignment's rotation: the error of the global orientation
+    ra_mpjpe: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    orientation_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def summary(self) -> Dict[str, float]:
         s = self.swaps[self.swaps >= 0]
@@ -331,6 +338,9 @@ class ClipScore:
                'jitter_ratio': self.jitter / max(self.jitter_gt, 1e-9),
                'swap_rate': float(s.mean()) if len(s) else float('nan'),
                'detected': self.detected, 'scored': self.scored, 'frames': self.frames}
+        if len(self.ra_mpjpe):
+            out['ra_mpjpe'] = float(np.mean(self.ra_mpjpe))
+            out['orientation_deg'] = float(np.median(self.orientation_deg))
         for stage, r in self.root.items():
             for k, v in r.items():
                 out[f'{stage}_{k}'] = v
@@ -415,6 +425,7 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
     pr, gr = P - P[:, :1], g - g[:, :1]
     mpjpe = 1000 * np.linalg.norm(pr - gr, axis=-1).mean(axis=1)
     pa = 1000 * np.linalg.norm(procrustes_align(P, g) - g, axis=-1).mean(axis=1)
+    ra = 1000 * np.linalg.norm(procrustes_align(P, g, scale=False) - g, axis=-1).mean(axis=1)
     mrpe = 1000 * np.linalg.norm(P[:, 0] - g[:, 0], axis=-1)
     bl_p = np.linalg.norm(P[:, _BONES] - P[:, [PARENTS[j] for j in _BONES]], axis=-1)
     bl_g = np.linalg.norm(g[:, _BONES] - g[:, [PARENTS[j] for j in _BONES]], axis=-1)
@@ -464,7 +475,8 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
     return ClipScore(clip, motion_group(clip), height, meta['camera']['kind'], F, len(idx),
                      float(meta.get('detected_fraction', float('nan'))), mpjpe, pa, mrpe,
                      np.asarray(gt['view'])[idx], swaps, mble, jit, jit_gt, root,
-                     detector_swaps(gt), np.asarray(gt['view']))
+                     detector_swaps(gt), np.asarray(gt['view']), ra_mpjpe=ra,
+                     orientation_deg=alignment_angle_deg(P, g))
 
 
 # ------------------------------------------------------------------------------------------
@@ -492,6 +504,12 @@ def aggregate(scores: List[ClipScore]) -> dict:
     views = np.concatenate([s.views for s in scores])
     mp = np.concatenate([s.mpjpe for s in scores])
     pa = np.concatenate([s.pa_mpjpe for s in scores])
+    decomposed = all(len(s.ra_mpjpe) == len(s.mpjpe) for s in scores)
+    if decomposed:
+        ra = np.concatenate([s.ra_mpjpe for s in scores])
+        ori = np.concatenate([s.orientation_deg for s in scores])
+        out['pooled']['ra_mpjpe'] = float(ra.mean())
+        out['pooled']['orientation_deg'] = float(np.median(ori))
     by_view = {}
     for v in ('front', 'side', 'back'):
         m = views == v
@@ -501,6 +519,9 @@ def aggregate(scores: List[ClipScore]) -> dict:
                           'pa_mpjpe': float(pa[m].mean()),
                           'swap_rate': float((sw[sw >= 0]).mean()) if (sw >= 0).any()
                           else float('nan')}
+            if decomposed:
+                by_view[v]['ra_mpjpe'] = float(ra[m].mean())
+                by_view[v]['orientation_deg'] = float(np.median(ori[m]))
     det = np.concatenate([s.detector_swaps for s in scores])
     det_views = np.concatenate([s.all_views for s in scores])
     out['pooled']['detector_swap_rate'] = float(det[det >= 0].mean()) if (det >= 0).any() \
@@ -556,6 +577,11 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"| lifter MPJPE | {_f(m.get('mpjpe'))} mm (pooled over frames "
              f"{_f(p['mpjpe'])}) |",
              f"| lifter PA-MPJPE | {_f(m.get('pa_mpjpe'))} mm (pooled {_f(p['pa_mpjpe'])}) |",
+             "| ... where the MPJPE comes from: after a rigid alignment (RA-MPJPE: the global "
+             f"orientation removed, not the scale) | {_f(m.get('ra_mpjpe'))} mm (pooled "
+             f"{_f(p.get('ra_mpjpe', float('nan')))}); orientation error "
+             f"{_f(m.get('orientation_deg'))} deg (pooled median "
+             f"{_f(p.get('orientation_deg', float('nan')))}) |",
              f"| lifter MRPE (pelvis position) | {_f(m.get('mrpe'))} mm |",
              f"| lifter MBLE (bone lengths) | {_f(m.get('mble'))} mm |",
              f"| left/right leg swaps | {_f(100 * m.get('swap_rate', float('nan')), '{:.2f}')} "
@@ -591,10 +617,13 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                f"{_f(m.get(f'{st}_skating_mm'))} mm per frame |" for st in ('physics', 'world')],
              f"| person detected | {_f(100 * m.get('detected', float('nan')))} % of frames |",
              '', '## By view (pooled over frames)', '',
-             '| view | frames | MPJPE | PA-MPJPE | leg swaps | detector leg swaps (2D) |',
-             '|---|---|---|---|---|---|']
+             '| view | frames | MPJPE | RA-MPJPE | PA-MPJPE | orientation error (deg, '
+             'median) | leg swaps | detector leg swaps (2D) |',
+             '|---|---|---|---|---|---|---|---|']
     for v, r in agg['by_view'].items():
-        lines.append(f"| {v} | {r['frames']} | {_f(r['mpjpe'])} | {_f(r['pa_mpjpe'])} | "
+        lines.append(f"| {v} | {r['frames']} | {_f(r['mpjpe'])} | "
+                     f"{_f(r.get('ra_mpjpe', float('nan')))} | {_f(r['pa_mpjpe'])} | "
+                     f"{_f(r.get('orientation_deg', float('nan')))} | "
                      f"{_f(100 * r['swap_rate'], '{:.2f}')} % | "
                      f"{_f(100 * r.get('detector_swap_rate', float('nan')), '{:.2f}')} % |")
     for name, label in (('by_group', 'motion group'), ('by_height', 'body height'),
@@ -652,6 +681,8 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
 COMPARISON_ROWS = (
     ('lifter MPJPE (mm)', 'mpjpe', '{:.1f}'),
     ('lifter PA-MPJPE (mm)', 'pa_mpjpe', '{:.1f}'),
+    ('lifter RA-MPJPE: rigidly aligned, no scale (mm)', 'ra_mpjpe', '{:.1f}'),
+    ('lifter global orientation error (deg)', 'orientation_deg', '{:.1f}'),
     ("lifter jitter / the truth's", 'jitter_ratio', '{:.2f}'),
     ('physics PA-MPJPE change from the lifter, same frames (mm)', 'physics_pa_mpjpe_change',
      '{:+.1f}'),
