@@ -147,6 +147,18 @@ def test_view_labels():
     assert list(view_labels(cams, pelvis, facing)) == ['front', 'side', 'back']
 
 
+def test_travel_per_stretch_scales_the_clip_path_to_the_rendered_stretch():
+    from mocap_core.render.batch import travel_per_stretch
+    t = np.arange(301) / 30.0                     # 10 s walking at 1.2 m/s along x
+    walk = np.c_[1.2 * t, np.zeros_like(t), np.full_like(t, 0.9)]
+    assert travel_per_stretch(walk, 30.0, 8.0) == pytest.approx(9.6)
+    assert travel_per_stretch(walk[:91], 30.0, 8.0) == pytest.approx(3.6)  # 3 s clip
+    # standing, with sway and a bobbing pelvis: little horizontal travel; height not counted
+    sway = np.c_[0.01 * np.sin(2 * t), np.zeros_like(t), 0.9 + 0.05 * np.sin(9 * t)]
+    assert travel_per_stretch(sway, 30.0, 8.0) < 0.2
+    assert travel_per_stretch(walk[:1], 30.0, 8.0) == 0.0
+
+
 def test_render_command_rejects_bad_arguments_in_one_line(capsys):
     from mocap_core.cli.mocap import main
     assert main(['data', 'render', '--camera', 'drone']) == 1
@@ -154,6 +166,8 @@ def test_render_command_rejects_bad_arguments_in_one_line(capsys):
     assert len(err) == 1 and 'static, pan, orbit, handheld, follow' in err[0]
     assert main(['data', 'render', '--bvh', '/nonexistent.bvh']) == 1
     assert 'no such BVH file' in capsys.readouterr().err
+    assert main(['data', 'render', '--min-travel', '-1']) == 1
+    assert '--min-travel must be >= 0' in capsys.readouterr().err
 
 
 def test_render_without_a_working_renderer_says_what_is_missing(tmp_path):

@@ -387,6 +387,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise CommandError(f'--camera must be one of {", ".join(CAMERA_KINDS)}')
     if args.jobs < 1 or args.max_seconds <= 0:
         raise CommandError('--jobs must be >= 1 and --max-seconds > 0')
+    if not args.min_travel >= 0:
+        raise CommandError('--min-travel must be >= 0 (metres)')
     for f in args.bvh:
         if not Path(f).is_file():
             raise CommandError(f'{f}: no such BVH file')
@@ -398,7 +400,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         splits = []
     logging.basicConfig(level=logging.INFO, format='%(message)s')
     out = Path(args.out) if args.out else DEFAULT_OUT
-    jobs = plan(splits, args.seed, args.limit, args.bvh)
+    jobs = plan(splits, args.seed, args.limit, args.bvh, min_travel=args.min_travel,
+                max_seconds=args.max_seconds)
     print(f'{_PROG} render: {len(jobs)} clips ({", ".join(splits) or "user BVH"}) -> {out}; '
           f'{args.jobs} worker(s), at most {args.max_seconds:g} s per clip', file=sys.stderr)
     try:
@@ -588,6 +591,11 @@ def add_data_parser(sub) -> None:
     q.add_argument('--seed', type=int, default=0, help='seed of bodies, scenes and cameras')
     q.add_argument('--camera', default='', help='force one camera kind (static, pan, orbit, '
                    'handheld, follow); default: drawn per clip')
+    q.add_argument('--min-travel', type=float, default=0.0, metavar='M',
+                   help='only clips of the split whose pelvis travels at least M metres '
+                   'over a --max-seconds stretch (at the clip\'s mean speed), before '
+                   '--limit: a world-frame benchmark of people who go somewhere '
+                   '(e.g. --min-travel 1.5 -o ~/.cache/mocap/render_travel)')
     q.add_argument('--hours', type=float, help='stop starting new clips after this long')
     q.add_argument('--no-bag', action='store_true', help='skip the per-clip MCAP bag')
     q.add_argument('--quiet', action='store_true', help='no progress bar')

@@ -23,6 +23,8 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Dict, Iterable, List, Optional, Sequence
 
+import numpy as np
+
 from .clip import clip_key, clip_seed, is_done, iter_done
 
 log = logging.getLogger('mocap.render')
@@ -42,9 +44,24 @@ class Job:
     bvh: str = ''
 
 
+def travel_per_stretch(root_positions: np.ndarray, fps: float, seconds: float) -> float:
+    """Horizontal path length (m) of the pelvis over a stretch of ``seconds`` at the clip's
+    mean speed: ``root_positions`` (F, 3) in a z-up world, metres."""
+    xy = np.asarray(root_positions, dtype=float)[:, :2]
+    if len(xy) < 2:
+        return 0.0
+    path = float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+    duration = (len(xy) - 1) / float(fps)
+    return path * min(1.0, seconds / duration)
+
+
 def plan(splits: Sequence[str], seed: int, limit: Optional[int] = None,
-         bvh_files: Sequence[str] = ()) -> List[Job]:
-    """The jobs, in rendering order (module docstring). ``limit`` caps the clips per split."""
+         bvh_files: Sequence[str] = (), min_travel: float = 0.0,
+         max_seconds: float = 8.0) -> List[Job]:
+    """The jobs, in rendering order (module docstring). ``limit`` caps the clips per split;
+    ``min_travel`` > 0 (m) keeps only the split's clips whose pelvis travels at least that far
+    over a ``max_seconds`` stretch (:func:`travel_per_stretch`; a benchmark of the world frame
+    needs people who go somewhere), before the limit."""
     jobs: List[Job] = []
     for path in bvh_files:
         jobs.append(Job('user', str(Path(path).resolve()), bvh=str(Path(path).resolve())))
@@ -54,6 +71,9 @@ def plan(splits: Sequence[str], seed: int, limit: Optional[int] = None,
             ds = load_split(split)
             names = [str(n) for n in ds.ids]
             order = sorted(range(len(names)), key=lambda i: clip_seed(seed, names[i]))
+            if min_travel > 0:
+                order = [i for i in order if travel_per_stretch(
+                    ds.motion(i).root_positions, ds.motion(i).fps, max_seconds) >= min_travel]
             if limit is not None:
                 order = order[:limit]
             jobs += [Job(split, names[i], dataset_index=i) for i in order]
