@@ -230,7 +230,7 @@ class PhysicsCycle:
                 skeleton, self.params.body_mass, atol=self.params.skeleton_tolerance):
             return False
         old = self.model
-        model = PhysicsModel(skeleton, self.params.body_mass)
+        model = PhysicsModel(skeleton, self.params.body_mass, self.params.flat_foot_pitch_deg)
         self.model = model
         self.stats.model_builds += 1
         if self._whole_body:

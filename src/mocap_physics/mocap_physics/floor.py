@@ -37,7 +37,8 @@ import numpy as np
 
 from mocap_core.pose import Pose
 from mocap_core.rotations import matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix
-from mocap_core.skeleton import CONTACT_POINT_NAMES
+
+from .foot import contact_positions
 
 #: The camera optical frame's "up" (-y): the prior of the floor normal when nothing better
 #: is known (a camera held roughly level).
@@ -363,6 +364,7 @@ class FloorTrackerParams:
     min_change_m: float = 0.01        # moved by more than this
     freeze_after: int = 0             # frames after which the frame is fixed (0: never)
     blend_frames: int = 15            # frames over which a new fit is blended in (0: at once)
+    flat_foot_pitch_deg: float = 30.0  # the heel points' placement (mocap_physics.foot)
 
     def validate(self) -> None:
         bad = []
@@ -495,8 +497,7 @@ class FloorTracker:
     def update(self, pose: Pose, probabilities: Optional[Sequence[float]]
                ) -> Tuple[FloorFrame, bool]:
         """Record ``pose`` (source frame) and return (current floor frame, changed)."""
-        cps = pose.contact_positions()
-        pts = np.array([cps[n] for n in CONTACT_POINT_NAMES])
+        pts = contact_positions(pose, self.params.flat_foot_pitch_deg)
         try:
             up = body_up(pose)
         except ValueError:

@@ -41,6 +41,8 @@ from mocap_core.pose import Pose
 from mocap_core.skeleton import CONTACT_POINT_NAMES, Skeleton
 from mocap_core.urdf import link_inertials
 
+from .foot import TEMPLATE_FLAT_FOOT_PITCH_DEG, contact_points
+
 GRAVITY = 9.81
 #: Bones shorter than this (m) make a skeleton degenerate for the physics.
 MIN_BONE_LENGTH = 1e-3
@@ -87,10 +89,12 @@ class PhysicsModel:
             w; the root's after its position).
     """
 
-    def __init__(self, skeleton: Skeleton, body_mass: float = 70.0) -> None:
+    def __init__(self, skeleton: Skeleton, body_mass: float = 70.0,
+                 flat_foot_pitch_deg: float = TEMPLATE_FLAT_FOOT_PITCH_DEG) -> None:
         check_skeleton(skeleton, body_mass)
         self.skeleton = skeleton
         self.body_mass = float(body_mass)
+        self.flat_foot_pitch_deg = float(flat_foot_pitch_deg)
         model = pin.Model()
         model.name = 'mocap_skeleton'
         model.gravity = pin.Motion(np.array([0.0, 0.0, -GRAVITY]), np.zeros(3))
@@ -109,7 +113,7 @@ class PhysicsModel:
                 model.appendBodyToJoint(jid, pin.Inertia(mass, np.asarray(com, dtype=float),
                                                          np.asarray(inertia, dtype=float)),
                                         pin.SE3.Identity())
-        contacts = skeleton.contact_points()
+        contacts = contact_points(skeleton, self.flat_foot_pitch_deg)
         self.contact_names: Tuple[str, ...] = CONTACT_POINT_NAMES
         frame_ids = []
         for cname in self.contact_names:

@@ -110,6 +110,7 @@ from mocap_core.rotations import quat_to_matrix
 
 from .cycle_params import PhysicsParams
 from .floor import FloorFrame, FloorTracker, FloorTrackerParams
+from .foot import contact_positions
 from .markers import floor_transform_msg, friction_cone_spec
 from .model import revolute_efforts
 from .camera_rotation import START_FLOOR_FRAME, CameraRotations, floor_in_camera, rotate_pose
@@ -224,6 +225,10 @@ PARAMETERS = (
     ParamSpec('stick_release', _D.stick_release, 'The stick anchor follows the target when '
               'the target foot moves farther than this from it, m', min_value=0.0,
               read_only=True),
+    ParamSpec('flat_foot_pitch_deg', _D.flat_foot_pitch_deg, 'Ankle-to-toe pitch below the '
+              'floor of a flat foot, degrees: places the heel contact point (30: the skeleton '
+              'template; the Bandai Namco motion data put it near 40, CMU near 15)',
+              min_value=0.0, max_value=60.0, read_only=True),
     ParamSpec('max_frame_gap_s', _D.max_frame_gap, 'A longer gap between frames (stamp time) '
               're-initialises the simulation from the target', min_value=0.001, read_only=True),
     ParamSpec('skeleton_tolerance', _D.skeleton_tolerance, 'Bone offset change (m) that '
@@ -293,6 +298,7 @@ class PhysicsNode(Node):
             root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
             max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'],
             foot_stick=p['foot_stick'], stick_release=p['stick_release'],
+            flat_foot_pitch_deg=p['flat_foot_pitch_deg'],
             gains_mode=p['gains_mode'], dynet_weights=weights if learned else '',
             dynamics=p['dynamics'], residual_weight=p['residual_weight'],
             residual_horizontal_weight=p['residual_horizontal_weight'],
@@ -402,7 +408,8 @@ class PhysicsNode(Node):
                 window=p['floor_window'], update_every=p['floor_update_every'],
                 contact_threshold=p['floor_contact_threshold'], prior=p['floor_prior'],
                 freeze_after=p['floor_freeze_after'],
-                blend_frames=p['floor_blend_frames']))     # validates them
+                blend_frames=p['floor_blend_frames'],
+                flat_foot_pitch_deg=p['flat_foot_pitch_deg']))     # validates them
         raise ValueError(f"floor_source {p['floor_source']!r}: use "
                          f"{', '.join(FLOOR_SOURCES[:-1])} or {FLOOR_SOURCES[-1]}")
 
@@ -654,8 +661,8 @@ class PhysicsNode(Node):
         forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
         specs = pose_marker_specs(pose, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
                                   contacts=res.contact_active.astype(float), forces=forces)
-        cps = pose.contact_positions()
-        loaded = [cps[n] for i, n in enumerate(names) if res.contact_forces[i, 2] > 1e-6]
+        cps = contact_positions(pose, self.params.flat_foot_pitch_deg)
+        loaded = [cps[i] for i in range(len(names)) if res.contact_forces[i, 2] > 1e-6]
         specs.append(friction_cone_spec(np.array(loaded), self.params.friction))
         return cdr.marker_array(specs, header)
 

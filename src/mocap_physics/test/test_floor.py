@@ -232,3 +232,35 @@ def test_from_plane_and_body_up():
     np.testing.assert_allclose(up, [0, 0, 1], atol=1e-9)
     with pytest.raises(ValueError):
         FloorFrame.from_plane(np.zeros(3), 1.0)
+
+
+def test_heel_points_placed_for_the_motion_s_flat_foot_give_the_floor_under_it():
+    """Feet flat on the floor with the ankle-to-toe bone 40 degrees below it (the Bandai Namco
+    convention): with ``flat_foot_pitch_deg`` 40 the tracker takes heel points on the floor with
+    the toes, and the floor comes out within 1 cm and 1 degree. (The template's heel points lie
+    3 cm above the floor there; the fit's lower-quartile offset follows the toes then, so the
+    floor barely moves: what the pitch changes is where the physics holds the heel.)"""
+    R, c = _camera(20.0, 4.0)
+    poses, probs = _walk_in_camera(R, c)
+    sk = poses[0].skeleton
+    drop = np.sin(np.radians(40.0)) - np.sin(np.radians(30.0))   # the turn lowers the toe so much
+    turned = []
+    for pose in poses:
+        rot = np.array(pose.rotations)
+        for side in ('left', 'right'):
+            rot[JOINT_INDEX[f'{side}_ankle']] = axis_angle_to_quat(np.array([0.0, np.radians(10.0),
+                                                                             0.0]))
+        # the whole body raised so that the turned toes stand on the floor again
+        up = R @ np.array([0.0, 0.0, drop * sk.foot_length()])
+        turned.append(Pose(sk, rot, pose.root_position + up))
+    true_normal = R @ np.array([0.0, 0.0, 1.0])
+    mean_root = np.mean([pose.root_position for pose in turned], axis=0)
+    under = mean_root - (true_normal @ mean_root + c[2]) * true_normal
+    errors = {}
+    for pitch in (40.0,):
+        tracker = FloorTracker(FloorTrackerParams(flat_foot_pitch_deg=pitch))
+        for pose, p in zip(turned, probs):
+            frame, _ = tracker.update(pose, p)
+        angle = np.degrees(np.arccos(np.clip(frame.normal @ true_normal, -1, 1)))
+        errors[pitch] = (abs(frame.transform_points(under)[2]), angle)
+    assert errors[40.0][0] < 0.01 and errors[40.0][1] < 1.0, errors

@@ -69,6 +69,42 @@ def test_rest_pose_feet_on_floor(model):
     assert feet[:, 0].min() < com[0] < feet[:, 0].max()       # CoM above the support polygon
 
 
+@pytest.mark.parametrize('pitch', [15.0, 30.0, 40.0])
+def test_the_heel_point_makes_a_foot_flat_at_the_given_pitch(pitch):
+    """With ``flat_foot_pitch_deg``, heel and toe are at one height exactly when the ankle is
+    turned toe-down by ``pitch - 30`` degrees, the heel behind the ankle, and the template
+    (30) is the skeleton's own point."""
+    from mocap_core.rotations import axis_angle_to_quat
+    sk = Skeleton.default()
+    m = PhysicsModel(sk, 70.0, flat_foot_pitch_deg=pitch)
+    rest = Pose.rest(sk)
+    rot = rest.rotations.copy()
+    for side in ('left', 'right'):
+        rot[sk.joint_names.index(f'{side}_ankle')] = axis_angle_to_quat(
+            np.array([0.0, np.radians(pitch - 30.0), 0.0]))
+    q = m.pose_to_q(Pose(sk, rot, rest.root_position))
+    cp = dict(zip(m.contact_names, m.contact_positions(q)))
+    pos = m.joint_positions(q)
+    for side in ('left', 'right'):
+        heel, toe = cp[f'{side}_heel'], cp[f'{side}_toe']
+        ankle = pos[sk.joint_names.index(f'{side}_ankle')]
+        assert heel[2] == pytest.approx(toe[2], abs=1e-9)
+        v = toe - ankle
+        assert np.degrees(np.arcsin(-v[2] / np.linalg.norm(v))) == pytest.approx(pitch)
+        assert heel[0] < ankle[0] < toe[0]
+        # the heel lies a quarter of a foot behind the ankle along the floor
+        assert ankle[0] - heel[0] == pytest.approx(0.25 * sk.foot_length())
+    if pitch == 30.0:
+        template = sk.contact_points()
+        np.testing.assert_allclose(
+            m.model.frames[m.contact_frame_ids[0]].placement.translation,
+            template['left_heel'][1], atol=1e-12)
+    else:   # in the rest pose the heel is then off the floor: below it for a steeper foot
+        q0 = m.pose_to_q(rest)
+        heel0 = m.contact_positions(q0)[0, 2]
+        assert (heel0 < -1e-3) if pitch > 30 else (heel0 > 1e-3)
+
+
 def test_mass_matrix_and_aba_consistent(model):
     """M * aba(q, v, tau) + h == tau (catches a wrongly ordered model, ENVIRONMENT.md)."""
     rng = np.random.default_rng(2)
