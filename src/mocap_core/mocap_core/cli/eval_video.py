@@ -402,10 +402,13 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     agg = aggregate(scores)
     agg['failed'] = failed
     agg['no_output'] = no_output
-    setup = [f'`mocap eval video --split {args.split} --start {args.start} --intrinsics '
+    home = str(Path.home())
+    shown = str(renders).replace(home, '~', 1) if str(renders).startswith(home) else renders
+    setup = ['`mocap eval video' + (f' --renders {shown}' if args.renders else '')
+             + f' --split {args.split} --start {args.start} --intrinsics '
              f'{args.intrinsics}' + ''.join(f' --param {p}' for p in args.param) + '`'
              + (f' (first {args.limit} clips)' if args.limit else ''),
-             f'Rendered clips: `{renders}` ({args.split} split: subjects, contents and styles '
+             f'Rendered clips: `{shown}` ({args.split} split: subjects, contents and styles '
              'never trained on).',
              f'{len(no_output)} clip(s) without any lifter output (the detector found nobody '
              'in any frame) are not in the figures.' if no_output else '']
