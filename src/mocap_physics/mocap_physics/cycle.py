@@ -85,6 +85,7 @@ from mocap_core.pose import Pose
 from mocap_core.skeleton import JOINT_NAMES, Skeleton
 
 from .cycle_params import PhysicsParams
+from .foot import TEMPLATE_FLAT_FOOT_PITCH_DEG
 from .model import GRAVITY, PhysicsModel
 from .qp import GrfQP, PenetrationQP
 from .results import CycleStats, FootWrench, FrameResult
@@ -126,6 +127,10 @@ class PhysicsCycle:
                  params: Optional[PhysicsParams] = None) -> None:
         self.params = params if params is not None else PhysicsParams()
         self.params.validate()
+        #: the flat-foot pitch the model's heel points are placed for (degrees; the template's
+        #: until an estimate replaces it when ``flat_foot_pitch_deg`` is -1)
+        self.flat_foot_pitch = self.params.flat_foot_pitch_deg \
+            if self.params.flat_foot_pitch_deg >= 0 else TEMPLATE_FLAT_FOOT_PITCH_DEG
         self._dynet_net = None
         self.dynet = None
         if self.params.gains_mode == 'learned':
@@ -229,8 +234,28 @@ class PhysicsCycle:
         if self.model is not None and self.model.matches(
                 skeleton, self.params.body_mass, atol=self.params.skeleton_tolerance):
             return False
+        self._build(skeleton)
+        return True
+
+    def set_flat_foot_pitch(self, degrees: float) -> bool:
+        """Place the heel points for a flat foot whose ankle-to-toe bone is ``degrees`` below
+        the floor (:func:`mocap_physics.foot.contact_points`): the model is rebuilt for the
+        same skeleton and the state carries over, as for a refined skeleton. Returns True when
+        the model changed."""
+        degrees = float(degrees)
+        if not (np.isfinite(degrees) and 0.0 <= degrees <= 60.0):
+            raise ValueError(f'flat-foot pitch must be 0 to 60 degrees, got {degrees}')
+        if degrees == self.flat_foot_pitch:
+            return False
+        self.flat_foot_pitch = degrees
+        if self.model is None:
+            return False
+        self._build(self.model.skeleton)
+        return True
+
+    def _build(self, skeleton: Skeleton) -> None:
         old = self.model
-        model = PhysicsModel(skeleton, self.params.body_mass, self.params.flat_foot_pitch_deg)
+        model = PhysicsModel(skeleton, self.params.body_mass, self.flat_foot_pitch)
         self.model = model
         self.stats.model_builds += 1
         if self._whole_body:
@@ -253,7 +278,6 @@ class PhysicsCycle:
             self.reset()
         elif self._q is not None:
             self._q = self._lift(self._q)   # longer legs must not start in the floor
-        return True
 
     # -- helpers -----------------------------------------------------------------------------
     def _difference(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:

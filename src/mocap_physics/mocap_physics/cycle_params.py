@@ -76,13 +76,15 @@ class PhysicsParams:
     stick_speed: float = 0.2              # m/s: cap of that velocity
     stick_release: float = 0.05           # m: the anchor stays this close to the target
     flat_foot_pitch_deg: float = 30.0     # deg: ankle-to-toe pitch of a flat foot (heel point,
-    #                                       mocap_physics.model.contact_points); 30: template
+    #                                       mocap_physics.foot); 30: template; -1: estimated
+    #                                       from the input's flat feet (FlatFootEstimator)
 
     def validate(self) -> None:
         """Raise ValueError naming every bad value."""
         bad: List[str] = []
-        if not (np.isfinite(self.flat_foot_pitch_deg) and 0.0 <= self.flat_foot_pitch_deg <= 60.0):
-            bad.append(f'flat_foot_pitch_deg={self.flat_foot_pitch_deg} (0 to 60)')
+        if not (self.flat_foot_pitch_deg == -1.0 or (np.isfinite(self.flat_foot_pitch_deg)
+                                                     and 0.0 <= self.flat_foot_pitch_deg <= 60.0)):
+            bad.append(f'flat_foot_pitch_deg={self.flat_foot_pitch_deg} (0 to 60, or -1: auto)')
         if not (np.isfinite(self.body_mass) and self.body_mass > 0):
             bad.append(f'body_mass={self.body_mass} (must be > 0)')
         if int(self.substeps) != self.substeps or self.substeps < 1:

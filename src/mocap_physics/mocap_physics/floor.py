@@ -376,6 +376,8 @@ class FloorTrackerParams:
             # would stall and restart it, a jerk at every fit
             bad.append(f'blend_frames={self.blend_frames} (0 to update_every, '
                        f'{self.update_every})')
+        if not (np.isfinite(self.flat_foot_pitch_deg) and 0 <= self.flat_foot_pitch_deg <= 60):
+            bad.append(f'flat_foot_pitch_deg={self.flat_foot_pitch_deg} (0 to 60)')
         if self.prior not in ('body', 'camera'):
             bad.append(f"prior={self.prior!r} ('body' or 'camera')")
         for name in ('prior_weight_m', 'inlier_threshold', 'min_change_deg', 'min_change_m'):

@@ -14,7 +14,8 @@ pitch the heel point implies, so the physics can place the heel for another flat
 
 from __future__ import annotations
 
-from typing import Dict, Tuple
+import collections
+from typing import Deque, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -63,3 +64,60 @@ def contact_positions(pose: Pose, flat_foot_pitch_deg: float = TEMPLATE_FLAT_FOO
     pos, rot = pose.joint_positions(), pose.global_rotations()
     points = contact_points(pose.skeleton, flat_foot_pitch_deg)
     return np.array([pos[j] + rot[j] @ p for j, p in (points[n] for n in CONTACT_POINT_NAMES)])
+
+
+#: Samples (feet in double contact) before :class:`FlatFootEstimator` gives an estimate.
+FLAT_FOOT_MIN_SAMPLES = 30
+#: An estimate that moved by more than this (degrees) from the pitch in use replaces it.
+FLAT_FOOT_UPDATE_DEG = 2.0
+
+
+class FlatFootEstimator:
+    """The flat-foot pitch of a motion stream (``flat_foot_pitch_deg`` -1: auto).
+
+    :meth:`add` takes each target pose in the floor frame (z up, floor z = 0) with its contact
+    probabilities (heel, toe; left, right); a foot whose heel and toe are both above
+    ``threshold`` and whose toe joint is within ``max_height`` m of the floor gives one sample:
+    the angle (degrees) of its ankle-to-toe bone below the floor. :meth:`estimate` is the
+    median of the last ``window`` samples once there are ``min_samples``, clipped to 0-60,
+    else None.
+    """
+
+    def __init__(self, threshold: float = 0.5, max_height: float = 0.08,
+                 min_samples: int = FLAT_FOOT_MIN_SAMPLES, window: int = 300) -> None:
+        self.threshold = float(threshold)
+        self.max_height = float(max_height)
+        self.min_samples = int(min_samples)
+        self._samples: Deque[float] = collections.deque(maxlen=int(window))
+
+    def add(self, pose: Pose, probabilities: Optional[Sequence[float]]) -> int:
+        """Record the feet of ``pose`` that stand flat; returns the samples added (0-2)."""
+        if probabilities is None:
+            return 0
+        prob = np.asarray(probabilities, dtype=float).reshape(-1)
+        if prob.shape != (len(CONTACT_POINT_NAMES),) or not np.all(np.isfinite(prob)):
+            return 0
+        names = pose.skeleton.joint_names
+        pos = pose.joint_positions()
+        added = 0
+        for side in ('left', 'right'):
+            heel = prob[CONTACT_POINT_NAMES.index(f'{side}_heel')]
+            toe_p = prob[CONTACT_POINT_NAMES.index(f'{side}_toe')]
+            ankle, toe = pos[names.index(f'{side}_ankle')], pos[names.index(f'{side}_toe')]
+            v = toe - ankle
+            length = float(np.linalg.norm(v))
+            if heel > self.threshold and toe_p > self.threshold and length > 1e-6 \
+                    and np.all(np.isfinite(v)) and toe[2] < self.max_height:
+                self._samples.append(float(np.degrees(np.arcsin(np.clip(-v[2] / length,
+                                                                        -1.0, 1.0)))))
+                added += 1
+        return added
+
+    @property
+    def samples(self) -> int:
+        return len(self._samples)
+
+    def estimate(self) -> Optional[float]:
+        if len(self._samples) < self.min_samples:
+            return None
+        return float(np.clip(np.median(np.asarray(self._samples)), 0.0, 60.0))

@@ -110,7 +110,7 @@ from mocap_core.rotations import quat_to_matrix
 
 from .cycle_params import PhysicsParams
 from .floor import FloorFrame, FloorTracker, FloorTrackerParams
-from .foot import contact_positions
+from .foot import TEMPLATE_FLAT_FOOT_PITCH_DEG, contact_positions
 from .markers import floor_transform_msg, friction_cone_spec
 from .model import revolute_efforts
 from .camera_rotation import START_FLOOR_FRAME, CameraRotations, floor_in_camera, rotate_pose
@@ -227,8 +227,9 @@ PARAMETERS = (
               read_only=True),
     ParamSpec('flat_foot_pitch_deg', _D.flat_foot_pitch_deg, 'Ankle-to-toe pitch below the '
               'floor of a flat foot, degrees: places the heel contact point (30: the skeleton '
-              'template; the Bandai Namco motion data put it near 40, CMU near 15)',
-              min_value=0.0, max_value=60.0, read_only=True),
+              'template; the Bandai Namco motion data put it near 40, CMU near 15); -1: '
+              'estimated from the input\'s feet in double contact (docs/physics.md)',
+              min_value=-1.0, max_value=60.0, read_only=True),
     ParamSpec('max_frame_gap_s', _D.max_frame_gap, 'A longer gap between frames (stamp time) '
               're-initialises the simulation from the target', min_value=0.001, read_only=True),
     ParamSpec('skeleton_tolerance', _D.skeleton_tolerance, 'Bone offset change (m) that '
@@ -409,7 +410,9 @@ class PhysicsNode(Node):
                 contact_threshold=p['floor_contact_threshold'], prior=p['floor_prior'],
                 freeze_after=p['floor_freeze_after'],
                 blend_frames=p['floor_blend_frames'],
-                flat_foot_pitch_deg=p['flat_foot_pitch_deg']))     # validates them
+                # auto (-1): the template's until the physics has estimated it
+                flat_foot_pitch_deg=p['flat_foot_pitch_deg'] if p['flat_foot_pitch_deg'] >= 0
+                else TEMPLATE_FLAT_FOOT_PITCH_DEG))     # validates them
         raise ValueError(f"floor_source {p['floor_source']!r}: use "
                          f"{', '.join(FLOOR_SOURCES[:-1])} or {FLOOR_SOURCES[-1]}")
 
@@ -661,7 +664,7 @@ class PhysicsNode(Node):
         forces = {n: res.contact_forces[i] for i, n in enumerate(names)}
         specs = pose_marker_specs(pose, ns='physics', color=(1.0, 0.6, 0.1, 1.0),
                                   contacts=res.contact_active.astype(float), forces=forces)
-        cps = contact_positions(pose, self.params.flat_foot_pitch_deg)
+        cps = contact_positions(pose, self._main_online.cycle.flat_foot_pitch)
         loaded = [cps[i] for i in range(len(names)) if res.contact_forces[i, 2] > 1e-6]
         specs.append(friction_cone_spec(np.array(loaded), self.params.friction))
         return cdr.marker_array(specs, header)
@@ -683,6 +686,7 @@ class PhysicsNode(Node):
         d.set_value('time_jumps', st.time_jumps)
         d.set_value('invalid_inputs', st.invalid_inputs)
         d.set_value('model_builds', st.model_builds)
+        d.set_value('flat_foot_pitch_deg', f'{online.cycle.flat_foot_pitch:.1f}')
         d.set_value('friction_cone_violations', st.cone_violations)
         d.set_value('stick_failures', st.stick_failures)
         d.set_value('dynamics', self.params.dynamics)

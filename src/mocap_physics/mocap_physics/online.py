@@ -43,6 +43,7 @@ from mocap_core.skeleton import Skeleton
 from .cycle import InvalidInput, PhysicsCycle
 from .cycle_params import PhysicsParams
 from .floor import FloorFrame, FloorTracker
+from .foot import FLAT_FOOT_UPDATE_DEG, FlatFootEstimator
 from .model import SkeletonError
 from .results import FrameResult
 
@@ -145,6 +146,10 @@ class OnlinePhysics:
         self.contacts: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
         self.last_stamp = -1
         self.last_result: Optional[FrameResult] = None
+        #: the input's flat-foot pitch, estimated when ``flat_foot_pitch_deg`` is -1
+        self.flat_foot: Optional[FlatFootEstimator] = FlatFootEstimator(
+            self.params.contact_probability_threshold) \
+            if self.params.flat_foot_pitch_deg < 0 else None
 
     @property
     def has_floor(self) -> bool:
@@ -262,6 +267,24 @@ class OnlinePhysics:
         self.floor = new
         return True
 
+    def _update_flat_foot(self, pose: Pose, probabilities: Optional[np.ndarray]) -> None:
+        """Feed the flat-foot estimator with a target in the floor frame; an estimate that
+        moved by more than ``FLAT_FOOT_UPDATE_DEG`` from the pitch in use replaces it in the
+        model and the floor tracker."""
+        self.flat_foot.add(pose, probabilities)
+        est = self.flat_foot.estimate()
+        if est is None or abs(est - self.cycle.flat_foot_pitch) <= FLAT_FOOT_UPDATE_DEG:
+            return
+        try:
+            self.cycle.set_flat_foot_pitch(est)
+        except Exception as exc:  # noqa: BLE001 - keep the model in use
+            self._notify('flat_foot', f'flat-foot pitch {est:.1f} deg not applied: {exc}')
+            return
+        if self.tracker is not None:
+            self.tracker.params.flat_foot_pitch_deg = est
+        self._notify('flat_foot', f'flat-foot pitch of the input: {est:.1f} deg below the floor '
+                     f'({self.flat_foot.samples} samples); heel points placed for it', 'info')
+
     def step(self, stamp_ns: int, pose: Pose, frame_id: str = '',
              probabilities: Optional[np.ndarray] = None,
              time_s: Optional[float] = None) -> Optional[PhysicsFrame]:
@@ -287,6 +310,8 @@ class OnlinePhysics:
         if self.floor is not None:
             pose = self.floor.transform_pose(pose)
             out_frame = self.frame_id or 'floor'
+            if self.flat_foot is not None:
+                self._update_flat_foot(pose, probabilities)
         else:
             out_frame = self.frame_id or frame_id or 'world'
         t = stamp_ns * 1e-9 if time_s is None else float(time_s)
