@@ -21,8 +21,13 @@ Per frame the evidence gives a state:
 * ``rotating``: the rotation explains the motion (residual below ``parallax_px``), e.g. a
   tripod pan or a hand-held camera held in place;
 * ``moving``: the residual shows translation (a camera that walks, drives or orbits); the
-  rotation is still estimated (from the inliers, mostly the far background) but the camera's
-  position is unknown;
+  camera's position is unknown. Its rotation cannot be the best pure rotation then: a
+  translating camera's flow over the floor takes the step for a turn (0.3-0.6 deg per frame
+  on rendered walks). Until the floor is known (below), the rotation comes from the dominant
+  plane's homography decomposed (``cv2.decomposeHomographyMat``; the solution that keeps the
+  points in front of the camera and whose plane normal is closest to the optical frame's
+  vertical: a floor under a camera held roughly level; ``moving_rotation`` 'plane', the
+  default; 'homography' keeps the pure rotation);
 * ``unknown``: fewer than ``min_features`` background points could be tracked (a dark or
   texture-less scene, the person fills the image): the rotation is held at its last value.
 
@@ -93,6 +98,9 @@ class CameraMotionParams:
     floor_max_distance: float = 25.0  # floor points further than this many camera heights
     floor_iterations: int = 64       # RANSAC pairs tried per frame
     floor_max_speed: float = 5.0     # m/s: a faster step is rejected as a failure
+    moving_rotation: str = 'plane'   # rotation of a 'moving' frame without a floor:
+    #                                  'homography' (the turn that best explains the flow)
+    #                                  or 'plane' (the dominant plane's homography decomposed)
 
     def validate(self) -> None:
         """Raise ValueError naming every parameter that is out of range."""
@@ -103,6 +111,8 @@ class CameraMotionParams:
         bad += [n for n in ('static_flow_px', 'parallax_px', 'parallax_rate_px', 'ransac_px',
                             'fb_error_px', 'parallax_min_age', 'parallax_max_age',
                             'min_distance_px', 'feature_quality') if not getattr(self, n) > 0]
+        if self.moving_rotation not in ('homography', 'plane'):
+            bad.append('moving_rotation')
         if not 0 <= self.person_margin <= 2:
             bad.append('person_margin')
         if self.min_features > self.max_features:
@@ -518,6 +528,33 @@ class CameraMotionEstimator:
         resid = np.linalg.norm(self._project(self._bearings(a[inl]) @ R) - b[inl], axis=1)
         return R, inl, float(np.median(resid)) / ref
 
+    def _plane_rotation(self, a: np.ndarray, b: np.ndarray, ref: float
+                        ) -> Optional[np.ndarray]:
+        """The rotation taking frame-b bearings to frame-a bearings from matched pixels ``a``,
+        ``b`` (N, 2) of a camera that turns *and* translates over a plane: the homography of
+        the dominant plane (RANSAC) decomposed (``cv2.decomposeHomographyMat``), keeping the
+        solutions that put the inliers in front of the camera and of them the one whose plane
+        normal is closest to the optical frame's vertical (a floor under a camera held
+        roughly level). None when it fails."""
+        p = self.params
+        if len(a) < p.min_features:
+            return None
+        H, hin = cv2.findHomography(a, b, cv2.RANSAC, p.ransac_px * ref)
+        if H is None or hin is None or hin.sum() < p.min_features:
+            return None
+        n, Rs, ts, normals = cv2.decomposeHomographyMat(H, self._Kw)
+        inl = hin.ravel().astype(bool)
+        pts = a[inl].reshape(-1, 1, 2).astype(np.float64)
+        try:
+            keep = cv2.filterHomographyDecompByVisibleRefpoints(Rs, normals, pts, pts)
+        except cv2.error:
+            keep = None
+        idx = list(range(n)) if keep is None else [int(k) for k in np.ravel(keep)]
+        if not idx:
+            return None
+        best = max(idx, key=lambda k: abs(float(normals[k][1, 0])))
+        return np.asarray(Rs[best]).T    # H maps a to b: x_b ~ R x_a; we want b_a = R_rel b_b
+
     def update(self, image: np.ndarray, stamp_s: float,
                keypoints: Optional[np.ndarray] = None) -> CameraMotionEstimate:
         """The camera's motion from the previous frame into this one.
@@ -594,6 +631,13 @@ class CameraMotionEstimator:
             state = 'rotating' if parallax < p.parallax_px else 'moving'
         if self._kf_age >= p.parallax_min_age and rate > p.parallax_rate_px:
             state = 'moving'
+        if state == 'moving' and p.moving_rotation == 'plane' and not self.has_floor:
+            # a translating camera: the best pure turn absorbs the parallax of the step
+            kf = has.sum() >= p.min_features
+            R_p = self._plane_rotation(self._origin[has] if kf else prv,
+                                       cur[has] if kf else cur, ref)
+            if R_p is not None:
+                R0_cur = (self._kf_R0 if kf else self._R0) @ R_p
         step: Optional[np.ndarray] = None
         n_floor = n_inl = 0
         if state == 'static':
