@@ -67,8 +67,8 @@ def contact_positions(pose: Pose, flat_foot_pitch_deg: float = TEMPLATE_FLAT_FOO
 
 
 #: Samples (feet in double contact) before :class:`FlatFootEstimator` gives an estimate.
-FLAT_FOOT_MIN_SAMPLES = 30
-#: An estimate that moved by more than this (degrees) from the pitch in use replaces it.
+FLAT_FOOT_MIN_SAMPLES = 60
+#: An estimate further than this (degrees) from the pitch in use replaces it.
 FLAT_FOOT_UPDATE_DEG = 2.0
 
 

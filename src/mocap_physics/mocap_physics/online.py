@@ -146,10 +146,12 @@ class OnlinePhysics:
         self.contacts: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
         self.last_stamp = -1
         self.last_result: Optional[FrameResult] = None
-        #: the input's flat-foot pitch, estimated when ``flat_foot_pitch_deg`` is -1
+        #: the input's flat-foot pitch, estimated when ``flat_foot_pitch_deg`` is -1 (until
+        #: the estimate is decided; then None and ``flat_foot_estimate`` holds it)
         self.flat_foot: Optional[FlatFootEstimator] = FlatFootEstimator(
             self.params.contact_probability_threshold) \
             if self.params.flat_foot_pitch_deg < 0 else None
+        self.flat_foot_estimate: Optional[float] = None
 
     @property
     def has_floor(self) -> bool:
@@ -268,12 +270,18 @@ class OnlinePhysics:
         return True
 
     def _update_flat_foot(self, pose: Pose, probabilities: Optional[np.ndarray]) -> None:
-        """Feed the flat-foot estimator with a target in the floor frame; an estimate that
-        moved by more than ``FLAT_FOOT_UPDATE_DEG`` from the pitch in use replaces it in the
-        model and the floor tracker."""
+        """Feed the flat-foot estimator with a target in the floor frame. Its first estimate
+        is decided once: more than ``FLAT_FOOT_UPDATE_DEG`` from the pitch in use, it replaces
+        it in the model and the floor tracker; then the estimator stops (each change moves
+        the heel points under a standing foot: re-estimating as samples came in made the
+        physics output jitter a third more on rendered clips, docs/physics.md)."""
         self.flat_foot.add(pose, probabilities)
         est = self.flat_foot.estimate()
-        if est is None or abs(est - self.cycle.flat_foot_pitch) <= FLAT_FOOT_UPDATE_DEG:
+        if est is None:
+            return
+        samples, self.flat_foot = self.flat_foot.samples, None
+        self.flat_foot_estimate = est
+        if abs(est - self.cycle.flat_foot_pitch) <= FLAT_FOOT_UPDATE_DEG:
             return
         try:
             self.cycle.set_flat_foot_pitch(est)
@@ -283,7 +291,7 @@ class OnlinePhysics:
         if self.tracker is not None:
             self.tracker.params.flat_foot_pitch_deg = est
         self._notify('flat_foot', f'flat-foot pitch of the input: {est:.1f} deg below the floor '
-                     f'({self.flat_foot.samples} samples); heel points placed for it', 'info')
+                     f'({samples} samples); heel points placed for it', 'info')
 
     def step(self, stamp_ns: int, pose: Pose, frame_id: str = '',
              probabilities: Optional[np.ndarray] = None,

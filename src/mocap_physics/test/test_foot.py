@@ -68,6 +68,10 @@ def test_a_flat_foot_of_40_degrees_keeps_its_pitch_with_the_estimate(pitch):
     got = _foot_pitch(out)
     if pitch < 0:
         assert online.cycle.flat_foot_pitch == pytest.approx(40.0, abs=0.5)
+        # decided once: the estimator stopped, the model was rebuilt once
+        assert online.flat_foot is None and online.flat_foot_estimate == pytest.approx(40.0,
+                                                                                       abs=0.5)
+        assert online.cycle.stats.model_builds == 2
         assert got == pytest.approx(40.0, abs=2.0), got
         # heel and toe of the output on the floor together
         cp = contact_positions(out, online.cycle.flat_foot_pitch)
