@@ -239,8 +239,8 @@ class PhysicsCycle:
 
     def set_flat_foot_pitch(self, degrees: float) -> bool:
         """Place the heel points for a flat foot whose ankle-to-toe bone is ``degrees`` below
-        the floor (:func:`mocap_physics.foot.contact_points`): the model is rebuilt for the
-        same skeleton and the state carries over, as for a refined skeleton. Returns True when
+        the floor (:func:`mocap_physics.foot.contact_points`): a model with the new heel
+        frames for the same skeleton; the state and the solvers carry over. Returns True when
         the model changed."""
         degrees = float(degrees)
         if not (np.isfinite(degrees) and 0.0 <= degrees <= 60.0):
@@ -250,7 +250,15 @@ class PhysicsCycle:
         self.flat_foot_pitch = degrees
         if self.model is None:
             return False
-        self._build(self.model.skeleton)
+        # only the heel frames move: the joint tree, the solvers and the state stay as they
+        # are (rebuilding the solvers and lifting the state out of the floor at the switch
+        # made the output jump)
+        old = self.model
+        self.model = PhysicsModel(old.skeleton, self.params.body_mass, degrees)
+        self.stats.model_builds += 1
+        if self._dynet_net is not None:
+            from .dynet import LearnedGains
+            self.dynet = LearnedGains(self._dynet_net, self.model, self.params.dynet_weights)
         return True
 
     def _build(self, skeleton: Skeleton) -> None:

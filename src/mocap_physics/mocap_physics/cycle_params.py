@@ -39,7 +39,7 @@ class PhysicsParams:
     residual_bound: float = 1.0           # body weights: bound of each residual force row
     residual_moment_bound: float = 0.5    # body weight x m: bound of each residual moment row
     stance_gain: float = 20.0             # 1/s: stance points return to their anchor (whole body)
-    stance_release: float = 0.15          # m: whole body: a stance anchor follows the target
+    stance_release: float = 0.08          # m: whole body: a stance anchor follows the target
     #                                       point when it is farther (at most stick_speed)
     slide_threshold: float = 0.15         # body weights: horizontal residual that lets a foot
     #                                       with saturated friction slide (whole body)
