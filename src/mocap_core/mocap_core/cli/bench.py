@@ -48,6 +48,13 @@ STAGE_TOPICS = {'keypoints': topics.KEYPOINTS, 'lifter': topics.LIFTER_MOTION,
                 'physics': topics.PHYSICS_MOTION, 'world': topics.WORLD_MOTION}
 
 
+
+def _default_sigint() -> None:
+    """In a node process started by the benchmark: Ctrl-C (SIGINT) stops it, also when the
+    benchmark itself runs where SIGINT is ignored (a background job of a script, nohup),
+    whose disposition a child would inherit and then never stop on the SIGINT it is sent."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
 def _proc_stats(pid: int) -> Optional[Dict[str, float]]:
     """CPU seconds (user + system) and peak resident memory (MiB) of a live process."""
     try:
@@ -206,7 +213,7 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
         logs[name] = work / f"{config['name']}_{name}.log"
         with logs[name].open('wb') as f:
             procs[name] = subprocess.Popen(cmd, env=env, stdout=f, stderr=subprocess.STDOUT,
-                                           stdin=subprocess.DEVNULL)
+                                           stdin=subprocess.DEVNULL, preexec_fn=_default_sigint)
 
     def wait_for(name: str, text: str, timeout: float = 120) -> None:
         deadline = time.monotonic() + timeout
@@ -236,7 +243,8 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
             with logs['composed'].open('wb') as f:
                 procs['composed'] = subprocess.Popen(cmd, env=env, stdout=f,
                                                      stderr=subprocess.STDOUT,
-                                                     stdin=subprocess.DEVNULL)
+                                                     stdin=subprocess.DEVNULL,
+                                                     preexec_fn=_default_sigint)
             wait_for('composed', 'detector')
         else:
             start('lifter', {'mode': config['lifter_mode']})
@@ -329,7 +337,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
         pkg, exe = installed[stage].package, installed[stage].executable
         with (work / f'{exe}.log').open('wb') as f:
             procs[exe] = subprocess.Popen(ros2 + ['run', pkg, exe], env=env, stdout=f,
-                                          stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+                                          stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                          preexec_fn=_default_sigint)
     listener = _Listener(int(env['ROS_DOMAIN_ID']))
     samples: Dict[str, List[tuple]] = {n: [] for n in procs}
     try:
