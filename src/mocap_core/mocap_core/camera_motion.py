@@ -23,11 +23,12 @@ Per frame the evidence gives a state:
 * ``moving``: the residual shows translation (a camera that walks, drives or orbits); the
   camera's position is unknown. Its rotation cannot be the best pure rotation then: a
   translating camera's flow over the floor takes the step for a turn (0.3-0.6 deg per frame
-  on rendered walks). Until the floor is known (below), the rotation comes from the dominant
-  plane's homography decomposed (``cv2.decomposeHomographyMat``; the solution that keeps the
-  points in front of the camera and whose plane normal is closest to the optical frame's
-  vertical: a floor under a camera held roughly level; ``moving_rotation`` 'plane', the
-  default; 'homography' keeps the pure rotation);
+  on rendered walks). With ``moving_rotation`` 'plane' (opt-in) the rotation comes, until
+  the floor is known (below), from the dominant plane's homography decomposed
+  (``cv2.decomposeHomographyMat``; the solution that keeps the points in front of both
+  cameras and whose plane normal is closest to the optical frame's vertical: a floor under a
+  camera held roughly level). It fails for a camera pitched down 40 degrees or more, so the
+  default, 'homography', keeps the pure rotation (docs/global.md);
 * ``unknown``: fewer than ``min_features`` background points could be tracked (a dark or
   texture-less scene, the person fills the image): the rotation is held at its last value.
 
@@ -71,6 +72,11 @@ import numpy as np
 from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
+#: ``moving_rotation`` 'plane': when two decompositions of the floor's homography put the
+#: points in front of the camera, the more vertical normal is taken only if it has at least
+#: this component along the optical frame's vertical (cos 37 deg: a camera pitched or rolled
+#: less than about 37 deg); otherwise the pure rotation is kept.
+PLANE_MIN_VERTICAL = 0.8
 
 
 @dataclass(frozen=True)
@@ -98,7 +104,7 @@ class CameraMotionParams:
     floor_max_distance: float = 25.0  # floor points further than this many camera heights
     floor_iterations: int = 64       # RANSAC pairs tried per frame
     floor_max_speed: float = 5.0     # m/s: a faster step is rejected as a failure
-    moving_rotation: str = 'plane'   # rotation of a 'moving' frame without a floor:
+    moving_rotation: str = 'homography'  # rotation of a 'moving' frame without a floor:
     #                                  'homography' (the turn that best explains the flow)
     #                                  or 'plane' (the dominant plane's homography decomposed)
 
@@ -531,29 +537,46 @@ class CameraMotionEstimator:
     def _plane_rotation(self, a: np.ndarray, b: np.ndarray, ref: float
                         ) -> Optional[np.ndarray]:
         """The rotation taking frame-b bearings to frame-a bearings from matched pixels ``a``,
-        ``b`` (N, 2) of a camera that turns *and* translates over a plane: the homography of
+        ``b`` (N, 2) of a camera that turns *and* translates over a floor: the homography of
         the dominant plane (RANSAC) decomposed (``cv2.decomposeHomographyMat``), keeping the
-        solutions that put the inliers in front of the camera and of them the one whose plane
-        normal is closest to the optical frame's vertical (a floor under a camera held
-        roughly level). None when it fails."""
+        solutions that put the inliers in front of both cameras
+        (``cv2.filterHomographyDecompByVisibleRefpoints`` on normalised points) and of them
+        the one whose plane normal is closest to the optical frame's vertical. None (the
+        caller keeps the pure rotation) when it fails, or when two solutions remain and the
+        more vertical normal is not clearly a floor under a camera held roughly level
+        (``|n_y|`` below :data:`PLANE_MIN_VERTICAL`: a camera tilted steeply down)."""
         p = self.params
         if len(a) < p.min_features:
             return None
         H, hin = cv2.findHomography(a, b, cv2.RANSAC, p.ransac_px * ref)
         if H is None or hin is None or hin.sum() < p.min_features:
             return None
-        n, Rs, ts, normals = cv2.decomposeHomographyMat(H, self._Kw)
-        inl = hin.ravel().astype(bool)
-        pts = a[inl].reshape(-1, 1, 2).astype(np.float64)
         try:
-            keep = cv2.filterHomographyDecompByVisibleRefpoints(Rs, normals, pts, pts)
+            n, Rs, ts, normals = cv2.decomposeHomographyMat(H, self._Kw)
+        except cv2.error:
+            return None
+        inl = hin.ravel().astype(bool)
+        try:
+            keep = cv2.filterHomographyDecompByVisibleRefpoints(
+                Rs, normals, self._normalised(a[inl]), self._normalised(b[inl]))
         except cv2.error:
             keep = None
         idx = list(range(n)) if keep is None else [int(k) for k in np.ravel(keep)]
         if not idx:
             return None
         best = max(idx, key=lambda k: abs(float(normals[k][1, 0])))
+        # two solutions survive the visibility test as a rule (a plane's homography is
+        # ambiguous): the floor's normal is the more vertical one only for a camera held
+        # roughly level; a camera pitched down more steeply sees the other solution's normal
+        # (along its own step) as the more vertical. Undecided: the caller's pure rotation.
+        if len(idx) > 1 and abs(float(normals[best][1, 0])) < PLANE_MIN_VERTICAL:
+            return None
         return np.asarray(Rs[best]).T    # H maps a to b: x_b ~ R x_a; we want b_a = R_rel b_b
+
+    def _normalised(self, pts: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels at the working size -> (N, 1, 2) float32 normalised image points."""
+        h = np.concatenate([pts, np.ones((len(pts), 1))], axis=1) @ self._Kw_inv.T
+        return (h[:, :2] / h[:, 2:3]).reshape(-1, 1, 2).astype(np.float32)
 
     def update(self, image: np.ndarray, stamp_s: float,
                keypoints: Optional[np.ndarray] = None) -> CameraMotionEstimate:
