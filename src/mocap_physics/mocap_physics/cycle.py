@@ -247,15 +247,18 @@ class PhysicsCycle:
             raise ValueError(f'flat-foot pitch must be 0 to 60 degrees, got {degrees}')
         if degrees == self.flat_foot_pitch:
             return False
-        self.flat_foot_pitch = degrees
         if self.model is None:
+            self.flat_foot_pitch = degrees
             return False
         # only the heel frames move: the joint tree, the solvers and the state stay as they
         # are (rebuilding the solvers and lifting the state out of the floor at the switch
-        # made the output jump)
-        old = self.model
-        self.model = PhysicsModel(old.skeleton, self.params.body_mass, degrees)
+        # made the output jump); the heels' stance anchors were where the old heel points
+        # stood, so they are taken again
+        model = PhysicsModel(self.model.skeleton, self.params.body_mass, degrees)
+        self.model, self.flat_foot_pitch = model, degrees
         self.stats.model_builds += 1
+        heels = [i for i, name in enumerate(model.contact_names) if name.endswith('_heel')]
+        self._anchored[heels] = False
         if self._dynet_net is not None:
             from .dynet import LearnedGains
             self.dynet = LearnedGains(self._dynet_net, self.model, self.params.dynet_weights)

@@ -318,10 +318,12 @@ class OnlinePhysics:
         if self.floor is not None:
             pose = self.floor.transform_pose(pose)
             out_frame = self.frame_id or 'floor'
-            if self.flat_foot is not None:
-                self._update_flat_foot(pose, probabilities)
         else:
             out_frame = self.frame_id or frame_id or 'world'
+        # the flat feet are measured against a floor that has settled: a fitted one (not the
+        # provisional floor of the first frames), or the input's own (no floor source)
+        if self.flat_foot is not None and (self.tracker is None or self.tracker.ready):
+            self._update_flat_foot(pose, probabilities)
         t = stamp_ns * 1e-9 if time_s is None else float(time_s)
         t0 = time.perf_counter()
         try:

@@ -50,10 +50,13 @@ STAGE_TOPICS = {'keypoints': topics.KEYPOINTS, 'lifter': topics.LIFTER_MOTION,
 
 
 def _default_sigint() -> None:
-    """In a node process started by the benchmark: Ctrl-C (SIGINT) stops it, also when the
-    benchmark itself runs where SIGINT is ignored (a background job of a script, nohup),
-    whose disposition a child would inherit and then never stop on the SIGINT it is sent."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    """Let the node processes the benchmark starts stop on SIGINT also when the benchmark
+    itself runs where SIGINT is ignored (a background job of a script, nohup): an ignored
+    signal stays ignored across ``exec``, a handled one is reset to the default there. Call
+    once, before any child is started."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
 
 def _proc_stats(pid: int) -> Optional[Dict[str, float]]:
     """CPU seconds (user + system) and peak resident memory (MiB) of a live process."""
@@ -213,7 +216,7 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
         logs[name] = work / f"{config['name']}_{name}.log"
         with logs[name].open('wb') as f:
             procs[name] = subprocess.Popen(cmd, env=env, stdout=f, stderr=subprocess.STDOUT,
-                                           stdin=subprocess.DEVNULL, preexec_fn=_default_sigint)
+                                           stdin=subprocess.DEVNULL)
 
     def wait_for(name: str, text: str, timeout: float = 120) -> None:
         deadline = time.monotonic() + timeout
@@ -243,8 +246,7 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
             with logs['composed'].open('wb') as f:
                 procs['composed'] = subprocess.Popen(cmd, env=env, stdout=f,
                                                      stderr=subprocess.STDOUT,
-                                                     stdin=subprocess.DEVNULL,
-                                                     preexec_fn=_default_sigint)
+                                                     stdin=subprocess.DEVNULL)
             wait_for('composed', 'detector')
         else:
             start('lifter', {'mode': config['lifter_mode']})
@@ -325,6 +327,7 @@ def cmd_soak(args: argparse.Namespace) -> int:
     import random
     import tempfile
 
+    _default_sigint()
     work = Path(tempfile.mkdtemp(prefix='mocap_soak_'))
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -337,8 +340,7 @@ def cmd_soak(args: argparse.Namespace) -> int:
         pkg, exe = installed[stage].package, installed[stage].executable
         with (work / f'{exe}.log').open('wb') as f:
             procs[exe] = subprocess.Popen(ros2 + ['run', pkg, exe], env=env, stdout=f,
-                                          stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                          preexec_fn=_default_sigint)
+                                          stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     listener = _Listener(int(env['ROS_DOMAIN_ID']))
     samples: Dict[str, List[tuple]] = {n: [] for n in procs}
     try:
@@ -470,6 +472,7 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
     import random
     import tempfile
 
+    _default_sigint()
     work = Path(tempfile.mkdtemp(prefix='mocap_bench_'))
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

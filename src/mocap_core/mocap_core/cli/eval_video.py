@@ -402,8 +402,10 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     agg = aggregate(scores)
     agg['failed'] = failed
     agg['no_output'] = no_output
-    home = str(Path.home())
-    shown = str(renders).replace(home, '~', 1) if str(renders).startswith(home) else renders
+    try:
+        shown = f'~/{Path(renders).resolve().relative_to(Path.home().resolve())}'
+    except ValueError:
+        shown = str(renders)
     setup = ['`mocap eval video' + (f' --renders {shown}' if args.renders else '')
              + f' --split {args.split} --start {args.start} --intrinsics '
              f'{args.intrinsics}' + ''.join(f' --param {p}' for p in args.param) + '`'
