@@ -575,8 +575,8 @@ class CameraMotionEstimator:
 
     def _normalised(self, pts: np.ndarray) -> np.ndarray:
         """(N, 2) pixels at the working size -> (N, 1, 2) float32 normalised image points."""
-        h = np.concatenate([pts, np.ones((len(pts), 1))], axis=1) @ self._Kw_inv.T
-        return (h[:, :2] / h[:, 2:3]).reshape(-1, 1, 2).astype(np.float32)
+        b = self._bearings(pts)
+        return (b[:, :2] / b[:, 2:3]).reshape(-1, 1, 2).astype(np.float32)
 
     def update(self, image: np.ndarray, stamp_s: float,
                keypoints: Optional[np.ndarray] = None) -> CameraMotionEstimate:

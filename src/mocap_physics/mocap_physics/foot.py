@@ -14,8 +14,7 @@ pitch the heel point implies, so the physics can place the heel for another flat
 
 from __future__ import annotations
 
-import collections
-from typing import Deque, Dict, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -79,16 +78,16 @@ class FlatFootEstimator:
     probabilities (heel, toe; left, right); a foot whose heel and toe are both above
     ``threshold`` and whose toe joint is within ``max_height`` m of the floor gives one sample:
     the angle (degrees) of its ankle-to-toe bone below the floor. :meth:`estimate` is the
-    median of the last ``window`` samples once there are ``min_samples``, clipped to 0-60,
-    else None.
+    median of the samples once there are ``min_samples``, clipped to 0-60, else None (the
+    caller decides once and stops feeding it).
     """
 
     def __init__(self, threshold: float = 0.5, max_height: float = 0.08,
-                 min_samples: int = FLAT_FOOT_MIN_SAMPLES, window: int = 300) -> None:
+                 min_samples: int = FLAT_FOOT_MIN_SAMPLES) -> None:
         self.threshold = float(threshold)
         self.max_height = float(max_height)
         self.min_samples = int(min_samples)
-        self._samples: Deque[float] = collections.deque(maxlen=int(window))
+        self._samples: List[float] = []
 
     def add(self, pose: Pose, probabilities: Optional[Sequence[float]]) -> int:
         """Record the feet of ``pose`` that stand flat; returns the samples added (0-2)."""

@@ -72,8 +72,9 @@ def plan(splits: Sequence[str], seed: int, limit: Optional[int] = None,
             names = [str(n) for n in ds.ids]
             order = sorted(range(len(names)), key=lambda i: clip_seed(seed, names[i]))
             if min_travel > 0:
-                order = [i for i in order if travel_per_stretch(
-                    ds.motion(i).root_positions, ds.motion(i).fps, max_seconds) >= min_travel]
+                motions = (ds.motion(i) for i in order)
+                order = [i for i, m in zip(order, motions) if travel_per_stretch(
+                    m.root_positions, m.fps, max_seconds) >= min_travel]
             if limit is not None:
                 order = order[:limit]
             jobs += [Job(split, names[i], dataset_index=i) for i in order]
