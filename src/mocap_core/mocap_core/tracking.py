@@ -53,6 +53,15 @@ import numpy as np
 
 from .skeleton import KEYPOINT_INDEX, KEYPOINT_NAMES, NUM_KEYPOINTS
 
+#: Boxes overlap (two people in each other's way) from this IoU on.
+OVERLAP_IOU = 0.05
+#: A detection whose box overlaps two people's tracks this much could be either of them.
+MERGED_IOU = 0.3
+
+#: An occluder's box is widened by this share of its height on every side
+#: (:func:`appearance_features`).
+OCCLUDER_MARGIN = 0.05
+
 #: Per-keypoint OKS tolerance (COCO's sigmas for the 17 body points; the foot points as the
 #: ankles'), in the 23-point layout order.
 KEYPOINT_SIGMAS = np.array(
@@ -118,6 +127,7 @@ class TrackerParams:
     #: where it was last seen, takes its id (a person hidden for a while by another).
     appearance_max_lost_s: float = 3.0
     appearance_reid: float = 1.5
+    appearance_reid_recent: float = 4.0
     reid_speed: float = 1.0
 
     def __post_init__(self) -> None:
@@ -216,6 +226,7 @@ class _Track:
     appearance: Optional[np.ndarray] = None   # (R, 3) Lab per region, NaN where unknown
     spread: float = 0.0                       # running mean distance of its frames (Lab)
     looks: int = 0                            # frames that measured ``spread``
+    crowded: bool = False                     # its last match overlapped another person
 
     def box_at(self, dt: float) -> np.ndarray:
         x, _ = self.kalman.predicted(dt)
@@ -262,6 +273,7 @@ class PersonTracker:
         self._tracks: List[_Track] = []
         self._next_id = 1
         self._last_s: Optional[float] = None
+        self._with_looks = False
         self.stats = TrackerStats()
 
     # ------------------------------------------------------------------ public
@@ -305,18 +317,35 @@ class PersonTracker:
             self.reset()
             dt = 0.0
         self._last_s = stamp_s
+        self._with_looks = image is not None
         keep, boxes = self._valid(cands)
         cands, sigs = cands[keep], [sigs[i] for i in keep]
         kept = self._merge_duplicates(cands, boxes)
         rows = [keep[k] for k in kept]
         cands, boxes, sigs = cands[kept], [boxes[k] for k in kept], [sigs[k] for k in kept]
-        looks = ([appearance_features(image, c, b) for c, b in zip(cands, boxes)]
+        looks = ([appearance_features(image, c, b, p.min_confidence,
+                                      in_front_of(b, [boxes[k] for k in range(len(boxes))
+                                                      if k != j]))
+                  for j, (c, b) in enumerate(zip(cands, boxes))]
                  if image is not None else [None] * len(cands))
-        alone = [all(box_iou(boxes[j], boxes[k]) < 0.05 for k in range(len(cands)) if k != j)
-                 for j in range(len(cands))]
-
         pred_kp = [t.keypoints_at(dt) for t in self._tracks]
         pred_box = [t.box_at(dt) for t in self._tracks]
+        # which confirmed tracks (matched or coasting) each candidate's box overlaps: a
+        # candidate among several people may show another's colours, and its match is
+        # decided by clothes, not by position alone (a person hidden by another in front)
+        # (a track lost for longer than max_lost_s is kept for its clothes only: where it
+        # is predicted to be means little)
+        recent = [i for i, t in enumerate(self._tracks)
+                  if t.id > 0 and stamp_s - t.last_s <= p.max_lost_s]
+        near = [{i for i in recent if box_iou(boxes[j], pred_box[i]) >= OVERLAP_IOU}
+                for j in range(len(cands))]
+        merged = [image is not None and sum(
+            1 for i in near[j] if box_iou(boxes[j], pred_box[i]) >= MERGED_IOU) > 1
+            for j in range(len(cands))]
+        seen_near = [{i for i in near[j] if not self._tracks[i].missed}
+                     for j in range(len(cands))]
+        apart = [all(box_iou(boxes[j], boxes[k]) < OVERLAP_IOU
+                     for k in range(len(cands)) if k != j) for j in range(len(cands))]
         sim = np.zeros((len(self._tracks), len(cands)))
         for i, t in enumerate(self._tracks):
             lost = stamp_s - t.last_s
@@ -331,10 +360,15 @@ class PersonTracker:
         # crossing). A lone match keeps its similarity, so a person whose colours change at
         # once (a light switched on, the camera's exposure) keeps their id.
         # A track lost for longer than max_lost_s is kept only for its clothes: they decide.
+        # two people at one place: a detection there could be either (its keypoints and
+        # colours mix both); it is not taken and both tracks coast through, to be told
+        # apart by their clothes once they part (without the image, the motion model is
+        # the only cue and it takes the detection)
+        sim[:, merged] = 0.0
         plausible = sim >= p.match_threshold
         for i, j in zip(*np.nonzero(plausible)):
             t = self._tracks[i]
-            if plausible[:, j].sum() > 1 or plausible[i].sum() > 1 or \
+            if plausible[:, j].sum() > 1 or plausible[i].sum() > 1 or len(near[j]) > 1 or \
                     stamp_s - t.last_s > p.max_lost_s:
                 sim[i, j] *= self._look_factor(t, looks[j])
         # Matching cascade: the tracks seen in the last frame choose first, then the coasting
@@ -359,6 +393,11 @@ class PersonTracker:
                 free = [c for c in free if c not in taken]
         matched_t = {r for r, _ in matches}
         matched_c = {c for _, c in matches}
+        track_of = {j: i for i, j in matches}
+        # a candidate overlapping no other candidate and no other person's track shows its
+        # own colours only: only then are they learned
+        alone = [apart[j] and not (seen_near[j] - {track_of.get(j, -1)})
+                 for j in range(len(cands))]
 
         ready: List[Tuple[_Track, int]] = []
         for i, j in matches:
@@ -372,6 +411,7 @@ class PersonTracker:
             t.last_s = stamp_s
             t.row = rows[j]
             t.hits += 1
+            t.crowded = bool(seen_near[j] - {i})
             if sigs[j] is not None and t.signature is None:
                 t.signature = np.asarray(sigs[j], dtype=np.float64)
             if alone[j]:
@@ -403,7 +443,7 @@ class PersonTracker:
             survivors.append(t)
         self._tracks = survivors
 
-        new = [j for j in range(len(cands)) if j not in matched_c]
+        new = [j for j in range(len(cands)) if j not in matched_c and not merged[j]]
         new.sort(key=lambda j: -float(np.sum(cands[j][:, 2])))
         for j in new:
             if len(self._tracks) >= 2 * p.max_persons:
@@ -432,11 +472,17 @@ class PersonTracker:
         a coasting track (:meth:`_reid_target`; that track is marked for removal, id -1), else
         a new one while fewer than ``max_persons`` ids are held; otherwise it stays tentative
         (counted as ignored) until someone leaves."""
+        if self._with_looks and t.crowded and t.appearance is None:
+            return        # among others and its clothes unknown: who it is can wait
         lost = self._reid_target(t, stamp_s, matched)
         if lost is not None:
             t.id, t.first_s = lost.id, lost.first_s
             if t.signature is None:
                 t.signature = lost.signature
+            if lost.appearance is not None:      # the person's colours as long known
+                look, t.appearance = t.appearance, lost.appearance.copy()
+                t.spread, t.looks = lost.spread, lost.looks
+                self._learn_look(t, look)
             lost.id = -1
             self.stats.reidentified += 1
         elif sum(1 for o in self._tracks if o.id > 0) < self.params.max_persons:
@@ -448,11 +494,17 @@ class PersonTracker:
 
     def _reid_target(self, t: _Track, stamp_s: float, matched: set) -> Optional[_Track]:
         """The lost (coasting, unmatched this frame) track that the tentative track ``t``
-        plausibly continues, or None: its box within ``reid_distance`` box heights of that
-        track's prediction, a height within 0.7-1.4 of it, and a signature that agrees; the
-        nearest such track."""
+        plausibly continues, or None.
+
+        Plausible: a box within ``reid_distance`` box heights of that track's prediction
+        (plus ``reid_speed`` per second lost beyond ``max_lost_s``), a height within 0.7-1.4
+        of it, a signature that agrees, and colours within ``appearance_reid`` of its sigma
+        (``appearance_reid_recent`` while lost for at most ``max_lost_s``: a person coming
+        out from behind another still shows some of the other's colours). Of several, the
+        one with the lowest distance in box heights plus colour distance in sigmas (two
+        people lost at one crossing are told apart by their clothes)."""
         p = self.params
-        best, best_d = None, np.inf
+        best, best_key = None, np.inf
         tb = self._box_of(t)
         for i, o in enumerate(self._tracks):
             if o is t or o.id <= 0 or not o.missed or i in matched:
@@ -461,15 +513,17 @@ class PersonTracker:
             ob = o.box_at(lost)
             d = float(np.hypot(tb[0] - ob[0], tb[1] - ob[1]) / max(ob[2], 1.0))
             look = appearance_distance(o.appearance, t.appearance)
-            limit = p.appearance_reid * self._sigma(o)
+            sigma = self._sigma(o)
             if lost <= p.max_lost_s:
-                ok = d < p.reid_distance
+                ok = d < p.reid_distance and (
+                    look is None or look <= p.appearance_reid_recent * sigma)
             else:            # kept for its appearance: it must look the same
-                ok = look is not None and look <= limit and \
+                ok = look is not None and look <= p.appearance_reid * sigma and \
                     d < p.reid_distance + p.reid_speed * lost
-            if ok and d < best_d and 0.7 <= tb[2] / max(ob[2], 1.0) <= 1.4 and \
+            key = d + (0.0 if look is None else look / sigma)
+            if ok and key < best_key and 0.7 <= tb[2] / max(ob[2], 1.0) <= 1.4 and \
                     self._signature_ok(o, t.signature):
-                best, best_d = o, d
+                best, best_key = o, key
         return best
 
     def _keep_s(self, t: _Track) -> float:
@@ -489,6 +543,9 @@ class PersonTracker:
     def _learn_look(self, t: _Track, look: Optional[np.ndarray]) -> None:
         """Update the running mean colours of ``t`` and the spread of its frames about it."""
         if look is None:
+            return
+        if not t.id:        # a tentative track: its latest look (a first frame may be wrong)
+            t.appearance = look.copy()
             return
         d = appearance_distance(t.appearance, look)
         if d is not None:
@@ -609,16 +666,21 @@ _REGION_INDEX = tuple(tuple((KEYPOINT_INDEX[a], KEYPOINT_INDEX[b]) for a, b in p
 
 
 def appearance_features(image: np.ndarray, kp: np.ndarray, box: Optional[np.ndarray] = None,
-                        min_confidence: float = 0.3) -> Optional[np.ndarray]:
+                        min_confidence: float = 0.3,
+                        occluders: Sequence[np.ndarray] = ()) -> Optional[np.ndarray]:
     """(R, 3) mean colour (CIE Lab, L in [0, 100]) of each region of
     :data:`APPEARANCE_REGIONS` of one person, NaN for a region whose keypoints are not seen
-    or fall outside the image; None when no region is seen. Each segment is sampled at 1/4,
-    1/2 and 3/4 of its length with a square patch of side 4 % of the person's height.
+    or fall outside the image or behind an occluder; None when no region is seen. Each
+    segment is sampled at 1/4, 1/2 and 3/4 of its length with a square patch of side 4 % of
+    the person's height.
 
     Args:
         image: (H, W, 3) uint8 BGR.
         kp: (23, 3) keypoints (u, v px, confidence).
         box: the person's :func:`keypoint_box` (computed when None).
+        occluders: boxes ``(cx, cy, h, w)`` (px) of people in front of this one; a patch
+            whose centre falls in one (widened by :data:`OCCLUDER_MARGIN` of its height on
+            every side: a body is wider than its joints) shows them, and is not sampled.
     """
     import cv2
 
@@ -643,7 +705,9 @@ def appearance_features(image: np.ndarray, kp: np.ndarray, box: Optional[np.ndar
                 u, v = (1 - t) * kp[a, :2] + t * kp[b, :2]
                 x0, y0 = int(round(u)) - half, int(round(v)) - half
                 x1, y1 = x0 + 2 * half + 1, y0 + 2 * half + 1
-                if x0 < 0 or y0 < 0 or x1 > W or y1 > H:
+                if x0 < 0 or y0 < 0 or x1 > W or y1 > H or any(
+                        abs(u - o[0]) <= o[3] / 2 + OCCLUDER_MARGIN * o[2] and
+                        abs(v - o[1]) <= o[2] * (0.5 + OCCLUDER_MARGIN) for o in occluders):
                     continue
                 samples.append(img[y0:y1, x0:x1].reshape(-1, 3).mean(axis=0))
         if samples:
@@ -655,6 +719,14 @@ def appearance_features(image: np.ndarray, kp: np.ndarray, box: Optional[np.ndar
                        cv2.COLOR_BGR2LAB)[0]
     means[which] = lab
     return means
+
+
+def in_front_of(box: np.ndarray, others: Sequence[np.ndarray]) -> List[np.ndarray]:
+    """Of the boxes ``(cx, cy, h, w)`` (px) ``others``, those whose
+    bottom (the feet, on a floor seen from above its height) is lower in the image by more
+    than 3 % of ``box``'s height: the people standing nearer the camera."""
+    bottom = box[1] + box[2] / 2
+    return [o for o in others if o[1] + o[2] / 2 > bottom + 0.03 * box[2]]
 
 
 def appearance_distance(a: Optional[np.ndarray], b: Optional[np.ndarray]) -> Optional[float]:
