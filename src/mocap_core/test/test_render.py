@@ -361,3 +361,23 @@ def test_two_rendered_people_crossing_keep_their_ids(model, tmp_path):
     assert m['switches'] == 0 and m['ids_per_actor'] == 1.0, m
     assert set(map(tuple, m['ids'].values())) == {(1,), (2,)}, m
     assert m['recall'] > 0.5 and m['median_error_rel_height'] < 0.05, m
+
+
+def test_people_report_keeps_the_held_out_seeds_apart(tmp_path):
+    """`mocap eval people` reports the seeds not looked at while tuning on their own."""
+    from mocap_core.cli.eval_people import summarise, write_report
+    row = dict(scene='cross2', actors=2, frames=100, person_frames=500.0, ids_per_actor=1.0,
+               recall=0.8, recall_unhidden=0.9, fragments=0, false_ids=0,
+               median_error_rel_height=0.02, ids={'0': [1], '1': [2]})
+    rows = [dict(row, seed=0, switches=2.0), dict(row, seed=1, switches=0.0),
+            dict(row, seed=5, switches=1.0, ids_per_actor=1.5)]
+    res = summarise(rows)
+    res['rows'] = rows
+    assert res['switches_per_1000'] == pytest.approx(2.0)     # 3 in 1500
+    write_report(res, tmp_path / 'r.md', 'mocap eval people --seeds 6', held_out_from=5)
+    text = (tmp_path / 'r.md').read_text()
+    assert '| seeds 0-4 (looked at while tuning) | 2 | 1000 | 2.00 (2) | 1.00 | 80.0% |' \
+        in text, text
+    assert '| seeds 5+ (held out: not looked at) | 1 | 500 | 2.00 (1) | 1.50 | 80.0% |' in text
+    saved = json.loads((tmp_path / 'r.json').read_text())
+    assert saved['groups']['seeds 5+ (held out: not looked at)']['switches'] == 1
