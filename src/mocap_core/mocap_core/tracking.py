@@ -34,6 +34,15 @@
   different rendered people 18-53 apart. A lost track with an appearance is kept for
   ``appearance_max_lost_s`` (longer than ``max_lost_s``), and a new person within
   ``appearance_reid`` sigmas of its colours near where it was lost takes its id back.
+* **People in each other's way** (measured on rendered crossings, docs/multi_person.md).
+  A candidate whose box overlaps the boxes of more than one person's track counts as
+  ambiguous, even when it is the only candidate: the person behind, found alone for a frame,
+  must not go to the track of the one in front. A candidate that overlaps two tracks by
+  ``MERGED_IOU`` or more is, with the image, taken by neither. The detector's row there mixes
+  both people, so both tracks coast and their clothes tell them apart once they part.
+  Colours are sampled only where no nearer person stands (:func:`in_front_of`: the feet lower
+  in the image). A new track among others whose colours are still unknown waits for its id.
+  Re-identification ranks the lost tracks by distance plus colour distance.
 * **Signatures.** :meth:`PersonTracker.set_signature` attaches a vector to an id (the 3D
   stages' bone lengths, m); a coasting track only takes a candidate whose signature, when the
   caller gives one, is within ``signature_tolerance`` (relative) of its own.
