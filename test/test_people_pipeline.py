@@ -85,6 +85,10 @@ def test_two_people_through_every_stage(two_people):
             assert len(both[topics.body_topic(pid, 'physics', name)]) == FRAMES, (pid, name)
     combined = both[topics.bodies_topic('physics', 'motion')]
     assert sorted({pid for m in combined for pid, _ in motion_to_bodies(m)}) == [1, 2]
+    # one combined message per stamp with everybody in it (the world stage then runs its
+    # network once for both)
+    assert len(combined) == FRAMES
+    assert all(len(motion_to_bodies(m)) == 2 for m in combined)
     # the main person (row 0, id 1) on the single-person topic: exactly as when alone
     main = both[topics.PHYSICS_MOTION]
     ref = alone[topics.PHYSICS_MOTION]
@@ -112,6 +116,7 @@ def test_two_people_through_every_stage(two_people):
     assert np.abs(w1.rotations - w2.rotations).max() > 0.1     # a walker and a waver
     worlds = both[topics.bodies_topic('world', 'motion')]
     assert sorted({pid for m in worlds for pid, _ in motion_to_bodies(m)}) == [1, 2]
+    assert len(worlds) == FRAMES
 
 
 def test_mocap_process_and_bvh_export_of_two_people(two_people, tmp_path):

@@ -614,8 +614,9 @@ class GMRNode(Node):
             prepare_outputs([person.online for _, person, _ in batch])
             ready = [(pid, person, frames + person.online.take(), event, gap)
                      for pid, person, (frames, event, gap) in batch]
-        for pid, person, frames, event, gap in ready:
-            self._finish(pid, person, frames, event, gap)
+        self._publish_combined([
+            (pid, self._finish(pid, person, frames, event, gap, combined=False))
+            for pid, person, frames, event, gap in ready])
         timeout = int(self.p['person_timeout_s'] * 1e9)
         for pid in [q for q, pr in self.persons.items()
                     if stamp - pr.seen_ns > timeout or pr.seen_ns - stamp > max(timeout, 10**9)]:
@@ -689,8 +690,9 @@ class GMRNode(Node):
         return frames, event, gap
 
     def _finish(self, pid: Optional[int], person: _Person, frames, event: str,
-                gap: float) -> None:
-        """After :meth:`_add` and the emission: restarts, the first-frame log, publish."""
+                gap: float, combined: bool = True) -> List[WorldFrame]:
+        """After :meth:`_add` and the emission: restarts, the first-frame log, publish
+        (:meth:`_publish`; returns the frames published)."""
         self.diag.error(None)
         self.last_input = time.monotonic()
         if event:
@@ -705,7 +707,7 @@ class GMRNode(Node):
             self.get_logger().info(
                 f'waiting for {person.online.frames_needed()} frames (look-ahead) before the '
                 'first world pose')
-        self._publish(pid, person, frames)
+        return self._publish(pid, person, frames, combined)
 
     def _check_rate(self, dt: float) -> None:
         """Warn once when the input rate is not the model's (the motions per frame would be
@@ -736,20 +738,21 @@ class GMRNode(Node):
             self.restart_time = None
             self.diag.warn(None)
         if time.monotonic() - self.last_input > self.p['flush_after_s']:
-            for pid, person in self._everyone():
-                if person.online is not None and person.online.pending():
-                    self._publish(pid, person, person.online.flush())
+            self.flush()
 
     def flush(self) -> None:
         """End of the input (offline processing): emit the frames waiting for look-ahead."""
-        for pid, person in self._everyone():
-            if person.online is not None and person.online.pending():
-                self._publish(pid, person, person.online.flush())
+        self._publish_combined([
+            (pid, self._publish(pid, person, person.online.flush(), combined=False))
+            for pid, person in self._everyone()
+            if person.online is not None and person.online.pending()])
 
     def _publish(self, pid: Optional[int], person: _Person,
-                 frames: Sequence[WorldFrame]) -> None:
-        """A person's ready frames: on their own topics and combined (several people), and
-        on the single-person topics for the main person (or the single-person input)."""
+                 frames: Sequence[WorldFrame], combined: bool = True) -> List[WorldFrame]:
+        """A person's ready frames: on their own topics and combined (several people;
+        unless ``combined`` is False, when the caller sends everybody's frames together), and
+        on the single-person topics for the main person (or the single-person input).
+        Returns the frames published (the finite ones)."""
         good = []
         for f in frames:
             pose = f.pose
@@ -777,8 +780,8 @@ class GMRNode(Node):
                     self.main_last_ns = f.stamp_ns
                 self._publish_main(f, pose, header, odom, person.path)
             self.diag.output.tick()
-        if pid is not None:
-            self._publish_combined(pid, good)
+        if pid is not None and combined:
+            self._publish_combined([(pid, good)])
         online = self.online
         if online is not None:
             self._report_nonfinite(online.nonfinite_outputs)
@@ -793,6 +796,7 @@ class GMRNode(Node):
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
                 self.diag.set_value('unfused_frames', online.unanchored_frames)
         self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
+        return good
 
     def _publish_main(self, f: WorldFrame, pose, header, odom: bytes,
                       path: cdr.PathTrail) -> None:
@@ -819,12 +823,20 @@ class GMRNode(Node):
         b.publish(pid, 'odom', lambda: odom)
         b.publish(pid, 'path', path.message)
 
-    def _publish_combined(self, pid: int, frames: Sequence[WorldFrame]) -> None:
-        """Combined world messages of person ``pid``'s frames (one per frame: the persons'
-        world frames become ready at their own times)."""
-        for f in frames:
-            self.combined.publish(rc.make_header(f.stamp_ns, self.output_frame),
-                                  [(pid, f.pose, None)])
+    def _publish_combined(self, released: Sequence[Tuple[Optional[int], Sequence[WorldFrame]]]
+                          ) -> None:
+        """Combined world messages of the frames several people released at once: one per
+        stamp with everybody's frame of it, the main person first (``(None, frames)`` of the
+        single-person input are not combined)."""
+        by_stamp: Dict[int, list] = {}
+        for pid, frames in released:
+            if pid is None:
+                continue
+            for f in frames:
+                by_stamp.setdefault(f.stamp_ns, []).append((pid, f.pose, None))
+        for stamp in sorted(by_stamp):
+            bodies = sorted(by_stamp[stamp], key=lambda b: (b[0] != self.main_id, b[0]))
+            self.combined.publish(rc.make_header(stamp, self.output_frame), bodies)
 
     def _report_nonfinite(self, count: int) -> None:
         """Diagnostics and a rate-limited warning for frames whose network output was not

@@ -132,6 +132,9 @@ PARAMETERS = (
               'many frames, in regions of the image taken in turn (between, each person is '
               'tracked in their own window); while nobody new appears the interval doubles, up '
               'to 3x this', min_value=1, max_value=1000, read_only=True),
+    ParamSpec('landmark_threads', 2, 'blazepose_multi: the people\'s landmark models run in '
+              'up to this many threads at once (1: one after the other)', min_value=1,
+              max_value=16, read_only=True),
     ParamSpec('min_person_height_px', 48.0, 'Persons whose seen keypoints span fewer pixels '
               'in height are ignored', min_value=0.0, read_only=True),
     ParamSpec('id_after_frames', 0, 'A new person gets an id (and is published) after being '
@@ -338,7 +341,8 @@ class KeypointsNode(Node):
                     max_detection_interval=3 * p['detection_interval'] if p['tracking'] else 1,
                     min_person_px=p['min_person_height_px'],
                     min_detection_confidence=p['min_detection_confidence'],
-                    min_tracking_confidence=p['min_tracking_confidence'])
+                    min_tracking_confidence=p['min_tracking_confidence'],
+                    threads=p['landmark_threads'])
             else:
                 detector = create_detector(
                     name, tracking=p['tracking'],

@@ -43,15 +43,17 @@ def test_one_person_as_the_single_person_detector(clip_frames, clip_detections, 
     assert shared > 0.85 and err < 6.0, (err, shared)
 
 
-def test_two_people_side_by_side(clip_frames, clip_detections):
+@pytest.mark.parametrize('threads', [1, 2])
+def test_two_people_side_by_side(clip_frames, clip_detections, threads):
     """The clip next to its mirror image: two people, each found where the single-person
-    detector finds the person of its half (mirrored for the right half)."""
+    detector finds the person of its half (mirrored for the right half); the two windows'
+    landmarkers one after the other or at once in two threads."""
     frames = clip_frames[::3][:30]
     single = np.concatenate(clip_detections[0])[::3][:30]
     w = frames[0].image.shape[1]
     found = []
     scan = len(BlazePoseMultiDetector.regions(2 * w, frames[0].image.shape[0]))
-    with BlazePoseMultiDetector(max_persons=4, detection_interval=1) as det:
+    with BlazePoseMultiDetector(max_persons=4, detection_interval=1, threads=threads) as det:
         for f, s in zip(frames, single):
             img = np.concatenate([f.image, f.image[:, ::-1]], axis=1)
             got = det.detect(img)
@@ -73,6 +75,8 @@ def test_bad_parameters_and_closing():
         BlazePoseMultiDetector(max_persons=0)
     with pytest.raises(ValueError):
         BlazePoseMultiDetector(detection_interval=0)
+    with pytest.raises(ValueError):
+        BlazePoseMultiDetector(threads=0)
     det = BlazePoseMultiDetector()
     det.close()
     det.close()

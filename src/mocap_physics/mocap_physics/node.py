@@ -84,7 +84,7 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
@@ -458,12 +458,14 @@ class PhysicsNode(Node):
             self._problem('contacts', f"ignoring {self.p['bodies_contacts_topic']}: {exc}")
             return
         stamp = stamp_to_ns(msg.header.stamp)
+        released = []
         for pid, probs in bodies:
             online = self.persons.get(pid)
             if online is not None:
-                self._publish(online.add_contacts(stamp, probs), pid)
+                released.append((pid, online.add_contacts(stamp, probs)))
             else:                                  # contacts before the person's first motion
                 self._person(pid).add_contacts(stamp, probs)
+        self._publish_people(released)
 
     @property
     def _main_online(self) -> OnlinePhysics:
@@ -497,14 +499,16 @@ class PhysicsNode(Node):
             self.diag.dropped += 1
             self._problem('motion', f'dropping a motion message: {exc}')
             return
+        released = []
         for pid, pose in bodies:
             online = self._person(pid)
             self.person_seen_ns[pid] = stamp
             accepted, frames = online.admit(stamp)
-            self._publish(frames, pid)
             if accepted:
-                self._publish(online.add_motion(stamp, self._derotated(stamp, pose),
-                                                msg.header.frame_id), pid)
+                frames = frames + online.add_motion(stamp, self._derotated(stamp, pose),
+                                                    msg.header.frame_id)
+            released.append((pid, frames))
+        self._publish_people(released)
         timeout = int(self.p['person_timeout_s'] * 1e9)
         for pid in [q for q, t in self.person_seen_ns.items() if stamp - t > timeout or
                     t - stamp > max(timeout, 10**9)]:
@@ -570,24 +574,26 @@ class PhysicsNode(Node):
     def on_timer(self) -> None:
         """Frames whose contacts did not come in time go now."""
         self._publish(self.online.process())
-        for pid, online in list(self.persons.items()):
-            self._publish(online.process(), pid)
+        self._publish_people([(pid, online.process())
+                              for pid, online in list(self.persons.items())])
 
     def flush(self) -> None:
         """End of the input (offline processing): step every waiting frame now, with the
         contacts that arrived (no more waiting for late ones)."""
         self._publish(self.online.flush())
-        for pid, online in list(self.persons.items()):
-            self._publish(online.flush(), pid)
+        self._publish_people([(pid, online.flush())
+                              for pid, online in list(self.persons.items())])
 
     # -- output --------------------------------------------------------------------------------
-    def _publish(self, frames: List[PhysicsFrame], pid: Optional[int] = None) -> None:
+    def _publish(self, frames: List[PhysicsFrame], pid: Optional[int] = None,
+                 combined: bool = True) -> None:
         """Publish frames of the single-person input (``pid`` None) or of person ``pid``: on
-        their own topics, combined (one message per call and stamp), and, for the main
-        person, on the single-person topics."""
+        their own topics, combined (one message per stamp, unless ``combined`` is False:
+        :meth:`_publish_people` sent it with everybody's), and, for the main person, on the
+        single-person topics."""
         if not frames:
             return
-        if pid is not None:
+        if pid is not None and combined:
             # combined first: the next stage follows everybody from it, and hears it before
             # the single-person topics
             self._publish_combined(pid, frames)
@@ -600,6 +606,22 @@ class PhysicsNode(Node):
                     self.main_last_ns = frame.stamp_ns
                     self._publish_frame(frame)
             self.diag.output.tick()
+
+    def _publish_people(self, released: List[Tuple[int, List[PhysicsFrame]]]) -> None:
+        """Publish the frames several people released in one callback: everybody's frames
+        of a stamp in one combined message (the world stage then runs its network once for
+        all of them), then each person's own topics and the main person's."""
+        by_stamp: Dict[int, List[Tuple[int, PhysicsFrame]]] = {}
+        for pid, frames in released:
+            for frame in frames:
+                by_stamp.setdefault(frame.stamp_ns, []).append((pid, frame))
+        for stamp in sorted(by_stamp):
+            group = sorted(by_stamp[stamp], key=lambda pf: (pf[0] != self.main_id, pf[0]))
+            self.combined.publish(make_header(stamp, group[0][1].frame_id), [
+                (pid, f.result.pose, f.result.contact_active.astype(float))
+                for pid, f in group])
+            for pid, frame in group:
+                self._publish([frame], pid, combined=False)
 
     def _publish_body(self, pid: int, frame: PhysicsFrame) -> None:
         res = frame.result
