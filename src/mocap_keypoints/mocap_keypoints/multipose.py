@@ -172,6 +172,18 @@ def jumped(last: np.ndarray, kp: np.ndarray, max_shift: float = 1.0,
                 or max(a[1], b[1]) / min(a[1], b[1]) > max_ratio)
 
 
+def _where(win: '_Window') -> List[np.ndarray]:
+    """Where the person of ``win`` may be in this frame, before its landmarker has run: the
+    last frame's keypoints and, after two frames in a row, those moved on as much again."""
+    if win.last is None:
+        return []
+    if win.prev is None:
+        return [win.last]
+    ahead = win.last.copy()
+    ahead[:, :2] = 2.0 * win.last[:, :2] - win.prev[:, :2]
+    return [win.last, ahead]
+
+
 @dataclass
 class _Window:
     x0: int                 # top-left corner in the image (px), may lie outside it
@@ -180,6 +192,7 @@ class _Window:
     landmarker: object      # a VIDEO-mode PoseLandmarker (one pose)
     missed: int = 0
     last: Optional[np.ndarray] = None   # (23, 3) image keypoints of the last frame
+    prev: Optional[np.ndarray] = None   # those of the frame before (None after a miss)
 
 
 class BlazePoseMultiDetector:
@@ -280,6 +293,7 @@ class BlazePoseMultiDetector:
                 if win.missed >= self.max_missed:
                     self._end(win)
                 continue
+            win.prev = win.last if win.missed == 0 else None
             win.missed = 0
             win.last = kp
             people.append(kp)
@@ -439,8 +453,9 @@ class BlazePoseMultiDetector:
         """Yield ``(window, keypoints or None)`` of every window on this frame. With
         ``threads`` > 1 and several windows, the landmarkers run at once (MediaPipe lets go of
         the GIL while it infers), each masking the others' people where they were in the
-        last frame; with one thread, in turn, a later window masking the earlier ones where
-        they are in this frame."""
+        last frame and where they would be now at the same speed (:func:`_where`); with one
+        thread, in turn, a later window masking the earlier ones where they are in this
+        frame."""
         wins = list(self._windows)
         with warnings.catch_warnings():        # here: the filters are global, not per thread
             warnings.simplefilter('ignore', UserWarning)
@@ -449,7 +464,7 @@ class BlazePoseMultiDetector:
                     from concurrent.futures import ThreadPoolExecutor
                     self._pool = ThreadPoolExecutor(self.threads,
                                                     thread_name_prefix='landmarks')
-                jobs = [(win, [o.last for o in wins if o is not win and o.last is not None])
+                jobs = [(win, [k for o in wins if o is not win for k in _where(o)])
                         for win in wins]
                 found = list(self._pool.map(lambda j: self._track(j[0], rgb, j[1]), jobs))
                 yield from zip(wins, found)
