@@ -152,6 +152,7 @@ class PhysicsCycle:
         self._period = self.params.frame_period
         self._anchor = np.zeros((4, 2))
         self._anchored = np.zeros(4, dtype=bool)
+        self._root_offset = np.zeros(2)       # m, floor x, y (_follow_feet)
         self._stick_vertical = True
         #: the stick needs the residual root actuation (module docstring); the whole-body
         #: dynamics holds stance points by its own acceleration rows instead
@@ -403,6 +404,7 @@ class PhysicsCycle:
                 self._period = 0.9 * self._period + 0.1 * gap
         if not np.isfinite(stamp):
             stamp = (self._stamp or 0.0) + self._period
+        q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
         v_hat = None
         if self._target_prev is not None and reinit is None:
             v_hat = self._difference(self._target_prev, q_hat) / frame_dt
@@ -453,6 +455,33 @@ class PhysicsCycle:
         if events:
             self.stats.last_event = ', '.join(events)
         return result
+
+    def _follow_feet(self, q_hat: np.ndarray, frame_dt: float, reinit: bool) -> np.ndarray:
+        """Root follow (``root_follow_gain`` > 0, whole body): the target's root moved
+        horizontally so that the targets of the points anchored in stance lie on their
+        anchors. The lifter's root and legs often disagree about how far a step goes; the
+        stance anchors then follow the target (``stance_release``) and the feet slide. This
+        takes the disagreement out of the root instead: a translation, which changes no
+        joint angle. The offset (m, floor x, y) moves ``root_follow_gain`` of the way to its
+        new value per frame and fades with ``root_follow_relax_s`` while nothing stands."""
+        p = self.params
+        if p.root_follow_gain <= 0.0 or not self._stance_on:
+            return q_hat
+        if reinit or self._q is None:
+            self._root_offset = np.zeros(2)
+            return q_hat
+        held = self._anchored
+        if np.any(held):
+            tgt = self.model.contact_positions(q_hat)[:, :2]
+            wanted = np.mean(self._anchor[held] - tgt[held], axis=0)
+            self._root_offset = self._root_offset + p.root_follow_gain * (
+                wanted - self._root_offset)
+        else:
+            self._root_offset = self._root_offset * np.exp(
+                -frame_dt / max(p.root_follow_relax_s, 1e-6))
+        out = q_hat.copy()
+        out[:2] += self._root_offset
+        return out
 
     def _simulate(self, q_hat, v_ff, mask, alpha, dt, n_sub) -> dict:
         """Run n_sub sub-steps from the current state; raises _Fallback."""

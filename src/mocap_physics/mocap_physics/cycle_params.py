@@ -41,6 +41,11 @@ class PhysicsParams:
     stance_gain: float = 20.0             # 1/s: stance points return to their anchor (whole body)
     stance_release: float = 0.08          # m: whole body: a stance anchor follows the target
     #                                       point when it is farther (at most stick_speed)
+    root_follow_gain: float = 0.0         # whole body: per frame, the target root moves this
+    #                                       share of the way to where the stance feet's targets
+    #                                       lie on their anchors (0: off; cycle.py, root follow)
+    root_follow_relax_s: float = 1.0      # s: without stance, that root offset fades with
+    #                                       this time constant
     slide_threshold: float = 0.15         # body weights: horizontal residual that lets a foot
     #                                       with saturated friction slide (whole body)
     slide_time: float = 0.1               # s: whole body: that residual is averaged over this
@@ -110,12 +115,14 @@ class PhysicsParams:
                        'physics)')
         if self.dynamics not in DYNAMICS_MODES:
             bad.append(f"dynamics={self.dynamics!r} ('whole_body' or 'paper')")
-        for name in ('residual_weight', 'residual_horizontal_weight', 'stance_gain'):
+        for name in ('residual_weight', 'residual_horizontal_weight', 'stance_gain',
+                     'root_follow_relax_s'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val > 0):
                 bad.append(f'{name}={val} (must be > 0)')
         for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness',
-                     'stance_release', 'slide_threshold', 'slide_time', 'stance_height'):
+                     'stance_release', 'slide_threshold', 'slide_time', 'stance_height',
+                     'root_follow_gain'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0):
                 bad.append(f'{name}={val} (must be >= 0)')

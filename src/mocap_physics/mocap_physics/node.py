@@ -198,6 +198,14 @@ PARAMETERS = (
     ParamSpec('stance_release', _D.stance_release, 'whole_body: a stance point\'s anchor '
               'follows the target point when it is farther than this, at most stick_speed, m',
               min_value=0.0, read_only=True),
+    ParamSpec('root_follow_gain', _D.root_follow_gain, 'whole_body: per frame the target '
+              'root moves this share of the way to where the stance feet\'s targets lie on '
+              'their anchors (0: off): the lifter\'s disagreement between root and legs is '
+              'taken out of the root instead of sliding the feet', min_value=0.0,
+              max_value=1.0, read_only=True),
+    ParamSpec('root_follow_relax_s', _D.root_follow_relax_s, 'whole_body: without stance, '
+              'the root follow offset fades with this time constant, s', min_value=0.01,
+              read_only=True),
     ParamSpec('slide_threshold', _D.slide_threshold, 'whole_body: a foot whose friction is '
               'saturated slides when holding it needs a horizontal residual root force above '
               'this, body weights', min_value=0.0, read_only=True),
@@ -307,6 +315,8 @@ class PhysicsNode(Node):
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
             wbid_condensed=p['wbid_condensed'],
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
+            root_follow_gain=p['root_follow_gain'],
+            root_follow_relax_s=p['root_follow_relax_s'],
             stance_height=p['stance_height'], slide_time=p['slide_time'],
             velocity_feedforward=p['velocity_feedforward'])
         self._limited = KeyedRateLimit()

@@ -330,3 +330,35 @@ def test_runs_are_bit_identical(skeleton):
                               for i, t in enumerate(targets)]))
         _ = [np.zeros(int(k)) for k in rng.integers(1, 50, size=10)]   # vary the heap
     assert all(np.array_equal(outs[0], o) for o in outs[1:])
+
+
+def test_root_follow_keeps_the_stance_feet_where_they_stand(skeleton):
+    """A target that says both feet stand while its root drifts forward at 0.3 m/s (the
+    lifter's root and legs disagreeing about a step). By default the stance anchors follow
+    their targets once these are 8 cm away, and the feet slide with the root. With the root
+    follow the disagreement is taken out of the root: the feet stay, and the offset fades
+    once nothing stands."""
+    rest = Pose.rest(skeleton)
+
+    def run(params, frames=60, contacts=(1, 1, 1, 1)):
+        cyc = PhysicsCycle(skeleton, params)
+        xy = []
+        for i in range(frames):
+            target = Pose(skeleton, rest.rotations, rest.root_position + [0.3 * i / FPS, 0, 0])
+            r = cyc.step(target, i / FPS, contacts)
+            xy.append(cyc.model.contact_positions(r.q)[:, :2])
+        return cyc, np.array(xy)
+
+    _, plain = run(PhysicsParams())
+    cyc, held = run(PhysicsParams(root_follow_gain=0.5))
+    slide_plain = np.linalg.norm(plain[-1] - plain[0], axis=1).max()
+    slide_held = np.linalg.norm(held[-1] - held[0], axis=1).max()
+    assert slide_plain > 0.3, slide_plain            # the drift beyond the 8 cm slides
+    assert slide_held < 0.03, slide_held
+    assert cyc._root_offset[0] < -0.4                # the root was held back by the drift
+    # nothing stands: the offset fades (time constant root_follow_relax_s = 1 s)
+    before = float(np.linalg.norm(cyc._root_offset))
+    for i in range(60, 90):
+        target = Pose(skeleton, rest.rotations, rest.root_position + [0.3 * i / FPS, 0, 0])
+        cyc.step(target, i / FPS, [0, 0, 0, 0])
+    assert np.linalg.norm(cyc._root_offset) < 0.45 * before
