@@ -22,7 +22,8 @@
 * **Appearance.** With the image, :func:`appearance_features` gives each candidate the mean
   colours (CIE Lab) of its torso, upper arms, thighs and shins. A track keeps a running mean
   of its own and of how far its frames fall from it (its *spread*), updated only while it
-  overlaps nobody (a person half hidden by another would take the other's colours); a
+  overlaps nobody, detected or followed in the last ``max_lost_s`` (a person half hidden by
+  another would take the other's colours); a
   candidate's similarity to a track is multiplied by ``exp(-d^2 / (2 sigma^2))`` (d: the
   mean colour distance over the regions both show; sigma: twice the track's spread, at least
   ``appearance_sigma_min``; floored at ``appearance_floor``) where the match is ambiguous (the
@@ -38,11 +39,13 @@
   A candidate whose box overlaps the boxes of more than one person's track counts as
   ambiguous, even when it is the only candidate: the person behind, found alone for a frame,
   must not go to the track of the one in front. A candidate that overlaps two tracks by
-  ``MERGED_IOU`` or more is, with the image, taken by neither. The detector's row there mixes
+  ``MERGED_IOU`` or more, where fewer candidates than those tracks are, is, with the image,
+  taken by none. The detector's row there mixes
   both people, so both tracks coast and their clothes tell them apart once they part.
   Colours are sampled only where no nearer person stands (:func:`in_front_of`: the feet lower
-  in the image). A new track among others whose colours are still unknown waits for its id.
-  Re-identification ranks the lost tracks by distance plus colour distance.
+  in the image). A new track among others whose colours are still unknown waits for its id
+  (at most ``max_lost_s``). Re-identification ranks the lost tracks by distance plus colour
+  distance.
 * **Signatures.** :meth:`PersonTracker.set_signature` attaches a vector to an id (the 3D
   stages' bone lengths, m); a coasting track only takes a candidate whose signature, when the
   caller gives one, is within ``signature_tolerance`` (relative) of its own.
@@ -348,13 +351,18 @@ class PersonTracker:
                   if t.id > 0 and stamp_s - t.last_s <= p.max_lost_s]
         near = [{i for i in recent if box_iou(boxes[j], pred_box[i]) >= OVERLAP_IOU}
                 for j in range(len(cands))]
-        merged = [image is not None and sum(
-            1 for i in near[j] if box_iou(boxes[j], pred_box[i]) >= MERGED_IOU) > 1
-            for j in range(len(cands))]
-        seen_near = [{i for i in near[j] if not self._tracks[i].missed}
-                     for j in range(len(cands))]
         apart = [all(box_iou(boxes[j], boxes[k]) < OVERLAP_IOU
                      for k in range(len(cands)) if k != j) for j in range(len(cands))]
+        # fewer detections than people where two or more people's tracks overlap (the
+        # detector found one of two): a detection there could be either
+        def crowd(j: int) -> int:
+            return sum(1 for i in near[j] if box_iou(boxes[j], pred_box[i]) >= MERGED_IOU)
+
+        def here(j: int) -> int:
+            return 1 + sum(1 for k in range(len(cands))
+                           if k != j and box_iou(boxes[j], boxes[k]) >= OVERLAP_IOU)
+        merged = [image is not None and crowd(j) > 1 and here(j) < crowd(j)
+                  for j in range(len(cands))]
         sim = np.zeros((len(self._tracks), len(cands)))
         for i, t in enumerate(self._tracks):
             lost = stamp_s - t.last_s
@@ -369,10 +377,13 @@ class PersonTracker:
         # crossing). A lone match keeps its similarity, so a person whose colours change at
         # once (a light switched on, the camera's exposure) keeps their id.
         # A track lost for longer than max_lost_s is kept only for its clothes: they decide.
-        # two people at one place: a detection there could be either (its keypoints and
-        # colours mix both); it is not taken and both tracks coast through, to be told
-        # apart by their clothes once they part (without the image, the motion model is
-        # the only cue and it takes the detection)
+        # people at one place and fewer detections there: a detection could be any of them
+        # (its keypoints and colours mix them); it is not taken and the tracks coast
+        # through, to be told apart by their clothes once they part (without the image, the
+        # motion model is the only cue and it takes the detection). As many detections as
+        # people there (two people side by side) are matched as usual; a hidden person's
+        # track leaves the recent ones after max_lost_s, so the one in front is not held
+        # back for longer.
         sim[:, merged] = 0.0
         plausible = sim >= p.match_threshold
         for i, j in zip(*np.nonzero(plausible)):
@@ -405,7 +416,7 @@ class PersonTracker:
         track_of = {j: i for i, j in matches}
         # a candidate overlapping no other candidate and no other person's track shows its
         # own colours only: only then are they learned
-        alone = [apart[j] and not (seen_near[j] - {track_of.get(j, -1)})
+        alone = [apart[j] and not (near[j] - {track_of.get(j, -1)})
                  for j in range(len(cands))]
 
         ready: List[Tuple[_Track, int]] = []
@@ -420,7 +431,7 @@ class PersonTracker:
             t.last_s = stamp_s
             t.row = rows[j]
             t.hits += 1
-            t.crowded = bool(seen_near[j] - {i})
+            t.crowded = bool(near[j] - {i})
             if sigs[j] is not None and t.signature is None:
                 t.signature = np.asarray(sigs[j], dtype=np.float64)
             if alone[j]:
@@ -463,6 +474,7 @@ class PersonTracker:
                        signature=None if sigs[j] is None else np.asarray(sigs[j], float))
             self._set_shape(t, cands[j], boxes[j])
             t.row = rows[j]
+            t.crowded = bool(near[j])
             if alone[j]:
                 self._learn_look(t, looks[j])
             self._tracks.append(t)
@@ -481,8 +493,9 @@ class PersonTracker:
         a coasting track (:meth:`_reid_target`; that track is marked for removal, id -1), else
         a new one while fewer than ``max_persons`` ids are held; otherwise it stays tentative
         (counted as ignored) until someone leaves."""
-        if self._with_looks and t.crowded and t.appearance is None:
-            return        # among others and its clothes unknown: who it is can wait
+        if self._with_looks and t.crowded and t.appearance is None and \
+                stamp_s - t.first_s <= self.params.max_lost_s:
+            return        # among others and its clothes unknown: who it is can wait (a while)
         lost = self._reid_target(t, stamp_s, matched)
         if lost is not None:
             t.id, t.first_s = lost.id, lost.first_s
@@ -529,7 +542,8 @@ class PersonTracker:
             else:            # kept for its appearance: it must look the same
                 ok = look is not None and look <= p.appearance_reid * sigma and \
                     d < p.reid_distance + p.reid_speed * lost
-            key = d + (0.0 if look is None else look / sigma)
+            # (unknown colours count as a fair match: appearance_reid sigmas)
+            key = d + (p.appearance_reid if look is None else look / sigma)
             if ok and key < best_key and 0.7 <= tb[2] / max(ob[2], 1.0) <= 1.4 and \
                     self._signature_ok(o, t.signature):
                 best, best_key = o, key

@@ -394,3 +394,20 @@ def test_a_lone_detection_of_the_person_behind_does_not_take_the_id_in_front():
         for p in tr.update(rows, f / 30.0, image=img):
             ids[truth[p.row]].add(p.id)
     assert ids == {0: {1}, 1: {2}}, ids
+
+
+def test_two_people_standing_close_are_both_followed():
+    """Two people side by side, their boxes overlapping (IoU 0.4), both found in every frame:
+    as many detections as people there, so each goes to its own track (a detection on two
+    tracks is left alone only where the detector found fewer people than are there)."""
+    red, green, blue = (40, 40, 200), (40, 200, 40), (200, 60, 30)
+    a, b = walker(400, 300), walker(440, 300)
+    assert box_iou(keypoint_box(a, 0.3), keypoint_box(b, 0.3)) > 0.3
+    img = np.full((600, 900, 3), 90, np.uint8)
+    _draw(img, a, red, blue)
+    _draw(img, b, green, blue)
+    tr = PersonTracker()
+    for f in range(40):
+        got = tr.update(np.stack([a, b]), f / 30.0, image=img)
+        if f >= 3:
+            assert sorted((p.row, p.id) for p in got) == [(0, 1), (1, 2)], (f, got)

@@ -180,7 +180,9 @@ def _where(win: '_Window') -> List[np.ndarray]:
     if win.prev is None:
         return [win.last]
     ahead = win.last.copy()
-    ahead[:, :2] = 2.0 * win.last[:, :2] - win.prev[:, :2]
+    both = (win.last[:, 2] >= 0.3) & (win.prev[:, 2] >= 0.3)
+    ahead[both, :2] = 2.0 * win.last[both, :2] - win.prev[both, :2]
+    ahead[~both, 2] = 0.0          # only what was seen in both frames moves on
     return [win.last, ahead]
 
 
@@ -290,6 +292,7 @@ class BlazePoseMultiDetector:
                 kp = None
             if kp is None:
                 win.missed += 1
+                win.prev = None
                 if win.missed >= self.max_missed:
                     self._end(win)
                 continue
@@ -457,21 +460,23 @@ class BlazePoseMultiDetector:
         thread, in turn, a later window masking the earlier ones where they are in this
         frame."""
         wins = list(self._windows)
-        with warnings.catch_warnings():        # here: the filters are global, not per thread
-            warnings.simplefilter('ignore', UserWarning)
-            if self.threads > 1 and len(wins) > 1:
-                if self._pool is None:
-                    from concurrent.futures import ThreadPoolExecutor
-                    self._pool = ThreadPoolExecutor(self.threads,
-                                                    thread_name_prefix='landmarks')
-                jobs = [(win, [k for o in wins if o is not win for k in _where(o)])
-                        for win in wins]
+        if self.threads > 1 and len(wins) > 1:
+            if self._pool is None:
+                from concurrent.futures import ThreadPoolExecutor
+                self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix='landmarks')
+            jobs = [(win, [k for o in wins if o is not win for k in _where(o)])
+                    for win in wins]
+            with warnings.catch_warnings():    # here: the filters are global, not per thread
+                warnings.simplefilter('ignore', UserWarning)
                 found = list(self._pool.map(lambda j: self._track(j[0], rgb, j[1]), jobs))
-                yield from zip(wins, found)
-                return
-            for win in wins:
-                others = [o.last for o in self._windows if o is not win and o.last is not None]
-                yield win, self._track(win, rgb, others)
+            yield from zip(wins, found)
+            return
+        for win in wins:
+            others = [o.last for o in self._windows if o is not win and o.last is not None]
+            with warnings.catch_warnings():
+                warnings.simplefilter('ignore', UserWarning)
+                kp = self._track(win, rgb, others)
+            yield win, kp
 
     def _track(self, win: _Window, rgb: np.ndarray, others: Sequence[np.ndarray] = ()
                ) -> Optional[np.ndarray]:

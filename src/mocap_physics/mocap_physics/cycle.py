@@ -183,6 +183,7 @@ class PhysicsCycle:
         self._stamp = stamp
         self._reset_solvers()
         self._anchored[:] = False
+        self._root_offset = np.zeros(2)
 
     def reset(self) -> None:
         """Forget the state: the next frame re-initialises from its target."""
@@ -218,8 +219,10 @@ class PhysicsCycle:
         angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
         if angle <= SMALL_FRAME_CHANGE_DEG and np.linalg.norm(t) <= SMALL_FRAME_CHANGE_M:
             self._anchor = self._anchor @ R[:2, :2].T + t[:2]
+            self._root_offset = R[:2, :2] @ self._root_offset     # a horizontal vector
         else:
             self._anchored[:] = False
+            self._root_offset = np.zeros(2)
             self._reset_solvers()
         self.stats.frame_changes += 1
 
@@ -362,7 +365,8 @@ class PhysicsCycle:
             if self.model is None:
                 raise InvalidInput('no skeleton yet: pass a Pose or call set_skeleton first')
             q_hat = np.array(target, dtype=float).reshape(-1)
-        if self._valid_q(q_hat):
+        valid = self._valid_q(q_hat)
+        if valid:
             q_hat = self.model.normalize(q_hat)
         else:
             self.stats.invalid_inputs += 1
@@ -404,7 +408,8 @@ class PhysicsCycle:
                 self._period = 0.9 * self._period + 0.1 * gap
         if not np.isfinite(stamp):
             stamp = (self._stamp or 0.0) + self._period
-        q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
+        if valid:          # a held target (the last one) carries its offset already
+            q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
         v_hat = None
         if self._target_prev is not None and reinit is None:
             v_hat = self._difference(self._target_prev, q_hat) / frame_dt

@@ -362,3 +362,24 @@ def test_root_follow_keeps_the_stance_feet_where_they_stand(skeleton):
         target = Pose(skeleton, rest.rotations, rest.root_position + [0.3 * i / FPS, 0, 0])
         cyc.step(target, i / FPS, [0, 0, 0, 0])
     assert np.linalg.norm(cyc._root_offset) < 0.45 * before
+
+
+def test_root_follow_holds_an_invalid_frame_where_it_was(skeleton):
+    """An invalid target is replaced by the last one, which carries the root offset already:
+    the body does not jump by the offset for that frame."""
+    rest = Pose.rest(skeleton)
+    cyc = PhysicsCycle(skeleton, PhysicsParams(root_follow_gain=0.5))
+    roots, offsets = [], []
+    for i in range(60):
+        target = Pose(skeleton, rest.rotations, rest.root_position + [0.3 * i / FPS, 0, 0])
+        if i == 45:                                  # a broken frame
+            target = cyc.model.pose_to_q(target)
+            target[0] = np.nan
+        r = cyc.step(target, i / FPS, [1, 1, 1, 1])
+        roots.append(r.q[:2].copy())
+        offsets.append(cyc._root_offset.copy())
+    assert cyc.stats.invalid_inputs == 1
+    assert np.abs(offsets[44][0]) > 0.2             # the offset is large by then
+    np.testing.assert_allclose(offsets[45], offsets[44])    # the held frame keeps it
+    steps = np.linalg.norm(np.diff(np.array(roots)[40:52], axis=0), axis=1)
+    assert steps.max() < 0.02, steps
