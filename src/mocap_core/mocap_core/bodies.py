@@ -11,7 +11,7 @@ stage's combined topics (every person of a frame in one message).
 
 from __future__ import annotations
 
-from typing import Any, Callable, Dict, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -99,6 +99,19 @@ class BodyPublishers:
     def remove_all(self) -> None:
         for pid in self.ids:
             self.remove(pid)
+
+
+def by_stamp(released: Sequence[Tuple[int, Sequence[Any]]], main_id: Optional[int]
+             ) -> List[Tuple[int, List[Tuple[int, Any]]]]:
+    """The frames several people released at once, grouped for the combined messages:
+    ``[(stamp_ns, [(id, frame), ...]), ...]`` in stamp order, the main person first in each
+    group, then by id. ``released``: ``(id, frames)`` pairs; each frame has ``stamp_ns``."""
+    groups: Dict[int, List[Tuple[int, Any]]] = {}
+    for pid, frames in released:
+        for frame in frames:
+            groups.setdefault(int(frame.stamp_ns), []).append((pid, frame))
+    return [(stamp, sorted(groups[stamp], key=lambda pf: (pf[0] != main_id, pf[0])))
+            for stamp in sorted(groups)]
 
 
 class CombinedPublishers:

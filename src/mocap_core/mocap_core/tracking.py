@@ -40,8 +40,8 @@
   ambiguous, even when it is the only candidate: the person behind, found alone for a frame,
   must not go to the track of the one in front. A candidate that overlaps two tracks by
   ``MERGED_IOU`` or more, where fewer candidates than those tracks are, is, with the image,
-  taken by none. The detector's row there mixes
-  both people, so both tracks coast and their clothes tell them apart once they part.
+  taken by none. The detector's row there mixes both people, so both tracks coast and their
+  clothes tell them apart once they part.
   Colours are sampled only where no nearer person stands (:func:`in_front_of`: the feet lower
   in the image). A new track among others whose colours are still unknown waits for its id
   (at most ``max_lost_s``). Re-identification ranks the lost tracks by distance plus colour
@@ -347,22 +347,20 @@ class PersonTracker:
         # decided by clothes, not by position alone (a person hidden by another in front)
         # (a track lost for longer than max_lost_s is kept for its clothes only: where it
         # is predicted to be means little)
+        n = len(cands)
+        iou_ct = np.array([[box_iou(b, pb) for pb in pred_box] for b in boxes]).reshape(
+            n, len(self._tracks))                            # candidate x track
+        iou_cc = np.array([[box_iou(a, b) for b in boxes] for a in boxes]).reshape(n, n)
         recent = [i for i, t in enumerate(self._tracks)
                   if t.id > 0 and stamp_s - t.last_s <= p.max_lost_s]
-        near = [{i for i in recent if box_iou(boxes[j], pred_box[i]) >= OVERLAP_IOU}
-                for j in range(len(cands))]
-        apart = [all(box_iou(boxes[j], boxes[k]) < OVERLAP_IOU
-                     for k in range(len(cands)) if k != j) for j in range(len(cands))]
+        near = [{i for i in recent if iou_ct[j, i] >= OVERLAP_IOU} for j in range(n)]
+        # candidates at each one's place, itself included
+        here = 1 + ((iou_cc >= OVERLAP_IOU) & ~np.eye(n, dtype=bool)).sum(axis=1)
+        apart = [int(here[j]) == 1 for j in range(n)]
         # fewer detections than people where two or more people's tracks overlap (the
         # detector found one of two): a detection there could be either
-        def crowd(j: int) -> int:
-            return sum(1 for i in near[j] if box_iou(boxes[j], pred_box[i]) >= MERGED_IOU)
-
-        def here(j: int) -> int:
-            return 1 + sum(1 for k in range(len(cands))
-                           if k != j and box_iou(boxes[j], boxes[k]) >= OVERLAP_IOU)
-        merged = [image is not None and crowd(j) > 1 and here(j) < crowd(j)
-                  for j in range(len(cands))]
+        crowd = [sum(1 for i in near[j] if iou_ct[j, i] >= MERGED_IOU) for j in range(n)]
+        merged = [image is not None and crowd[j] > 1 and here[j] < crowd[j] for j in range(n)]
         sim = np.zeros((len(self._tracks), len(cands)))
         for i, t in enumerate(self._tracks):
             lost = stamp_s - t.last_s
@@ -371,7 +369,7 @@ class PersonTracker:
                 if not self._signature_ok(t, sigs[j]):
                     continue
                 sim[i, j] = oks(cands[j], pred_kp[i], pred_box[i][2], p.min_confidence,
-                                p.oks_scale * widen) + 0.3 * box_iou(boxes[j], pred_box[i])
+                                p.oks_scale * widen) + 0.3 * iou_ct[j, i]
         # Clothes decide only where position and pose do not: a candidate that more than one
         # track could take, or a track that could take more than one candidate (two people
         # crossing). A lone match keeps its similarity, so a person whose colours change at

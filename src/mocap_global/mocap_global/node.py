@@ -77,7 +77,7 @@ from visualization_msgs.msg import MarkerArray
 
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
-from mocap_core.bodies import BodyPublishers, CombinedPublishers
+from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.tf import TfBroadcaster
@@ -614,15 +614,15 @@ class GMRNode(Node):
             prepare_outputs([person.online for _, person, _ in batch])
             ready = [(pid, person, frames + person.online.take(), event, gap)
                      for pid, person, (frames, event, gap) in batch]
-        self._publish_combined([
-            (pid, self._finish(pid, person, frames, event, gap, combined=False))
-            for pid, person, frames, event, gap in ready])
+        self._publish_combined([(pid, self._finish(pid, person, frames, event, gap))
+                                for pid, person, frames, event, gap in ready])
         timeout = int(self.p['person_timeout_s'] * 1e9)
         for pid in [q for q, pr in self.persons.items()
                     if stamp - pr.seen_ns > timeout or pr.seen_ns - stamp > max(timeout, 10**9)]:
             person = self.persons.pop(pid)
             if person.online is not None and person.online.pending():
-                self._publish(pid, person, person.online.flush())
+                self._publish_combined([(pid, self._publish(pid, person,
+                                                            person.online.flush()))])
             self.main_id = min(self.persons) if self.persons else None
             self.bodies.remove(pid)
             self.get_logger().info(f'person {pid} gone: their topics are removed')
@@ -690,7 +690,7 @@ class GMRNode(Node):
         return frames, event, gap
 
     def _finish(self, pid: Optional[int], person: _Person, frames, event: str,
-                gap: float, combined: bool = True) -> List[WorldFrame]:
+                gap: float) -> List[WorldFrame]:
         """After :meth:`_add` and the emission: restarts, the first-frame log, publish
         (:meth:`_publish`; returns the frames published)."""
         self.diag.error(None)
@@ -707,7 +707,7 @@ class GMRNode(Node):
             self.get_logger().info(
                 f'waiting for {person.online.frames_needed()} frames (look-ahead) before the '
                 'first world pose')
-        return self._publish(pid, person, frames, combined)
+        return self._publish(pid, person, frames)
 
     def _check_rate(self, dt: float) -> None:
         """Warn once when the input rate is not the model's (the motions per frame would be
@@ -743,16 +743,15 @@ class GMRNode(Node):
     def flush(self) -> None:
         """End of the input (offline processing): emit the frames waiting for look-ahead."""
         self._publish_combined([
-            (pid, self._publish(pid, person, person.online.flush(), combined=False))
+            (pid, self._publish(pid, person, person.online.flush()))
             for pid, person in self._everyone()
             if person.online is not None and person.online.pending()])
 
     def _publish(self, pid: Optional[int], person: _Person,
-                 frames: Sequence[WorldFrame], combined: bool = True) -> List[WorldFrame]:
-        """A person's ready frames: on their own topics and combined (several people;
-        unless ``combined`` is False, when the caller sends everybody's frames together), and
-        on the single-person topics for the main person (or the single-person input).
-        Returns the frames published (the finite ones)."""
+                 frames: Sequence[WorldFrame]) -> List[WorldFrame]:
+        """A person's ready frames: on their own topics, and on the single-person topics
+        for the main person (or the single-person input). Returns the frames published (the
+        finite ones), for the caller's combined messages (:meth:`_publish_combined`)."""
         good = []
         for f in frames:
             pose = f.pose
@@ -780,8 +779,6 @@ class GMRNode(Node):
                     self.main_last_ns = f.stamp_ns
                 self._publish_main(f, pose, header, odom, person.path)
             self.diag.output.tick()
-        if pid is not None and combined:
-            self._publish_combined([(pid, good)])
         online = self.online
         if online is not None:
             self._report_nonfinite(online.nonfinite_outputs)
@@ -828,15 +825,9 @@ class GMRNode(Node):
         """Combined world messages of the frames several people released at once: one per
         stamp with everybody's frame of it, the main person first (``(None, frames)`` of the
         single-person input are not combined)."""
-        by_stamp: Dict[int, list] = {}
-        for pid, frames in released:
-            if pid is None:
-                continue
-            for f in frames:
-                by_stamp.setdefault(f.stamp_ns, []).append((pid, f.pose, None))
-        for stamp in sorted(by_stamp):
-            bodies = sorted(by_stamp[stamp], key=lambda b: (b[0] != self.main_id, b[0]))
-            self.combined.publish(rc.make_header(stamp, self.output_frame), bodies)
+        for stamp, group in by_stamp([r for r in released if r[0] is not None], self.main_id):
+            self.combined.publish(rc.make_header(stamp, self.output_frame),
+                                  [(pid, f.pose, None) for pid, f in group])
 
     def _report_nonfinite(self, count: int) -> None:
         """Diagnostics and a rate-limited warning for frames whose network output was not

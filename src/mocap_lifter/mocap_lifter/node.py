@@ -49,7 +49,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.diagnostics import NodeDiagnostics
-from mocap_core.bodies import BodyPublishers, CombinedPublishers
+from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.guard import guarded
@@ -269,21 +269,16 @@ class LifterNode(Node):
         """Log what a step did and publish its frames: each person's on their own topics,
         the main person's on the single-person topics, all of a stamp in one combined
         message."""
-        by_stamp: Dict[int, List[Tuple[int, LiftedFrame]]] = {}
+        released: List[Tuple[int, List[LiftedFrame]]] = []
         for pid, st in step.steps.items():
             for reason in st.resets:
                 self.get_logger().info(f'person {pid}: buffer and skeleton reset ({reason})')
             for error in st.errors:
                 self.diag.errors += 1
                 self.get_logger().error(f'frame dropped: {error}', throttle_duration_sec=2.0)
-            for frame in st.frames:
-                if self._finite(frame):
-                    by_stamp.setdefault(frame.stamp_ns, []).append((pid, frame))
+            released.append((pid, [f for f in st.frames if self._finite(f)]))
         self._report_intrinsics()
-        for stamp in sorted(by_stamp):
-            frames = by_stamp[stamp]
-            # the main person first (the combined messages' order)
-            frames.sort(key=lambda pf: (pf[0] != self.main_id, pf[0]))
+        for stamp, frames in by_stamp(released, self.main_id):   # the main person first
             # combined first: the next stage, which follows everybody from the combined
             # motion, hears it before the single-person topics
             self.publish_combined(stamp, frames)

@@ -95,7 +95,7 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from mocap_core import topics
-from mocap_core.bodies import BodyPublishers, CombinedPublishers
+from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
@@ -529,7 +529,7 @@ class PhysicsNode(Node):
         online = self.persons.pop(pid)
         self.person_seen_ns.pop(pid, None)
         self.main_id = min(self.persons) if self.persons else None
-        self._publish(online.flush(), pid)
+        self._publish_people([(pid, online.flush())])
         self.bodies.remove(pid)
         self.get_logger().info(f'person {pid} gone: their topics are removed')
 
@@ -595,18 +595,10 @@ class PhysicsNode(Node):
                               for pid, online in list(self.persons.items())])
 
     # -- output --------------------------------------------------------------------------------
-    def _publish(self, frames: List[PhysicsFrame], pid: Optional[int] = None,
-                 combined: bool = True) -> None:
-        """Publish frames of the single-person input (``pid`` None) or of person ``pid``: on
-        their own topics, combined (one message per stamp, unless ``combined`` is False:
-        :meth:`_publish_people` sent it with everybody's), and, for the main person, on the
-        single-person topics."""
-        if not frames:
-            return
-        if pid is not None and combined:
-            # combined first: the next stage follows everybody from it, and hears it before
-            # the single-person topics
-            self._publish_combined(pid, frames)
+    def _publish(self, frames: List[PhysicsFrame], pid: Optional[int] = None) -> None:
+        """Publish frames of the single-person input (``pid`` None) or of person ``pid`` on
+        their own topics and, for the main person, on the single-person topics (the combined
+        messages of several people: :meth:`_publish_people`)."""
         for frame in frames:
             if pid is None:
                 self._publish_frame(frame)
@@ -621,17 +613,14 @@ class PhysicsNode(Node):
         """Publish the frames several people released in one callback: everybody's frames
         of a stamp in one combined message (the world stage then runs its network once for
         all of them), then each person's own topics and the main person's."""
-        by_stamp: Dict[int, List[Tuple[int, PhysicsFrame]]] = {}
-        for pid, frames in released:
-            for frame in frames:
-                by_stamp.setdefault(frame.stamp_ns, []).append((pid, frame))
-        for stamp in sorted(by_stamp):
-            group = sorted(by_stamp[stamp], key=lambda pf: (pf[0] != self.main_id, pf[0]))
+        for stamp, group in by_stamp(released, self.main_id):
+            # combined first: the next stage follows everybody from it, and hears it before
+            # the single-person topics
             self.combined.publish(make_header(stamp, group[0][1].frame_id), [
                 (pid, f.result.pose, f.result.contact_active.astype(float))
                 for pid, f in group])
             for pid, frame in group:
-                self._publish([frame], pid, combined=False)
+                self._publish([frame], pid)
 
     def _publish_body(self, pid: int, frame: PhysicsFrame) -> None:
         res = frame.result
@@ -647,11 +636,6 @@ class PhysicsNode(Node):
         for foot in ('left', 'right'):
             w = res.feet[foot]
             b.publish(pid, f'grf/{foot}', lambda w=w: wrench_to_msg(w.force, w.moment, header))
-
-    def _publish_combined(self, pid: int, frames: List[PhysicsFrame]) -> None:
-        for frame in frames:
-            self.combined.publish(make_header(frame.stamp_ns, frame.frame_id), [
-                (pid, frame.result.pose, frame.result.contact_active.astype(float))])
 
     def _publish_frame(self, frame: PhysicsFrame) -> None:
         """The main person's (or the single input's) frame on the single-person topics: the
