@@ -506,6 +506,46 @@ def msg_to_bodies_contacts(msg: JointState) -> List[Tuple[int, np.ndarray]]:
     return out
 
 
+def bodies_bone_lengths_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header: Header
+                               ) -> JointState:
+    """Several persons' (G,) bone-group lengths (m, :data:`skeleton.BONE_GROUP_NAMES` order)
+    -> one JointState: names ``body_<id>/<group>``, ``position`` the lengths. The lifter's
+    held skeletons, the signature by which the keypoint node's tracker names a returning
+    person (:data:`topics.BODIES_BONE_LENGTHS`)."""
+    from .skeleton import BONE_GROUP_NAMES
+    msg = JointState()
+    msg.header = header
+    for pid, lengths in bodies:
+        lengths = np.asarray(lengths, dtype=np.float64).ravel()
+        if len(lengths) != len(BONE_GROUP_NAMES):
+            raise ValueError(f'expected {len(BONE_GROUP_NAMES)} bone-group lengths, got '
+                             f'{len(lengths)}')
+        msg.name.extend(_body_prefix(pid) + n for n in BONE_GROUP_NAMES)
+        msg.position.extend(float(x) for x in lengths)
+    return msg
+
+
+def msg_to_bodies_bone_lengths(msg: JointState) -> List[Tuple[int, np.ndarray]]:
+    """The inverse of :func:`bodies_bone_lengths_to_msg`: ``[(id, (G,) lengths)]``. Raises
+    MessageError for mismatched sizes, unknown or missing groups, or lengths that are not
+    finite and positive."""
+    from .skeleton import BONE_GROUP_NAMES
+    if len(msg.position) != len(msg.name):
+        raise MessageError(f'bone-length message has {len(msg.name)} names but '
+                           f'{len(msg.position)} values')
+    out = []
+    for pid, idx in _split_bodies(msg.name).items():
+        got = {msg.name[i].partition('/')[2]: float(msg.position[i]) for i in idx}
+        if sorted(got) != sorted(BONE_GROUP_NAMES):
+            raise MessageError(f'body_{pid}: bone groups {sorted(got)} are not '
+                               f'{sorted(BONE_GROUP_NAMES)}')
+        lengths = np.array([got[n] for n in BONE_GROUP_NAMES])
+        if not np.all(np.isfinite(lengths)) or not np.all(lengths > 0):
+            raise MessageError(f'body_{pid}: bone lengths must be finite and positive')
+        out.append((pid, lengths))
+    return out
+
+
 def is_bodies_message(names: Sequence[str]) -> bool:
     """Whether joint or contact names are prefixed ``body_<id>/`` (a several-people
     message) rather than plain (one person)."""

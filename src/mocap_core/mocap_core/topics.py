@@ -119,13 +119,19 @@ def bodies_topic(stage: str, name: str) -> str:
     return stage_prefix(stage) + 'bodies/' + name
 
 
+#: sensor_msgs/JointState, transient local: the lifter's held skeleton of every person
+#: followed, names ``body_<id>/<bone group>``, positions the lengths (m); re-published when
+#: a held skeleton changes. The keypoint node's tracker uses it as a signature to give a
+#: person who left and came back their old id (docs/multi_person.md).
+BODIES_BONE_LENGTHS = bodies_topic('lifter', 'bone_lengths')
+
 #: Every output topic of the pipeline (what ``record:=true`` of the launch file records).
 ALL = [KEYPOINTS, CAMERA_INFO, CAMERA_MOTION, SKELETON_URDF, DIAGNOSTICS, LIFTER_CONTACTS,
        PHYSICS_GRF_LEFT, PHYSICS_GRF_RIGHT, PHYSICS_COM, PHYSICS_FLOOR, WORLD_ODOM, WORLD_PATH,
        WORLD_FLOOR] + [
     stage_topic(stage, leaf) for stage in STAGES
     for leaf in ('motion', 'joints3d', 'joint_states', 'markers')] + [
-    BODIES_TRACKED, '/tf', bodies_topic('lifter', 'contacts')] + [
+    BODIES_TRACKED, BODIES_BONE_LENGTHS, '/tf', bodies_topic('lifter', 'contacts')] + [
     bodies_topic(stage, leaf) for stage in STAGES for leaf in ('motion', 'joints3d', 'markers')]
 #: (The per-person topics /humans/bodies/body_<id>/... come and go with the people: record them
 #: with ``ros2 bag record -a`` or by regular expression, ``-e '/humans/bodies/.*'``.)

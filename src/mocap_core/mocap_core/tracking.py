@@ -49,6 +49,15 @@
 * **Signatures.** :meth:`PersonTracker.set_signature` attaches a vector to an id (the 3D
   stages' bone lengths, m); a coasting track only takes a candidate whose signature, when the
   caller gives one, is within ``signature_tolerance`` (relative) of its own.
+  The 3D stages know a body's bone lengths only after a while (the lifter holds a skeleton
+  after some 3 s), too late to name a new detection, so they also correct a name after the
+  fact: a dropped track with a signature is remembered for ``signature_memory_s``, and when
+  a track that was given a *new* id later receives its first signatures, it takes back the
+  id of the one remembered person whose signature agrees within ``signature_rename_tolerance``
+  and whose clothes, where both are known, are within ``appearance_reid`` of its sigma, who
+  was last seen before the new track began (a person who left the picture and came back).
+  :meth:`PersonTracker.set_signature` returns the id taken back; from then on the person is
+  published under it (the stages start the returning body afresh under its old id).
 * **Order.** Output rows are ordered by how long each id has been tracked, the longest first:
   row 0 is the *main person* that one-person consumers read.
 
@@ -111,6 +120,12 @@ class TrackerParams:
     #: Relative signature difference (median over entries) beyond which a coasting track
     #: does not take a candidate.
     signature_tolerance: float = 0.08
+    #: A dropped track with a signature is remembered this long (s) for renaming: a new id
+    #: whose signature, when it arrives, agrees within ``signature_rename_tolerance``
+    #: (relative, median over entries) with exactly one remembered person takes that
+    #: person's id back (module docstring). 0 disables renaming.
+    signature_memory_s: float = 60.0
+    signature_rename_tolerance: float = 0.03
     #: Kalman filter: acceleration noise (px/s^2, per px of box height) and measurement
     #: noise (px per px of box height).
     accel_noise: float = 3.0
@@ -239,6 +254,7 @@ class _Track:
     spread: float = 0.0                       # running mean distance of its frames (Lab)
     looks: int = 0                            # frames that measured ``spread``
     crowded: bool = False                     # its last match overlapped another person
+    renamable: bool = False                   # got a new id; may still take an old one back
 
     def box_at(self, dt: float) -> np.ndarray:
         x, _ = self.kalman.predicted(dt)
@@ -275,6 +291,7 @@ class TrackerStats:
     duplicates: int = 0           # candidates merged as the same person twice
     ignored: int = 0              # candidates too small, too few points, or beyond max_persons
     lost_ids: List[int] = field(default_factory=list)   # ids dropped in the last update
+    renamed: int = 0              # new ids that took an old one back by signature
 
 
 class PersonTracker:
@@ -283,6 +300,8 @@ class PersonTracker:
     def __init__(self, params: Optional[TrackerParams] = None) -> None:
         self.params = params or TrackerParams()
         self._tracks: List[_Track] = []
+        #: dropped tracks with a signature, for renaming (``signature_memory_s``)
+        self._ended: List[_Track] = []
         self._next_id = 1
         self._last_s: Optional[float] = None
         self._with_looks = False
@@ -292,6 +311,7 @@ class PersonTracker:
     def reset(self) -> None:
         """Forget every track (a new, unrelated stream); ids keep counting up."""
         self._tracks = []
+        self._ended = []
         self._last_s = None
 
     @property
@@ -299,11 +319,47 @@ class PersonTracker:
         """Ids of the confirmed tracks, matched or coasting."""
         return [t.id for t in self._tracks if t.id]
 
-    def set_signature(self, track_id: int, signature: Sequence[float]) -> None:
-        """Attach a signature to ``track_id`` (e.g. the lifter's bone lengths of that body)."""
+    def set_signature(self, track_id: int, signature: Sequence[float]) -> Optional[int]:
+        """Attach a signature to ``track_id`` (e.g. the lifter's bone-group lengths of that
+        body, m). When that id was new and the signature names a person dropped earlier
+        (module docstring, "Signatures"), the track takes that person's id back: returns
+        that id (``track_id`` is retired), else None."""
+        sig = np.asarray(signature, dtype=np.float64).ravel()
+        if not np.all(np.isfinite(sig)) or not np.all(sig > 0):
+            return None
         for t in self._tracks:
-            if t.id == track_id:
-                t.signature = np.asarray(signature, dtype=np.float64)
+            if t.id == track_id and track_id > 0:
+                t.signature = sig
+                old = self._rename_target(t) if t.renamable else None
+                if old is None:
+                    return None
+                self._ended.remove(old)
+                t.id, t.first_s, t.renamable = old.id, old.first_s, False
+                if t.appearance is None and old.appearance is not None:
+                    t.appearance = old.appearance.copy()
+                    t.spread, t.looks = old.spread, old.looks
+                self.stats.renamed += 1
+                return t.id
+        return None
+
+    def _rename_target(self, t: _Track) -> Optional[_Track]:
+        """The one remembered dropped person whose id the new track ``t`` takes back by its
+        signature (module docstring), or None when none or more than one qualifies."""
+        p = self.params
+        now = self._last_s if self._last_s is not None else t.last_s
+        found = []
+        for o in self._ended:
+            if o.signature is None or o.signature.shape != t.signature.shape or \
+                    o.last_s >= t.first_s or now - o.last_s > p.signature_memory_s:
+                continue
+            rel = np.abs(t.signature - o.signature) / np.maximum(np.abs(o.signature), 1e-6)
+            if np.median(rel) > p.signature_rename_tolerance:
+                continue
+            look = appearance_distance(o.appearance, t.appearance)
+            if look is not None and look > p.appearance_reid * self._sigma(o):
+                continue
+            found.append(o)
+        return found[0] if len(found) == 1 else None
 
     def predicted_boxes(self, stamp_s: float) -> Dict[int, np.ndarray]:
         """``{key: (cx, cy, h, w)}`` box of every live track predicted to ``stamp_s``; keys are
@@ -457,9 +513,13 @@ class PersonTracker:
             if stamp_s - t.last_s > self._keep_s(t):
                 self.stats.deaths += 1
                 self.stats.lost_ids.append(t.id)
+                if t.signature is not None and p.signature_memory_s > 0:
+                    self._ended.append(t)
                 continue
             survivors.append(t)
         self._tracks = survivors
+        self._ended = [t for t in self._ended
+                       if stamp_s - t.last_s <= p.signature_memory_s]
 
         new = [j for j in range(len(cands)) if j not in matched_c and not merged[j]]
         new.sort(key=lambda j: -float(np.sum(cands[j][:, 2])))
@@ -508,6 +568,7 @@ class PersonTracker:
         elif sum(1 for o in self._tracks if o.id > 0) < self.params.max_persons:
             t.id = self._next_id
             self._next_id += 1
+            t.renamable = self.params.signature_memory_s > 0
             self.stats.births += 1
         else:
             self.stats.ignored += 1

@@ -337,3 +337,26 @@ def test_bodies_messages_roundtrip(header, pose):
         rc.motion_to_bodies(short)
     with pytest.raises(rc.MessageError):
         rc.bodies_to_cloud(np.zeros((2, 18, 3)), [1, 0], header)
+
+
+def test_bodies_bone_lengths_roundtrip_and_bad_messages(header):
+    a = Skeleton.default().group_lengths()
+    msg = rc.bodies_bone_lengths_to_msg([(3, a), (7, a * 1.1)], header)
+    assert msg.name[0].startswith('body_3/')
+    got = rc.msg_to_bodies_bone_lengths(deserialize_message(serialize_message(msg),
+                                                            type(msg)))
+    assert [pid for pid, _ in got] == [3, 7]
+    np.testing.assert_allclose(got[1][1], a * 1.1)
+    bad = rc.bodies_bone_lengths_to_msg([(3, a)], header)
+    bad.position[2] = float('nan')
+    with pytest.raises(rc.MessageError, match='finite'):
+        rc.msg_to_bodies_bone_lengths(bad)
+    bad = rc.bodies_bone_lengths_to_msg([(3, a)], header)
+    bad.name = bad.name[:-1]
+    with pytest.raises(rc.MessageError):
+        rc.msg_to_bodies_bone_lengths(bad)
+    bad.name = ['pelvis'] * len(bad.position)
+    with pytest.raises(rc.MessageError, match='prefix'):
+        rc.msg_to_bodies_bone_lengths(bad)
+    with pytest.raises(ValueError):
+        rc.bodies_bone_lengths_to_msg([(3, a[:-1])], header)

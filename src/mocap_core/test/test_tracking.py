@@ -179,6 +179,88 @@ def test_signature_stops_a_coasting_track_taking_someone_else():
     assert set(feed(PersonTracker(params), sig_b)) == {2}       # another body: a new id
 
 
+def _leave_and_return(tr, sig_first, sig_back, others=(), gap_s=5.0, fps=30.0):
+    """Person A at x=300 for 1 s, gone for ``gap_s`` (dropped), back at x=900 for 1 s; the
+    3D stages report A's signature while A is there and the returning person's after 0.5 s
+    of them. ``others``: signatures of people who left during A's absence (x=600, 0.3 s
+    each). Returns (A's first id, the returning person's ids before, after the signature,
+    and what set_signature returned)."""
+    t = 0.0
+    ids_a = set()
+    for _ in range(int(fps)):
+        ids_a |= {p.id for p in tr.update(person(300, 300)[None], t)}
+        t += 1.0 / fps
+    first = min(ids_a)
+    tr.set_signature(first, sig_first)
+    for k, sig in enumerate(others):
+        for _ in range(int(0.3 * fps)):
+            got = tr.update(person(600 + 50 * k, 300)[None], t)
+            t += 1.0 / fps
+        tr.set_signature(got[0].id, sig)
+    while t < 1.0 + gap_s:
+        tr.update(np.zeros((0, NUM_KEYPOINTS, 3)), t)
+        t += 1.0 / fps
+    before, after, renamed = set(), set(), None
+    for f in range(int(fps)):
+        got = tr.update(person(900, 300)[None], t)
+        t += 1.0 / fps
+        if f == int(fps) // 2:
+            renamed = tr.set_signature(got[0].id, sig_back)
+        (before if f <= int(fps) // 2 else after).update(p.id for p in got)
+    return first, before, after, renamed
+
+
+def test_a_returning_person_takes_their_id_back_by_their_bone_lengths():
+    """Gone longer than any re-identification by place or clothes, the person comes back
+    under a new id; once the 3D stages report their bone lengths, they get their old id."""
+    sig = np.array([0.12, 0.25, 0.42, 0.40, 0.08, 0.30, 0.26, 0.24, 0.17])
+    tr = PersonTracker()
+    first, before, after, renamed = _leave_and_return(tr, sig, sig * 1.01)
+    assert before == {first + 1}                  # a new id at first
+    assert renamed == first and after == {first}  # then the old one
+    assert tr.stats.renamed == 1
+    # once only: the same person's later signatures change nothing
+    assert tr.set_signature(first, sig) is None
+
+
+def test_another_body_or_an_ambiguous_one_keeps_its_new_id():
+    sig = np.array([0.12, 0.25, 0.42, 0.40, 0.08, 0.30, 0.26, 0.24, 0.17])
+    # another body (6 % longer bones): a new person
+    first, _, after, renamed = _leave_and_return(PersonTracker(), sig, sig * 1.06)
+    assert renamed is None and after == {first + 1}
+    # two people who left match the returning one: nobody is named
+    first, _, after, renamed = _leave_and_return(PersonTracker(), sig, sig,
+                                                 others=[sig * 1.005])
+    assert renamed is None and first not in after
+    # remembered for signature_memory_s only
+    params = TrackerParams(signature_memory_s=2.0)
+    first, _, after, renamed = _leave_and_return(PersonTracker(params), sig, sig)
+    assert renamed is None and after == {first + 1}
+    # renaming off; bad signatures are ignored
+    tr = PersonTracker(TrackerParams(signature_memory_s=0.0))
+    first, _, after, renamed = _leave_and_return(tr, sig, sig)
+    assert renamed is None and after == {first + 1}
+    assert tr.set_signature(first + 1, np.full(9, np.nan)) is None
+
+
+def test_someone_seen_at_the_same_time_is_never_renamed():
+    """Two people in the picture together are two people, whatever their bones say."""
+    sig = np.full(9, 0.3)
+    tr = PersonTracker()
+    for f in range(60):
+        frame = [person(300, 300)] + ([person(900, 300)] if f >= 20 else [])
+        got = tr.update(np.array(frame), f / 30.0)
+    ids = sorted(p.id for p in got)
+    tr.set_signature(ids[0], sig)
+    t = 2.0
+    while t < 4.0:                                  # the first leaves and is dropped
+        tr.update(person(900, 300)[None], t)
+        t += 1 / 30.0
+    assert tr.ids == [ids[1]]
+    assert tr.set_signature(ids[1], sig) is None
+    assert tr.ids == [ids[1]]
+
+
 def test_params_are_checked():
     with pytest.raises(ValueError):
         TrackerParams(max_persons=0)

@@ -18,7 +18,12 @@ Publishes for every processed frame, stamped with the image's stamp (docs/design
     the skeleton drawn over the frame, for debugging (reliable, keep-last 2, published by a
     second node ``<name>_annotated`` with its own DDS participant);
   * ``/diagnostics``: detector time, input and output rates, frames dropped, errors, source,
-    detector, intrinsics.
+    detector, intrinsics, ids given, lost, re-identified and renamed by bone lengths.
+
+Subscribes (besides an image source's topics) ``floor_topic`` (above) and, with several
+people, ``bone_lengths_topic`` (the lifter's held skeletons): a person who left and came back
+under a new id takes their old id back once the lifter knows their bones
+(``id_by_bone_lengths``, ``mocap_core.tracking``).
 
 Sources (parameter ``source``; ``auto`` picks from ``path``):
   * ``camera``: an OpenCV camera (``device`` index or /dev/videoN); stamps = grab time;
@@ -58,7 +63,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState, PointCloud2
 from std_msgs.msg import UInt32MultiArray
 
 from mocap_core import topics
@@ -70,13 +75,13 @@ from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, guarded, record_failure
 from mocap_core.metrics import LatencyStats, RateMeter
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
-from mocap_core.qos import SENSOR_QOS, STREAM_QOS, input_qos
+from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, bgr_to_image, camera_info_to_intrinsics,
                                         camera_motion_to_odometry,
                                         compressed_image_to_bgr, image_to_bgr,
                                         intrinsics_to_camera_info, keypoints_to_cloud,
-                                        make_header, stamp_to_ns,
-                                        transform_stamped_to_arrays)
+                                        make_header, msg_to_bodies_bone_lengths,
+                                        stamp_to_ns, transform_stamped_to_arrays)
 from mocap_core.rotations import quat_to_matrix
 from mocap_core.streams import StampOrder
 
@@ -151,6 +156,21 @@ PARAMETERS = (
     ParamSpec('id_appearance_timeout_s', 3.0, 'With id_by_appearance: how long a person '
               'unseen keeps their id for a return recognised by their clothes (at least '
               'id_timeout_s)', min_value=0.0, read_only=True),
+    ParamSpec('id_by_bone_lengths', True, 'Take the bone lengths the lifter holds for each '
+              'person (bone_lengths_topic) as their signature: a person who left and came back '
+              'under a new id gets their old one back once the lifter knows their skeleton '
+              '(bones within id_bone_length_tolerance, clothes alike where seen)',
+              read_only=True),
+    ParamSpec('bone_lengths_topic', topics.BODIES_BONE_LENGTHS, 'The lifter\'s held '
+              'skeletons (sensor_msgs/JointState, names body_<id>/<bone group>)',
+              read_only=True),
+    ParamSpec('id_bone_length_memory_s', 60.0, 'With id_by_bone_lengths: how long a person '
+              'who is gone is remembered by their bone lengths, seconds', min_value=0.0,
+              read_only=True),
+    ParamSpec('id_bone_length_tolerance', 0.03, 'With id_by_bone_lengths: largest relative '
+              'difference of the bone lengths (median over the bone groups) for a person to '
+              'be named as one who left; exactly one remembered person may qualify',
+              min_value=0.0, max_value=0.5, read_only=True),
     ParamSpec('calibration_file', '', 'Camera calibration (standard camera_info YAML); takes '
               'precedence over the CameraInfo topic', read_only=True),
     ParamSpec('horizontal_fov_deg', 60.0, 'Horizontal field of view for approximate '
@@ -360,7 +380,10 @@ class KeypointsNode(Node):
             birth_frames=(p['id_after_frames'] or (3 if p['max_persons'] > 1 else 1))
             if p['tracking'] else 1,
             max_lost_s=p['id_timeout_s'] if p['tracking'] else 0.0,
-            appearance_max_lost_s=p['id_appearance_timeout_s'] if p['tracking'] else 0.0))
+            appearance_max_lost_s=p['id_appearance_timeout_s'] if p['tracking'] else 0.0,
+            signature_memory_s=(p['id_bone_length_memory_s']
+                                if p['tracking'] and p['id_by_bone_lengths'] else 0.0),
+            signature_rename_tolerance=p['id_bone_length_tolerance']))
         self.processor = FrameProcessor(detector, self.provider, p['max_persons'],
                                         undistort=p['undistort'],
                                         annotate=p['publish_annotated'],
@@ -380,6 +403,12 @@ class KeypointsNode(Node):
             self.create_subscription(TransformStamped, p['floor_topic'],
                                      guarded(self, self.on_floor, 'floor'),
                                      input_qos(STREAM_QOS, 10))
+        self.signatures_received = 0
+        if p['tracking'] and p['id_by_bone_lengths'] and p['bone_lengths_topic'] and \
+                p['max_persons'] > 1:
+            self.create_subscription(JointState, p['bone_lengths_topic'],
+                                     guarded(self, self.on_bone_lengths, 'bone_lengths'),
+                                     input_qos(LATCHED_QOS, 10))
         self.motion_states: Dict[str, int] = {}
         self.motion_stats = LatencyStats()
         self.pub_annotated = None
@@ -675,6 +704,9 @@ class KeypointsNode(Node):
                           f'{frame.name}: detector failed ({type(error).__name__}: '
                           f'{error}); skipping the frame')
             return
+        for new_id, old_id in res.renamed:
+            log.info(f'person {new_id} is person {old_id} back, by the bone lengths the '
+                     f'lifter holds: published as {old_id} from now on')
         for note in res.notes:
             if 'approximating' in note or 'ignoring' in note or 'not supported' in note:
                 log.warn(note)
@@ -730,6 +762,17 @@ class KeypointsNode(Node):
             log.info(f'no person found ({res.name}); publishing all confidences 0',
                      throttle_duration_sec=2.0)
 
+    def on_bone_lengths(self, msg: JointState) -> None:
+        """The lifter's held skeletons (``bone_lengths_topic``): each person's signature,
+        handed to the tracker before the next frame (a returning person's old id)."""
+        try:
+            bodies = msg_to_bodies_bone_lengths(msg)
+        except MessageError as exc:
+            self._problem('bone_lengths', f'ignoring bone lengths: {exc}')
+            return
+        self.signatures_received += 1
+        self.processor.set_signatures(bodies)
+
     def on_floor(self, msg: TransformStamped) -> None:
         """The physics floor in the camera frame (``floor_topic``): ``p_camera = A p_floor +
         b``, so the floor's up normal is A's third column and the camera's height ``-n . b``;
@@ -753,6 +796,7 @@ class KeypointsNode(Node):
         self.diag.set_value('ids_given', ts.births)
         self.diag.set_value('ids_lost', ts.deaths)
         self.diag.set_value('reidentified', ts.reidentified)
+        self.diag.set_value('renamed_by_bone_lengths', ts.renamed)
         self.diag.set_value('false_detections_ignored', ts.blips)
         self.diag.set_value('persons_ignored', ts.ignored)
         if self.pub_motion is not None:

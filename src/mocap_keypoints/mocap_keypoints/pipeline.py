@@ -15,9 +15,10 @@ distortion, estimate the camera's motion from the image background (``camera_mot
 
 from __future__ import annotations
 
+import collections
 import time
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from typing import Deque, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -110,6 +111,8 @@ class FrameResult:
     camera_motion_s: float = 0.0
     error: Optional[str] = None
     notes: List[str] = field(default_factory=list)  # to log (intrinsics changes, ...)
+    #: (new id, old id): persons who took an old id back by their bone lengths this frame
+    renamed: List[Tuple[int, int]] = field(default_factory=list)
 
     @property
     def person_found(self) -> bool:
@@ -146,6 +149,21 @@ class FrameProcessor:
         self.camera_motion_failures = 0
         self._floor: Optional[Tuple[np.ndarray, float, float]] = None
         self._floor_pending = False
+        self._signatures: Deque[List[Tuple[int, np.ndarray]]] = collections.deque()
+
+    def set_signatures(self, bodies: Sequence[Tuple[int, np.ndarray]]) -> None:
+        """The 3D stages' signatures of the persons followed (``(id, (G,) bone-group
+        lengths, m)``, the lifter's held skeletons), for the tracker to name a person who
+        came back (:meth:`PersonTracker.set_signature`). Safe to call from another thread:
+        applied before the next frame."""
+        self._signatures.append([(int(i), np.asarray(x, dtype=np.float64)) for i, x in bodies])
+
+    def _apply_signatures(self, res: FrameResult) -> None:
+        while self._signatures:
+            for pid, lengths in self._signatures.popleft():
+                old = self.tracker.set_signature(pid, lengths)
+                if old is not None:
+                    res.renamed.append((pid, old))
 
     def set_floor(self, normal: np.ndarray, height: float, stamp_s: float) -> None:
         """The floor in the camera frame of the image stamped ``stamp_s`` (its up normal
@@ -224,6 +242,7 @@ class FrameProcessor:
             res.notes.append(f'intrinsics: {note}')
         res.intrinsics = fi
         if self.tracker is not None:
+            self._apply_signatures(res)
             tracked = self.tracker.update(
                 people, frame.stamp_ns * 1e-9,
                 image=image if self.appearance else None)[:self.max_persons]

@@ -17,8 +17,10 @@ last seen. Each person's frames go to ``/humans/bodies/body_<id>/lifter/{motion,
 joint_states,contacts}`` and ``/humans/bodies/body_<id>/urdf``; every person of a frame to
 ``/mocap/lifter/bodies/{motion,contacts,joints3d,markers}`` (names prefixed ``body_<id>/``, the
 main person first); the single-person topics above carry the person of row ``person`` (row 0:
-the one tracked longest). Every output but the motion and ``/diagnostics`` is built only while
-it has a subscriber.
+the one tracked longest). ``/mocap/lifter/bodies/bone_lengths`` (JointState, transient local)
+holds every person's held skeleton (names ``body_<id>/<bone group>``), re-published when one
+changes: the keypoint node's tracker gives a person who comes back their old id by it.
+Every output but the motion and ``/diagnostics`` is built only while it has a subscriber.
 
 Without a calibrated ``/mocap/camera_info`` the keypoints are lifted with approximate
 intrinsics fixed once per stream (:mod:`mocap_lifter.intrinsics`: the image size of an
@@ -165,6 +167,10 @@ class LifterNode(Node):
         self.bodies = BodyPublishers(self, 'lifter', with_urdf=True)
         self.published_lengths: Optional[np.ndarray] = None
         self.body_lengths: Dict[int, np.ndarray] = {}
+        #: each person's held skeleton (bone-group lengths, m) as last published on
+        #: BODIES_BONE_LENGTHS, and whether that table changed since
+        self.signatures: Dict[int, np.ndarray] = {}
+        self.signatures_changed = False
         self.main_id: Optional[int] = None
         self.main_last_ns = -1
         self.intrinsics_said = ''
@@ -177,6 +183,8 @@ class LifterNode(Node):
             'contacts': self.create_publisher(JointState, topics.LIFTER_CONTACTS, STREAM_QOS),
             'markers': self.create_publisher(MarkerArray, topics.LIFTER_MARKERS, STREAM_QOS),
             'urdf': self.create_publisher(String, topics.SKELETON_URDF, LATCHED_QOS),
+            'bone_lengths': self.create_publisher(JointState, topics.BODIES_BONE_LENGTHS,
+                                                  LATCHED_QOS),
         }
         self.combined = CombinedPublishers(self, 'lifter', with_contacts=True)
         self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
@@ -290,7 +298,13 @@ class LifterNode(Node):
         for pid in step.ended:
             self.bodies.remove(pid)
             self.body_lengths.pop(pid, None)
+            self.signatures_changed |= self.signatures.pop(pid, None) is not None
             self.get_logger().info(f'person {pid} gone: their topics are removed')
+        stamps = [int(f.stamp_ns) for _, frames in released for f in frames]
+        if self.signatures_changed and stamps:
+            self.signatures_changed = False
+            self.pub['bone_lengths'].publish(rc.bodies_bone_lengths_to_msg(
+                sorted(self.signatures.items()), rc.make_header(max(stamps), self.frame_id)))
         self.diag.set_value('persons', len(self.people.streams))
         self.diag.set_value('person_ids', ' '.join(map(str, sorted(self.people.streams)))
                             or 'none')
@@ -317,6 +331,12 @@ class LifterNode(Node):
             self.body_lengths[pid] = lengths
             self.bodies.urdf(pid, lambda: rc.urdf_to_msg(
                 skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
+        held = self.signatures.get(pid)
+        if frame.skeleton_fixed and (held is None or np.max(np.abs(lengths - held)) >
+                                     self.p['skeleton_tolerance']):
+            # the person's signature for the keypoint node's tracker (topics.py)
+            self.signatures[pid] = lengths
+            self.signatures_changed = True
         self.bodies.publish(pid, 'motion', lambda: cdr.pose_to_motion(pose, header))
         self.bodies.publish(pid, 'joints3d',
                             lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
