@@ -54,8 +54,11 @@
   fact: a dropped track with a signature is remembered for ``signature_memory_s``, and when
   a track that was given a *new* id later receives its first signatures, it takes back the
   id of the one remembered person whose signature agrees within ``signature_rename_tolerance``
-  and whose clothes, where both are known, are within ``appearance_reid`` of its sigma, who
-  was last seen before the new track began (a person who left the picture and came back).
+  and, when the tracker sees the image, whose clothes are known for both and within
+  ``appearance_reid`` of its sigma, who was last seen before the new track began (a person who
+  left the picture and came back). Off by default (``signature_memory_s`` 0): measured on
+  rendered bodies, the shipped lifter's held skeletons of two different people are about as
+  close as two estimates of one person (``mocap eval signatures``).
   :meth:`PersonTracker.set_signature` returns the id taken back; from then on the person is
   published under it (the stages start the returning body afresh under its old id).
 * **Order.** Output rows are ordered by how long each id has been tracked, the longest first:
@@ -123,8 +126,9 @@ class TrackerParams:
     #: A dropped track with a signature is remembered this long (s) for renaming: a new id
     #: whose signature, when it arrives, agrees within ``signature_rename_tolerance``
     #: (relative, median over entries) with exactly one remembered person takes that
-    #: person's id back (module docstring). 0 disables renaming.
-    signature_memory_s: float = 60.0
+    #: person's id back (module docstring). 0 (the default) disables renaming: the shipped
+    #: lifter's held skeletons barely tell people apart (docs/multi_person.md).
+    signature_memory_s: float = 0.0
     signature_rename_tolerance: float = 0.03
     #: Kalman filter: acceleration noise (px/s^2, per px of box height) and measurement
     #: noise (px per px of box height).
@@ -203,6 +207,16 @@ def oks(a: np.ndarray, b: np.ndarray, height: float, min_confidence: float,
     area = 0.5 * max(height, 1.0) ** 2
     k = 2.0 * (KEYPOINT_SIGMAS[both] * scale) ** 2
     return float(np.mean(np.exp(-d2 / (2.0 * area * k))))
+
+
+def signature_distance(sig: np.ndarray, ref: np.ndarray) -> float:
+    """How far signature ``sig`` is from ``ref`` (e.g. two estimates of a person's bone-group
+    lengths): the median over entries of ``|sig - ref| / |ref|`` (0.03 = 3 %); inf when the
+    shapes differ."""
+    a, b = np.asarray(sig, dtype=np.float64), np.asarray(ref, dtype=np.float64)
+    if a.shape != b.shape or not a.size:
+        return float('inf')
+    return float(np.median(np.abs(a - b) / np.maximum(np.abs(b), 1e-6)))
 
 
 class _Kalman:
@@ -349,13 +363,14 @@ class PersonTracker:
         now = self._last_s if self._last_s is not None else t.last_s
         found = []
         for o in self._ended:
-            if o.signature is None or o.signature.shape != t.signature.shape or \
-                    o.last_s >= t.first_s or now - o.last_s > p.signature_memory_s:
+            if o.signature is None or o.last_s >= t.first_s or \
+                    now - o.last_s > p.signature_memory_s:
                 continue
-            rel = np.abs(t.signature - o.signature) / np.maximum(np.abs(o.signature), 1e-6)
-            if np.median(rel) > p.signature_rename_tolerance:
+            if signature_distance(t.signature, o.signature) > p.signature_rename_tolerance:
                 continue
             look = appearance_distance(o.appearance, t.appearance)
+            if look is None and self._with_looks:
+                continue        # with the image, the clothes must have been seen and agree
             if look is not None and look > p.appearance_reid * self._sigma(o):
                 continue
             found.append(o)
@@ -676,11 +691,9 @@ class PersonTracker:
     def _signature_ok(self, t: _Track, sig: Optional[np.ndarray]) -> bool:
         if sig is None or t.signature is None or not t.missed:
             return True
-        a, b = np.asarray(sig, float), t.signature
-        if a.shape != b.shape:
+        if np.shape(sig) != t.signature.shape:
             return True
-        rel = np.abs(a - b) / np.maximum(np.abs(b), 1e-6)
-        return bool(np.median(rel) <= self.params.signature_tolerance)
+        return signature_distance(sig, t.signature) <= self.params.signature_tolerance
 
     def _measure(self, t: _Track, kp: np.ndarray, box: np.ndarray) -> np.ndarray:
         """The box ``(cx, cy, h)`` that a candidate puts the track at: the track's keypoint

@@ -179,6 +179,9 @@ def test_signature_stops_a_coasting_track_taking_someone_else():
     assert set(feed(PersonTracker(params), sig_b)) == {2}       # another body: a new id
 
 
+ON = TrackerParams(signature_memory_s=60.0)
+
+
 def _leave_and_return(tr, sig_first, sig_back, others=(), gap_s=5.0, fps=30.0):
     """Person A at x=300 for 1 s, gone for ``gap_s`` (dropped), back at x=900 for 1 s; the
     3D stages report A's signature while A is there and the returning person's after 0.5 s
@@ -214,7 +217,7 @@ def test_a_returning_person_takes_their_id_back_by_their_bone_lengths():
     """Gone longer than any re-identification by place or clothes, the person comes back
     under a new id; once the 3D stages report their bone lengths, they get their old id."""
     sig = np.array([0.12, 0.25, 0.42, 0.40, 0.08, 0.30, 0.26, 0.24, 0.17])
-    tr = PersonTracker()
+    tr = PersonTracker(ON)
     first, before, after, renamed = _leave_and_return(tr, sig, sig * 1.01)
     assert before == {first + 1}                  # a new id at first
     assert renamed == first and after == {first}  # then the old one
@@ -226,18 +229,18 @@ def test_a_returning_person_takes_their_id_back_by_their_bone_lengths():
 def test_another_body_or_an_ambiguous_one_keeps_its_new_id():
     sig = np.array([0.12, 0.25, 0.42, 0.40, 0.08, 0.30, 0.26, 0.24, 0.17])
     # another body (6 % longer bones): a new person
-    first, _, after, renamed = _leave_and_return(PersonTracker(), sig, sig * 1.06)
+    first, _, after, renamed = _leave_and_return(PersonTracker(ON), sig, sig * 1.06)
     assert renamed is None and after == {first + 1}
     # two people who left match the returning one: nobody is named
-    first, _, after, renamed = _leave_and_return(PersonTracker(), sig, sig,
+    first, _, after, renamed = _leave_and_return(PersonTracker(ON), sig, sig,
                                                  others=[sig * 1.005])
     assert renamed is None and first not in after
     # remembered for signature_memory_s only
     params = TrackerParams(signature_memory_s=2.0)
     first, _, after, renamed = _leave_and_return(PersonTracker(params), sig, sig)
     assert renamed is None and after == {first + 1}
-    # renaming off; bad signatures are ignored
-    tr = PersonTracker(TrackerParams(signature_memory_s=0.0))
+    # renaming off (the default); bad signatures are ignored
+    tr = PersonTracker()
     first, _, after, renamed = _leave_and_return(tr, sig, sig)
     assert renamed is None and after == {first + 1}
     assert tr.set_signature(first + 1, np.full(9, np.nan)) is None
@@ -246,7 +249,7 @@ def test_another_body_or_an_ambiguous_one_keeps_its_new_id():
 def test_someone_seen_at_the_same_time_is_never_renamed():
     """Two people in the picture together are two people, whatever their bones say."""
     sig = np.full(9, 0.3)
-    tr = PersonTracker()
+    tr = PersonTracker(ON)
     for f in range(60):
         frame = [person(300, 300)] + ([person(900, 300)] if f >= 20 else [])
         got = tr.update(np.array(frame), f / 30.0)
@@ -259,6 +262,41 @@ def test_someone_seen_at_the_same_time_is_never_renamed():
     assert tr.ids == [ids[1]]
     assert tr.set_signature(ids[1], sig) is None
     assert tr.ids == [ids[1]]
+
+
+def test_with_the_image_a_rename_also_needs_the_same_clothes():
+    """From images, bones alone do not rename: the returning person must also look the
+    same (the lifter's skeletons of two people are often as close as of one)."""
+    sig = np.full(9, 0.3)
+
+    def scene(shirt_back):
+        tr = PersonTracker(ON)
+        t, dt = 0.0, 1 / 30.0
+
+        def frame(kp, shirt):
+            img = np.full((600, 1000, 3), 90, np.uint8)
+            if kp is None:
+                return tr.update(np.zeros((0, NUM_KEYPOINTS, 3)), t, image=img)
+            _draw(img, kp, shirt, (200, 60, 30))
+            return tr.update(kp[None], t, image=img)
+
+        for _ in range(30):
+            got = frame(walker(250, 300), (40, 40, 200))
+            t += dt
+        first = got[0].id
+        tr.set_signature(first, sig)
+        while t < 6.0:
+            frame(None, None)
+            t += dt
+        for _ in range(15):
+            got = frame(walker(750, 300), shirt_back)
+            t += dt
+        return first, tr.set_signature(got[0].id, sig)
+
+    first, renamed = scene((40, 40, 200))        # the same red shirt: their id back
+    assert renamed == first
+    first, renamed = scene((40, 200, 40))        # a green one: someone else
+    assert renamed is None
 
 
 def test_params_are_checked():

@@ -21,9 +21,9 @@ Publishes for every processed frame, stamped with the image's stamp (docs/design
     detector, intrinsics, ids given, lost, re-identified and renamed by bone lengths.
 
 Subscribes (besides an image source's topics) ``floor_topic`` (above) and, with several
-people, ``bone_lengths_topic`` (the lifter's held skeletons): a person who left and came back
-under a new id takes their old id back once the lifter knows their bones
-(``id_by_bone_lengths``, ``mocap_core.tracking``).
+people and ``id_by_bone_lengths`` (off by default), ``bone_lengths_topic`` (the lifter's held
+skeletons): a person who left and came back under a new id takes their old id back once the
+lifter knows their bones (``mocap_core.tracking``).
 
 Sources (parameter ``source``; ``auto`` picks from ``path``):
   * ``camera``: an OpenCV camera (``device`` index or /dev/videoN); stamps = grab time;
@@ -156,11 +156,12 @@ PARAMETERS = (
     ParamSpec('id_appearance_timeout_s', 3.0, 'With id_by_appearance: how long a person '
               'unseen keeps their id for a return recognised by their clothes (at least '
               'id_timeout_s)', min_value=0.0, read_only=True),
-    ParamSpec('id_by_bone_lengths', True, 'Take the bone lengths the lifter holds for each '
+    ParamSpec('id_by_bone_lengths', False, 'Take the bone lengths the lifter holds for each '
               'person (bone_lengths_topic) as their signature: a person who left and came back '
               'under a new id gets their old one back once the lifter knows their skeleton '
-              '(bones within id_bone_length_tolerance, clothes alike where seen)',
-              read_only=True),
+              '(bones within id_bone_length_tolerance and, from images, clothes alike). Off by '
+              'default: the shipped lifter\'s skeletons of different people are about as close '
+              'as two of one person (docs/multi_person.md)', read_only=True),
     ParamSpec('bone_lengths_topic', topics.BODIES_BONE_LENGTHS, 'The lifter\'s held '
               'skeletons (sensor_msgs/JointState, names body_<id>/<bone group>)',
               read_only=True),

@@ -82,7 +82,8 @@ def test_returning_person_takes_their_id_back(scene):
         Parameter('fps', value=30.0), Parameter('realtime', value=False),
         Parameter('image_width', value=int(intr.width)),
         Parameter('image_height', value=int(intr.height)),
-        Parameter('horizontal_fov_deg', value=fov)]))
+        Parameter('horizontal_fov_deg', value=fov),
+        Parameter('id_by_bone_lengths', value=True)]))
     lifter = graph.add(LifterNode(context=context, parameter_overrides=[
         Parameter('skeleton_frames', value=45)]))
     try:
