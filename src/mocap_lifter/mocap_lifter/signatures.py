@@ -111,6 +111,14 @@ def summarise(clips: Sequence[ClipSignatures],
     truth_diff = np.array([signature_distance(a.truth, b.truth)
                            for i, a in enumerate(est) for b in est[i + 1:]])
     err = np.array([signature_distance(c.whole, c.truth) for c in est])
+    # scale taken out (each set of lengths over its sum): the body's proportions only
+    unit = lambda x: np.asarray(x) / np.sum(x)                     # noqa: E731
+    same_prop = np.array([signature_distance(unit(c.halves[1]), unit(c.halves[0]))
+                          for c in clips if c.halves])
+    diff_prop = np.array([signature_distance(unit(a.whole), unit(b.whole))
+                          for i, a in enumerate(est) for b in est[i + 1:]])
+    truth_prop = np.array([signature_distance(unit(a.truth), unit(b.truth))
+                           for i, a in enumerate(est) for b in est[i + 1:]])
     # how much the estimates follow the true size: correlation of the summed lengths
     size = (np.corrcoef([c.whole.sum() for c in est], [c.truth.sum() for c in est])[0, 1]
             if len(est) > 2 else float('nan'))
@@ -126,6 +134,12 @@ def summarise(clips: Sequence[ClipSignatures],
         'same_person': q(same), 'different_people': q(diff),
         'different_people_truth': q(truth_diff), 'estimate_vs_truth': q(err),
         'size_correlation': float(size),
+        'proportions': {'same_person': q(same_prop), 'different_people': q(diff_prop),
+                        'different_people_truth': q(truth_prop)},
+        'spread': {'estimate': float(np.median(np.std([c.whole for c in est], axis=0) /
+                                               np.mean([c.whole for c in est], axis=0))),
+                   'truth': float(np.median(np.std([c.truth for c in est], axis=0) /
+                                            np.mean([c.truth for c in est], axis=0)))},
         'tolerances': [{'tolerance': t,
                         'same_accepted': float(np.mean(same <= t)) if len(same) else
                         float('nan'),

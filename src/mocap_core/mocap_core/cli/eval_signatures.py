@@ -105,7 +105,16 @@ def write_report(res: Dict, out: Path, command: str) -> None:
         f"| estimate against the body's true bone lengths | {_q(res['estimate_vs_truth'])} |",
         '',
         f"Correlation of the estimated and the true summed bone lengths over the clips: "
-        f"{res['size_correlation']:.2f}.", '',
+        f"{res['size_correlation']:.2f}. Spread of a bone group over the clips (std / mean, "
+        f"median over the groups): estimates {100 * res['spread']['estimate']:.1f} %, "
+        f"truth {100 * res['spread']['truth']:.1f} %.", '',
+        'The same with the scale taken out (each set of lengths divided by its sum: the '
+        "body's proportions):", '',
+        '| pairs | distance: median (p10, p90) |', '|---|---|',
+        f"| one person twice | {_q(res['proportions']['same_person'])} |",
+        f"| two different people | {_q(res['proportions']['different_people'])} |",
+        f"| two different people, truth | "
+        f"{_q(res['proportions']['different_people_truth'])} |", '',
         '| tolerance | one person twice: renamed | two people: renamed (wrongly) |',
         '|---|---|---|']
     lines += [f"| {100 * t['tolerance']:.0f} % | {t['same_accepted']:.0%} | "
