@@ -410,8 +410,6 @@ class PhysicsCycle:
             stamp = (self._stamp or 0.0) + self._period
         if valid:          # a held target (the last one) carries its offset already
             q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
-            if reinit is None:
-                q_hat = self._bend_stance_legs(q_hat)
         v_hat = None
         if self._target_prev is not None and reinit is None:
             v_hat = self._difference(self._target_prev, q_hat) / frame_dt
@@ -489,57 +487,6 @@ class PhysicsCycle:
         out = q_hat.copy()
         out[:2] += self._root_offset
         return out
-
-    def _bend_stance_legs(self, q_hat: np.ndarray, iterations: int = 3,
-                          damping: float = 0.05) -> np.ndarray:
-        """Stance legs (``stance_leg_gain`` > 0, whole body): the target's hip, knee and ankle
-        of each leg with anchored contact points turned so that those points' targets lie
-        on their anchors (horizontally; their heights stay the target's). The lifter's root
-        and legs often disagree about how far a step goes, and the stance anchors then
-        follow the target and the feet slide; this takes the disagreement out of the stance
-        leg instead, and leaves the root where the lifter put it (unlike the root follow).
-        Damped least squares (``damping``, m) on the leg's 9 velocity coordinates,
-        ``iterations`` Gauss-Newton steps per leg, then ``stance_leg_gain`` of the way from
-        the target to that. An anchor out of the leg's reach is approached as far as it
-        goes (and then follows the target, ``stance_release``)."""
-        p = self.params
-        if p.stance_leg_gain <= 0.0 or not self._stance_on or not np.any(self._anchored):
-            return q_hat
-        m = self.model
-        model, data = m.model, m.data
-        heights = m.contact_positions(q_hat)[:, 2]
-        q = q_hat.copy()
-        for side, cols in self._leg_columns().items():
-            rows = [c for c in range(len(m.contact_frame_ids))
-                    if self._anchored[c] and m.contact_feet[c] == side]
-            if not rows:
-                continue
-            goal = np.column_stack([self._anchor[rows], heights[rows]])
-            for _ in range(iterations):
-                pin.computeJointJacobians(model, data, q)
-                pin.updateFramePlacements(model, data)
-                err = np.concatenate([goal[r] - data.oMf[m.contact_frame_ids[c]].translation
-                                      for r, c in enumerate(rows)])
-                if np.linalg.norm(err) < 1e-4:
-                    break
-                J = np.vstack([pin.getFrameJacobian(model, data, m.contact_frame_ids[c],
-                                                    pin.LOCAL_WORLD_ALIGNED)[:3, cols]
-                               for c in rows])
-                step = J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(len(err)), err)
-                dv = np.zeros(m.nv)
-                dv[cols] = step
-                q = pin.integrate(model, q, dv)
-        if p.stance_leg_gain < 1.0:
-            q = pin.interpolate(model, q_hat, q, p.stance_leg_gain)
-        return q
-
-    def _leg_columns(self) -> Dict[str, np.ndarray]:
-        """Velocity indices of each leg's hip, knee and ankle ball joints."""
-        m = self.model
-        index = {n: j for j, n in enumerate(m.skeleton.joint_names)}
-        return {side: np.concatenate([np.arange(3) + m.idx_v[index[f'{side}_{j}']]
-                                      for j in ('hip', 'knee', 'ankle')])
-                for side in ('left', 'right')}
 
     def _simulate(self, q_hat, v_ff, mask, alpha, dt, n_sub) -> dict:
         """Run n_sub sub-steps from the current state; raises _Fallback."""

@@ -203,12 +203,6 @@ PARAMETERS = (
               'their anchors (0: off): the lifter\'s disagreement between root and legs is '
               'taken out of the root instead of sliding the feet', min_value=0.0,
               max_value=1.0, read_only=True),
-    ParamSpec('stance_leg_gain', _D.stance_leg_gain, 'whole_body: the target\'s stance legs '
-              '(hip, knee, ankle) are bent this share of the way towards putting their '
-              'anchored foot points on their anchors (0: off): the lifter\'s disagreement '
-              'between root and legs is taken out of the stance legs instead of sliding the '
-              'feet; the root stays where the lifter put it', min_value=0.0, max_value=1.0,
-              read_only=True),
     ParamSpec('root_follow_relax_s', _D.root_follow_relax_s, 'whole_body: without stance, '
               'the root follow offset fades with this time constant, s', min_value=0.01,
               read_only=True),
@@ -323,7 +317,6 @@ class PhysicsNode(Node):
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
             root_follow_gain=p['root_follow_gain'],
             root_follow_relax_s=p['root_follow_relax_s'],
-            stance_leg_gain=p['stance_leg_gain'],
             stance_height=p['stance_height'], slide_time=p['slide_time'],
             velocity_feedforward=p['velocity_feedforward'])
         self._limited = KeyedRateLimit()
