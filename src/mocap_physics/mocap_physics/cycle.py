@@ -468,7 +468,11 @@ class PhysicsCycle:
         stance anchors then follow the target (``stance_release``) and the feet slide. This
         takes the disagreement out of the root instead: a translation, which changes no
         joint angle. The offset (m, floor x, y) moves ``root_follow_gain`` of the way to its
-        new value per frame and fades with ``root_follow_relax_s`` while nothing stands."""
+        new value per frame and fades with ``root_follow_relax_s`` while nothing stands.
+        With ``root_follow_stance_relax_s`` > 0 it also fades in stance, with that time
+        constant, and the stance anchors move with it: the feet slide slowly back under the
+        lifter's root (a complementary filter: the root's motion within that time from the
+        legs, the slower motion from the lifter's root)."""
         p = self.params
         if p.root_follow_gain <= 0.0 or not self._stance_on:
             return q_hat
@@ -481,6 +485,11 @@ class PhysicsCycle:
             wanted = np.mean(self._anchor[held] - tgt[held], axis=0)
             self._root_offset = self._root_offset + p.root_follow_gain * (
                 wanted - self._root_offset)
+            if p.root_follow_stance_relax_s > 0.0:
+                fade = self._root_offset * (1.0 - np.exp(
+                    -frame_dt / p.root_follow_stance_relax_s))
+                self._root_offset = self._root_offset - fade
+                self._anchor[held] -= fade
         else:
             self._root_offset = self._root_offset * np.exp(
                 -frame_dt / max(p.root_follow_relax_s, 1e-6))

@@ -46,6 +46,8 @@ class PhysicsParams:
     #                                       lie on their anchors (0: off; cycle.py, root follow)
     root_follow_relax_s: float = 1.0      # s: without stance, that root offset fades with
     #                                       this time constant
+    root_follow_stance_relax_s: float = 0.0   # s: > 0: it also fades in stance, the stance
+    #                                       anchors moving with it (0: it does not)
     slide_threshold: float = 0.15         # body weights: horizontal residual that lets a foot
     #                                       with saturated friction slide (whole body)
     slide_time: float = 0.1               # s: whole body: that residual is averaged over this
@@ -122,7 +124,7 @@ class PhysicsParams:
                 bad.append(f'{name}={val} (must be > 0)')
         for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness',
                      'stance_release', 'slide_threshold', 'slide_time', 'stance_height',
-                     'root_follow_gain'):
+                     'root_follow_gain', 'root_follow_stance_relax_s'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0):
                 bad.append(f'{name}={val} (must be >= 0)')

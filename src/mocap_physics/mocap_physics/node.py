@@ -203,6 +203,10 @@ PARAMETERS = (
               'their anchors (0: off): the lifter\'s disagreement between root and legs is '
               'taken out of the root instead of sliding the feet', min_value=0.0,
               max_value=1.0, read_only=True),
+    ParamSpec('root_follow_stance_relax_s', _D.root_follow_stance_relax_s, 'whole_body: '
+              '> 0: the root follow offset also fades in stance with this time constant, s, '
+              'the stance feet sliding slowly with it back under the lifter\'s root (0: it '
+              'does not fade in stance)', min_value=0.0, read_only=True),
     ParamSpec('root_follow_relax_s', _D.root_follow_relax_s, 'whole_body: without stance, '
               'the root follow offset fades with this time constant, s', min_value=0.01,
               read_only=True),
@@ -317,6 +321,7 @@ class PhysicsNode(Node):
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
             root_follow_gain=p['root_follow_gain'],
             root_follow_relax_s=p['root_follow_relax_s'],
+            root_follow_stance_relax_s=p['root_follow_stance_relax_s'],
             stance_height=p['stance_height'], slide_time=p['slide_time'],
             velocity_feedforward=p['velocity_feedforward'])
         self._limited = KeyedRateLimit()

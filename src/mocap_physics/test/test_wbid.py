@@ -383,3 +383,27 @@ def test_root_follow_holds_an_invalid_frame_where_it_was(skeleton):
     np.testing.assert_allclose(offsets[45], offsets[44])    # the held frame keeps it
     steps = np.linalg.norm(np.diff(np.array(roots)[40:52], axis=0), axis=1)
     assert steps.max() < 0.02, steps
+
+
+def test_root_follow_stance_relax_brings_the_root_back_to_the_lifters(skeleton):
+    """With the offset fading in stance too (root_follow_stance_relax_s), a root that
+    drifts away from standing feet for 3 s is held back by at most about drift speed x time
+    constant, and the feet slide slowly (by the fade per frame) instead of not at all."""
+    rest = Pose.rest(skeleton)
+
+    def run(params, frames=90):
+        cyc = PhysicsCycle(skeleton, params)
+        xy, lag = [], []
+        for i in range(frames):
+            target = Pose(skeleton, rest.rotations, rest.root_position + [0.3 * i / FPS, 0, 0])
+            r = cyc.step(target, i / FPS, [1, 1, 1, 1])
+            xy.append(cyc.model.contact_positions(r.q)[:, :2])
+            lag.append(target.root_position[0] - r.q[0])
+        slide = np.linalg.norm(np.diff(np.array(xy), axis=0), axis=2).max(axis=1)
+        return slide, np.array(lag)
+
+    slide_held, lag_held = run(PhysicsParams(root_follow_gain=0.5))
+    slide, lag = run(PhysicsParams(root_follow_gain=0.5, root_follow_stance_relax_s=1.0))
+    assert slide_held.max() < 1e-3 and lag_held[-1] > 0.8     # held: the lag grows
+    assert lag[-1] < 0.4 and abs(lag[-1] - lag[-10]) < 0.02   # bounded, near 0.3 m/s x 1 s
+    assert 0.003 < slide[-10:].mean() < 0.011                 # the feet creep, 3-11 mm/frame
