@@ -209,11 +209,6 @@ PARAMETERS = (
               'fused root. Not for a walking camera (estimate moving: its path is the '
               'person\'s) nor a known camera pose (camera_pose_topic), followed as they are',
               min_value=0.0, read_only=True),
-    ParamSpec('fusion_translating_lock_time_constant_s', 0.0, 'With foot_lock: > 0: fused '
-              'frames of a walking camera (its position measured over the floor) also keep '
-              'the foot lock, the locked root pulled towards the fused one with this time '
-              'constant, s; 0 = they follow the fused root (its estimate\'s noise makes the '
-              'feet skate)', min_value=0.0, read_only=True),
     ParamSpec('heading_smoothing', 7, 'With the vertical from the input: frames on each '
               'side over which the heading offset between the world and the input frame is '
               'averaged (the later ones from the look-ahead; 0 = GMR\'s heading per frame)',
@@ -409,10 +404,7 @@ class GMRNode(Node):
                          # a known camera pose carries no estimate noise: followed as it is
                          moving_lock_time_constant_s=(
                              0.0 if self.camera_mode == 'known'
-                             else p['fusion_moving_lock_time_constant_s']),
-                         translating_lock_time_constant_s=(
-                             0.0 if self.camera_mode == 'known'
-                             else p['fusion_translating_lock_time_constant_s']))
+                             else p['fusion_moving_lock_time_constant_s']))
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera-motion estimate of each stamp (the last ``MAX_CAMERA_FRAMES``)."""

@@ -278,9 +278,6 @@ class OnlineGMR:
             ``translating`` False) keep the foot lock, and the locked root is pulled towards
             the fused one with this time constant (s); 0: such frames follow the fused root
             (module docstring, foot lock).
-        translating_lock_time_constant_s: the same, > 0, for the fused frames of a camera
-            that walks (``translating`` anchors: its position measured over the floor carries
-            that estimate's noise); 0 (default): they follow the fused root.
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
@@ -289,8 +286,7 @@ class OnlineGMR:
                  input_up: Optional[np.ndarray] = None, device: str = 'cpu',
                  chunk: int = 1, floor_input: bool = False, foot_lock: bool = False,
                  lock_height: float = 0.02, heading_smoothing: int = 0,
-                 moving_lock_time_constant_s: float = 0.0,
-                 translating_lock_time_constant_s: float = 0.0) -> None:
+                 moving_lock_time_constant_s: float = 0.0) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -310,10 +306,9 @@ class OnlineGMR:
         self.lock_height = float(lock_height)
         self.heading_smoothing = int(heading_smoothing)
         self.moving_lock_time_constant_s = float(moving_lock_time_constant_s)
-        self.translating_lock_time_constant_s = float(translating_lock_time_constant_s)
-        for name in ('moving_lock_time_constant_s', 'translating_lock_time_constant_s'):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if not self.moving_lock_time_constant_s >= 0:
+            raise ValueError('moving_lock_time_constant_s must be >= 0, got '
+                             f'{moving_lock_time_constant_s}')
         if self.heading_smoothing < 0:
             raise ValueError(f'heading_smoothing must be >= 0, got {heading_smoothing}')
         if self.cfg.root_input == 'up' and input_up is None:
@@ -586,16 +581,13 @@ class OnlineGMR:
         if self.floor_input:
             R, T = self._on_floor(self._heading_offset(R, out, pos), T, pose)
             anchor = self._anchors_in[pos]
-            moving = anchor is not None and not anchor.static
-            tau = 0.0 if not moving else (self.translating_lock_time_constant_s
-                                          if anchor.translating
-                                          else self.moving_lock_time_constant_s)
-            if self.foot_lock and fused and tau > 0:
-                # a turning (or walking) camera's fused root carries the noise of the
-                # estimate of its motion: the feet stay locked (steps follow the fused root
-                # while no point stands), and the locked root is pulled towards the fused one
+            turning = anchor is not None and not anchor.static and not anchor.translating
+            if self.foot_lock and fused and turning and self.moving_lock_time_constant_s > 0:
+                # a turning camera's fused root carries the noise of the estimate of its
+                # motion: the feet stay locked (steps follow the fused root while no point
+                # stands), and the locked root is pulled towards the fused one
                 T_lock = self._lock_feet(k, R, T, T_gmr, pose)
-                g = 1.0 - math.exp(-max(dt, 0.0) / tau)
+                g = 1.0 - math.exp(-max(dt, 0.0) / self.moving_lock_time_constant_s)
                 T = np.array([T_lock[0] + g * (T[0] - T_lock[0]),
                               T_lock[1] + g * (T[1] - T_lock[1]), T[2]])
             elif self.foot_lock and fused:
