@@ -332,10 +332,9 @@ class GMRNode(Node):
         self.diag.set_value('latency_s', f"{p['lookahead'] / cfg.fps:.3f}")
         self.diag.set_value('camera_mode', self.camera_mode)
         self.diag.set_value('nonfinite_outputs', 0)
-        self.motion_sub = self.create_subscription(
+        self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
-            input_qos(STREAM_QOS, p['queue_depth']))
-        self.diag.watch('input', self.motion_sub)
+            input_qos(STREAM_QOS, p['queue_depth'])))
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
                 MultiDOFJointTrajectory, p['bodies_motion_topic'],
@@ -600,11 +599,6 @@ class GMRNode(Node):
             self.single = _Person()
             self.get_logger().info(f"following every person on {self.p['bodies_motion_topic']}"
                                    f" ({self.p['motion_topic']} is ignored from now on)")
-            # not read any more: unsubscribed, so that its messages are neither received
-            # nor deserialised (CPU per frame)
-            if self.motion_sub is not None:
-                self.destroy_subscription(self.motion_sub)
-                self.motion_sub = None
         try:
             bodies = rc.motion_to_bodies(msg)
         except rc.MessageError as exc:

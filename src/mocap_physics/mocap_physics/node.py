@@ -364,10 +364,9 @@ class PhysicsNode(Node):
         self.diag.set_value('gains', 'fixed' if not learned else f'learned ({weights})')
         self.diag.set_value('model', 'none yet (waiting for the first motion)')
         qos = input_qos(STREAM_QOS, p['queue_depth'])
-        self.motion_sub = self.create_subscription(
+        self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
-            qos)
-        self.diag.watch('input', self.motion_sub)
+            qos))
         self.contacts_sub = None
         if contacts_topic:
             self.contacts_sub = self.create_subscription(
@@ -509,12 +508,6 @@ class PhysicsNode(Node):
             self.online = self._make_online(self.p['contacts_topic'])
             self.get_logger().info(f"following every person on {self.p['bodies_motion_topic']}"
                                    f" ({self.p['motion_topic']} is ignored from now on)")
-            # the single-person inputs are not read any more: unsubscribed, so that their
-            # messages are neither received nor deserialised (CPU per frame)
-            for sub in (self.motion_sub, self.contacts_sub):
-                if sub is not None:
-                    self.destroy_subscription(sub)
-            self.motion_sub = self.contacts_sub = None
         try:
             bodies = motion_to_bodies(msg)
         except MessageError as exc:
