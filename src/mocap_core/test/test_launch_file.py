@@ -47,7 +47,8 @@ def test_launch_file_records_the_demo_topics():
     expected = set(fixed) | {f'/mocap/{s}/{leaf}' for s in ('lifter', 'physics', 'world')
                              for leaf in ('motion', 'joints3d', 'joint_states', 'markers')}
     # several people: the ids, the TF tree and every stage's combined messages
-    expected |= {'/humans/bodies/tracked', '/tf', '/mocap/lifter/bodies/contacts'} | {
+    expected |= {'/humans/bodies/tracked', '/tf', '/mocap/lifter/bodies/contacts',
+                 '/mocap/lifter/bodies/bone_lengths'} | {
         f'/mocap/{s}/bodies/{leaf}' for s in ('lifter', 'physics', 'world')
         for leaf in ('motion', 'joints3d', 'markers')}
     assert set(namespace['TOPICS']) == expected

@@ -380,10 +380,9 @@ def build_parser() -> argparse.ArgumentParser:
     eval_sub = sub.add_parser('eval', help='evaluate a model').add_subparsers(
         dest='model', metavar='MODEL')
     from .. import plugins
-    from . import eval_people, eval_signatures, eval_video
+    from . import eval_people, eval_video
     eval_video.add_eval_parser(eval_sub)  # the whole pipeline, from the core
     eval_people.add_eval_parser(eval_sub)  # several people: detector and tracker
-    eval_signatures.add_eval_parser(eval_sub)  # bone lengths as a person's signature
     for commands in plugins.command_modules():
         commands.add_train_parser(train_sub)
         commands.add_eval_parser(eval_sub)

@@ -1,4 +1,5 @@
-"""``mocap eval signatures``: can the lifter's held bone lengths tell people apart?
+"""``mocap eval signatures`` (registered with the lifter's commands): can the lifter's held
+bone lengths tell people apart?
 
 The keypoint node gives a person who left and came back under a new id their old id when the
 lifter's held skeletons of the two agree within ``id_bone_length_tolerance``
@@ -25,7 +26,7 @@ from typing import Dict
 DEFAULT_RENDERS = Path.home() / '.cache' / 'mocap' / 'render'
 
 
-def add_eval_parser(sub) -> None:
+def add_signatures_parser(sub) -> None:
     p = sub.add_parser('signatures', help="how well the lifter's held bone lengths tell "
                        'people apart (rendered clips)', description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -43,10 +44,10 @@ def add_eval_parser(sub) -> None:
 def cmd_eval_signatures(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from mocap_lifter.online import OnlineLifter
-    from mocap_lifter.signatures import clip_signatures, summarise
-    from mocap_lifter.weights import default_weights, load_weights
-    from mocap_lifter.output_smoothing import DEFAULT_OUTPUT_SIGMA
+    from .online import OnlineLifter
+    from .output_smoothing import DEFAULT_OUTPUT_SIGMA
+    from .signatures import clip_signatures, summarise
+    from .weights import default_weights, load_weights
 
     root = Path(args.renders).expanduser() / args.split
     clips = sorted(d for d in root.glob('*') if (d / 'done').exists()) if root.is_dir() else []
