@@ -404,7 +404,6 @@ class KeypointsNode(Node):
             self.create_subscription(TransformStamped, p['floor_topic'],
                                      guarded(self, self.on_floor, 'floor'),
                                      input_qos(STREAM_QOS, 10))
-        self.signatures_received = 0
         if p['tracking'] and p['id_by_bone_lengths'] and p['bone_lengths_topic'] and \
                 p['max_persons'] > 1:
             self.create_subscription(JointState, p['bone_lengths_topic'],
@@ -771,7 +770,6 @@ class KeypointsNode(Node):
         except MessageError as exc:
             self._problem('bone_lengths', f'ignoring bone lengths: {exc}')
             return
-        self.signatures_received += 1
         self.processor.set_signatures(bodies)
 
     def on_floor(self, msg: TransformStamped) -> None:
