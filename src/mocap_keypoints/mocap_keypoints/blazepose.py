@@ -8,6 +8,9 @@ from mocap_core.skeleton import BLAZEPOSE_TO_LAYOUT, NUM_KEYPOINTS
 
 NUM_BLAZEPOSE_LANDMARKS = 33
 
+_SRC = np.array(BLAZEPOSE_TO_LAYOUT)
+_HAS = _SRC >= 0
+
 
 def blazepose_to_layout(landmarks: np.ndarray, width: int, height: int) -> np.ndarray:
     """(33, 4) BlazePose landmarks ``(x, y, visibility, presence)`` with x, y normalised to the
@@ -23,7 +26,7 @@ def blazepose_to_layout(landmarks: np.ndarray, width: int, height: int) -> np.nd
     conf = np.where(np.isnan(lm[:, 3]), lm[:, 2], lm[:, 2] * lm[:, 3])
     pts = np.stack([lm[:, 0] * width, lm[:, 1] * height, np.clip(conf, 0.0, 1.0)], axis=-1)
     out = np.zeros((NUM_KEYPOINTS, 3))
-    for k, src in enumerate(BLAZEPOSE_TO_LAYOUT):
-        if src >= 0 and np.all(np.isfinite(pts[src])):
-            out[k] = pts[src]
+    picked = pts[_SRC[_HAS]]
+    ok = np.isfinite(picked).all(axis=1)
+    out[np.flatnonzero(_HAS)[ok]] = picked[ok]
     return out

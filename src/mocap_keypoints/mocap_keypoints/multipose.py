@@ -22,13 +22,28 @@ the BlazePose way, per person:
   square cuts is not taken from it (a larger region finds them whole). Each region is scanned every
   ``detection_interval`` x (number of regions) frames; while whole rounds find nobody new
   the interval doubles, up to ``max_detection_interval``, and it drops back as soon as someone
-  new is found or a window ends.
+  new is found or a window ends. Once a whole round of regions at the longest interval has
+  found nobody new, a due search is skipped while nothing has changed outside the people
+  followed since the last search (:func:`changed_outside`: a grey copy of the image about
+  160 px wide, the people's boxes then and now left out), but one is made at least every
+  ``still_detection_interval`` frames. Nobody can come into a still picture without changing
+  it, and a moving camera changes everything, so searches go on as before there. A change
+  starts a full round of regions again. On a static camera this takes most of the search's
+  cost off (one search costs about half a landmark pass).
 * **A window per person**: every person found that no window already follows gets a square
   window on the image (``window_scale`` x the person's box, at least ``min_window_px``) and
   its own VIDEO-mode landmarker for one pose. The window stays put while the person stays in
   its central part, so the landmarker tracks inside it as it does on a whole video (landmarks
   of one frame seed the next; no detection); when the person nears the window's edge, the
   window is moved onto the person and its landmarker restarted.
+* **One person alone, large in the image**: while only one person is followed and their box
+  is at least ``whole_frame_min_height`` of the image's long side, their landmarker sees the
+  whole image instead of a window, as the single-person detector does (the landmarker crops
+  its own region from the last frame's landmarks; no copy of a window, no restart when the
+  person crosses the image). It goes back to a window when a second person is found, when
+  the person becomes smaller than ``whole_frame_leave_height``, or when its landmarker jumps
+  to somebody else. Measured on the committed one-person clip: per frame as fast as the
+  single-person detector (docs/multi_person.md).
 * **Windows end** when their landmarker loses the person for ``max_missed`` frames (in the
   meantime it looks for them again in its window, as MediaPipe does after losing track), or
   when two windows follow the same person (the less confident one ends). When the landmarker
@@ -46,7 +61,7 @@ import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional, Sequence
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -126,6 +141,44 @@ def cut_by(kp: np.ndarray, region: tuple, width: int, height: int,
                 (x1 < width and box[2] >= x1 - m) or (y1 < height and box[3] >= y1 - m))
 
 
+#: Width (px) of the grey copy of the image compared between searches (:func:`changed_outside`),
+#: at least: the image is reduced by the integer factor that comes nearest (160-319 px).
+CHANGE_WIDTH = 160
+#: The people followed are left out of that comparison in their box grown by this x their
+#: height on every side (:func:`mask_box`): their shadows and reflections on the floor move
+#: with them (measured on the committed clip: a reflection beyond 0.1 triggered searches).
+CHANGE_MARGIN = 0.25
+
+
+def picture_range(ref: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(H, W) uint8 grey image -> the lowest and highest value in each pixel's 3 x 3
+    neighbourhood, int16 (for :func:`changed_outside`)."""
+    import cv2
+    kernel = np.ones((3, 3), np.uint8)
+    return cv2.erode(ref, kernel).astype(np.int16), cv2.dilate(ref, kernel).astype(np.int16)
+
+
+def changed_outside(ref_range: Tuple[np.ndarray, np.ndarray], now: np.ndarray,
+                    boxes: Sequence[tuple], level: float = 20.0, min_pixels: int = 6) -> bool:
+    """Whether a small grey image ``now`` (uint8) differs from a reference outside ``boxes``
+    (``(x0, y0, x1, y1)`` pixels of these images, e.g. the people followed in either): at
+    least ``min_pixels`` pixels of ``now`` lie more than ``level`` grey levels outside the
+    range of the reference in their 3 x 3 neighbourhood (``ref_range``, from
+    :func:`picture_range`). The neighbourhood forgives a shake of the camera by up to a pixel
+    of the small image (4 px of a 640-px-wide frame), which otherwise lights up every edge; a
+    person coming into the picture changes a whole patch. At :data:`CHANGE_WIDTH` px wide a
+    person 48 px high in a 1280 x 720 image covers about 15 pixels. Another image size is a
+    change."""
+    lo, hi = ref_range
+    if lo.shape != now.shape:
+        return True
+    cur = now.astype(np.int16)
+    diff = (cur < lo - level) | (cur > hi + level)
+    for x0, y0, x1, y1 in boxes:
+        diff[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)] = False
+    return int(np.count_nonzero(diff)) >= min_pixels
+
+
 def _fill(crop: np.ndarray, box: tuple, x0: int, y0: int) -> None:
     """Paint the image box ``(x0, y0, x1, y1)`` grey in ``crop``, whose top-left corner is
     at image pixel (``x0``, ``y0``)."""
@@ -195,6 +248,7 @@ class _Window:
     missed: int = 0
     last: Optional[np.ndarray] = None   # (23, 3) image keypoints of the last frame
     prev: Optional[np.ndarray] = None   # those of the frame before (None after a miss)
+    whole: bool = False     # the landmarker sees the whole image (x0, y0, side unused)
 
 
 class BlazePoseMultiDetector:
@@ -206,6 +260,9 @@ class BlazePoseMultiDetector:
             also whenever no window follows anybody; never while ``max_persons`` are followed.
         max_detection_interval: while whole rounds of regions find nobody new, the interval
             doubles up to this.
+        still_detection_interval: after a whole round at ``max_detection_interval`` found
+            nobody new, a search is skipped while nothing changed outside the people followed
+            since the last one, but made at least every this many frames (0: never skipped).
         min_person_px: people whose box of seen keypoints is lower than this are ignored.
         window_scale: window side / the person's box side (height or width, the larger).
         min_window_px: the smallest window side.
@@ -213,22 +270,38 @@ class BlazePoseMultiDetector:
         min_detection_confidence, min_tracking_confidence: MediaPipe's thresholds.
         threads: the windows' landmarkers run in up to this many threads at once (two people
             on two cores: 13 against 23 ms per frame for both windows, docs/multi_person.md).
+        whole_frame_min_height: a person followed alone whose box is at least this fraction
+            of the image's long side is tracked on the whole image (the detector then sees
+            them at least this x 224 px high); 0 disables it.
+        whole_frame_leave_height: ... and goes back to a window below this fraction
+            (hysteresis; at most ``whole_frame_min_height``).
     """
 
     name = 'mediapipe_blazepose_full_multi'
 
     def __init__(self, max_persons: int = 4, detection_interval: int = 5,
-                 max_detection_interval: int = 15,
+                 max_detection_interval: int = 15, still_detection_interval: int = 60,
                  min_person_px: float = 48.0, window_scale: float = 2.0,
                  min_window_px: int = 128, max_missed: int = 8,
                  min_detection_confidence: float = 0.5,
-                 min_tracking_confidence: float = 0.5, threads: int = 2) -> None:
+                 min_tracking_confidence: float = 0.5, threads: int = 2,
+                 whole_frame_min_height: float = 0.4,
+                 whole_frame_leave_height: float = 0.3) -> None:
         if max_persons < 1:
             raise ValueError(f'max_persons must be >= 1, got {max_persons}')
         if detection_interval < 1:
             raise ValueError(f'detection_interval must be >= 1, got {detection_interval}')
         if threads < 1:
             raise ValueError(f'threads must be >= 1, got {threads}')
+        if not 0.0 <= whole_frame_min_height <= 1.0:
+            raise ValueError(f'whole_frame_min_height must be in [0, 1] (0: off), got '
+                             f'{whole_frame_min_height}')
+        if whole_frame_min_height > 0 and not 0.0 <= whole_frame_leave_height \
+                <= whole_frame_min_height:
+            raise ValueError(f'whole_frame_leave_height must be in [0, whole_frame_min_height '
+                             f'= {whole_frame_min_height}], got {whole_frame_leave_height}')
+        self.whole_frame_min_height = float(whole_frame_min_height)
+        self.whole_frame_leave_height = float(whole_frame_leave_height)
         self.threads = int(threads)
         self._pool = None
         os.environ.setdefault('GLOG_minloglevel', '2')
@@ -259,6 +332,18 @@ class BlazePoseMultiDetector:
             min_pose_presence_confidence=self._det_conf))
         self._windows: List[_Window] = []
         self.max_detection_interval = max(int(max_detection_interval), self.detection_interval)
+        self.still_detection_interval = int(still_detection_interval)
+        #: the last search's small grey image (its 3 x 3 ranges) and the people's boxes in it
+        self._ref: Optional[Tuple[np.ndarray, np.ndarray]] = None
+        self._ref_boxes: List[tuple] = []
+        #: a whole round of regions at the longest interval found nobody new (searches may
+        #: then be skipped while the picture is still)
+        self._settled = False
+        self._since_search = 0
+        #: no lone person on the whole image until the next search (after a jump there)
+        self._whole_blocked = False
+        #: searches skipped because nothing changed outside the people followed
+        self.searches_skipped = 0
         self._frame = 0
         self._since_find = 0
         self._interval = self.detection_interval
@@ -270,6 +355,8 @@ class BlazePoseMultiDetector:
         self.windows_opened = 0
         #: windows ended because their landmarker jumped to somebody else
         self.jumps = 0
+        #: switches of a lone person's landmarker to the whole image and back to a window
+        self.whole_switches = 0
 
     # ------------------------------------------------------------------ protocol
     def detect(self, image: np.ndarray) -> np.ndarray:
@@ -287,8 +374,15 @@ class BlazePoseMultiDetector:
                 # window, and a fresh landmarker looks for the person again (the others
                 # masked) from the next frame on
                 self.jumps += 1
-                win.landmarker.close()
-                win.landmarker = self._new_landmarker()
+                if win.whole:
+                    # somebody else is in the picture: back to a window around the person,
+                    # and search soon (no whole image until then)
+                    self._to_window(win, win.last, w, h)
+                    self._whole_blocked = True
+                    self._interval, self._quiet, self._settled = self.detection_interval, 0, False
+                else:
+                    win.landmarker.close()
+                    win.landmarker = self._new_landmarker()
                 kp = None
             if kp is None:
                 win.missed += 1
@@ -303,22 +397,31 @@ class BlazePoseMultiDetector:
             self._recentre(win, kp, w, h)
         self._drop_duplicate_windows(people)
         self._since_find += 1
-        if not self._windows or (self._since_find >= self._interval and
-                                 len(self._windows) < self.max_persons):
-            self._since_find = 0
-            opened = 0
+        self._since_search += 1
+        due = not self._windows or (self._since_find >= self._interval and
+                                    len(self._windows) < self.max_persons)
+        if due and self._windows and self._still(rgb):
+            self._since_find = 0        # the picture is checked again an interval later
+            due = False
+        if due:
+            self._since_find = self._since_search = 0
+            new: List[np.ndarray] = []
             for kp in self._find(rgb, [wn.last for wn in self._windows if wn.last is not None]):
                 box = keypoint_box(kp, 0.3)
                 if box is None or box[2] < self.min_person_px:
                     continue
-                if any(self._same(kp, q) for q in people):
+                if any(self._same(kp, q) for q in people + new):
                     continue
-                if len(self._windows) >= self.max_persons:
+                if len(self._windows) + len(new) >= self.max_persons:
                     break
-                people.append(kp)
-                self._open(kp, w, h)
-                opened += 1
-            self._back_off(opened, len(self.regions(w, h)))
+                new.append(kp)
+            alone = not self._windows and len(new) == 1
+            for kp in new:
+                self._open(kp, w, h, whole=alone and self._large(kp, w, h))
+            people += new
+            self._back_off(len(new), len(self.regions(w, h)))
+            self._searched(rgb)
+        self._settle_whole(w, h)
         self._frame += 1
         people = [p for p in people if (b := keypoint_box(p, 0.3)) is not None and
                   b[2] >= self.min_person_px]
@@ -333,17 +436,67 @@ class BlazePoseMultiDetector:
         self._since_find = 0
         self._interval = self.detection_interval
         self._quiet = 0
+        self._ref, self._ref_boxes = None, []
+        self._settled = self._whole_blocked = False
+        self._since_search = 0
+
+    def _small(self, rgb: np.ndarray) -> Tuple[np.ndarray, float]:
+        """The image grey, reduced by an integer factor to :data:`CHANGE_WIDTH` - 319 px wide
+        (the last rows and columns that do not fill a block are left out), and its scale."""
+        h, w = rgb.shape[:2]
+        f = max(1, w // CHANGE_WIDTH)
+        cut = rgb[:max(f, h - h % f), :w - w % f]
+        small = self._cv2.resize(cut, (cut.shape[1] // f, cut.shape[0] // f),
+                                 interpolation=self._cv2.INTER_AREA)
+        return self._cv2.cvtColor(small, self._cv2.COLOR_RGB2GRAY), 1.0 / f
+
+    def _followed_boxes(self, scale: float) -> List[tuple]:
+        """The people followed, each in their box grown by :data:`CHANGE_MARGIN`, in the
+        pixels of :meth:`_small` (rounded outwards)."""
+        out = []
+        for win in self._windows:
+            box = mask_box(win.last, CHANGE_MARGIN) if win.last is not None else None
+            if box is not None:
+                out.append(tuple(int(round(v * scale)) + (1 if k >= 2 else -1)
+                                 for k, v in enumerate(box)))
+        return out
+
+    def _still(self, rgb: np.ndarray) -> bool:
+        """Whether this due search can be skipped: searches have settled (a whole round at
+        the longest interval found nobody new), the last search is fewer than
+        ``still_detection_interval`` frames ago, and nothing changed outside the people
+        followed (then or now) since then. A change unsettles the searches: a full round of
+        regions comes first again."""
+        if (self.still_detection_interval <= 0 or not self._settled or self._ref is None or
+                self._since_search >= self.still_detection_interval):
+            return False
+        small, scale = self._small(rgb)
+        if changed_outside(self._ref, small, self._ref_boxes + self._followed_boxes(scale)):
+            self._settled, self._quiet = False, 0
+            return False
+        self.searches_skipped += 1
+        return True
+
+    def _searched(self, rgb: np.ndarray) -> None:
+        """After a search: its picture is the reference of the next :meth:`_still`."""
+        self._whole_blocked = False
+        if self.still_detection_interval > 0:
+            small, scale = self._small(rgb)
+            self._ref = picture_range(small)
+            self._ref_boxes = self._followed_boxes(scale)
 
     def _back_off(self, opened: int, regions: int) -> None:
         """After a detection: someone new resets the interval to ``detection_interval``; a
         whole round of regions with nobody new doubles it, up to ``max_detection_interval``
         (a scene that stays the same costs little; a window that ends resets it too)."""
         if opened:
-            self._interval, self._quiet = self.detection_interval, 0
+            self._interval, self._quiet, self._settled = self.detection_interval, 0, False
             return
         self._quiet += 1
         if self._quiet >= regions:
             self._quiet = 0
+            if self._interval >= self.max_detection_interval:
+                self._settled = True
             self._interval = min(2 * self._interval, self.max_detection_interval)
 
     def close(self) -> None:
@@ -442,15 +595,54 @@ class BlazePoseMultiDetector:
         side = int(max(self.min_window_px, self.window_scale * max(box[2], box[3])))
         return int(round(box[0] - side / 2)), int(round(box[1] - side / 2)), side
 
-    def _open(self, kp: np.ndarray, w: int, h: int) -> None:
+    def _open(self, kp: np.ndarray, w: int, h: int, whole: bool = False) -> None:
         x0, y0, side = self._window_for(kp, w, h)
-        self._windows.append(_Window(x0, y0, side, self._new_landmarker(), last=kp))
+        self._windows.append(_Window(x0, y0, side, self._new_landmarker(), last=kp,
+                                     whole=whole))
         self.windows_opened += 1
+
+    def _large(self, kp: np.ndarray, w: int, h: int) -> bool:
+        """Whether a person is large enough to be followed alone on the whole image."""
+        box = keypoint_box(kp, 0.3)
+        return (self.whole_frame_min_height > 0.0 and not self._whole_blocked and
+                box is not None and box[2] >= self.whole_frame_min_height * max(w, h))
+
+    def _settle_whole(self, w: int, h: int) -> None:
+        """A lone, large person's landmarker goes to the whole image; with several windows
+        none sees the whole image (the others must be masked)."""
+        if len(self._windows) > 1:
+            for win in self._windows:
+                if win.whole:
+                    self._to_window(win, win.last, w, h)
+            return
+        if len(self._windows) != 1:
+            return
+        win = self._windows[0]
+        if win.whole or win.missed or win.last is None or not self._large(win.last, w, h):
+            return
+        win.whole = True
+        self.whole_switches += 1
+        win.landmarker.close()
+        win.landmarker = self._new_landmarker()
+
+    def _to_window(self, win: _Window, kp: Optional[np.ndarray], w: int, h: int) -> None:
+        """Back from the whole image to a window on ``kp`` (the landmarker restarts); a
+        square over the whole image when ``kp`` has too few points seen for a box."""
+        if kp is not None and keypoint_box(kp, 0.3) is not None:
+            win.x0, win.y0, win.side = self._window_for(kp, w, h)
+        else:
+            side = max(w, h)
+            win.x0, win.y0, win.side = (w - side) // 2, (h - side) // 2, side
+        win.whole = False
+        self.whole_switches += 1
+        win.landmarker.close()
+        win.landmarker = self._new_landmarker()
 
     def _end(self, win: _Window) -> None:
         win.landmarker.close()
         self._windows.remove(win)
         self._interval, self._quiet = self.detection_interval, 0   # look again soon
+        self._settled = False
 
     def _track_windows(self, rgb: np.ndarray):
         """Yield ``(window, keypoints or None)`` of every window on this frame. With
@@ -484,7 +676,15 @@ class BlazePoseMultiDetector:
         return image keypoints or None. The other people followed (``others``: their last
         (23, 3) keypoints) are masked grey in the crop, except where they overlap the window's
         own person: the landmarker then keeps to its person instead of taking a more salient
-        one next to them."""
+        one next to them. A window on the whole image (a lone person) takes the image as it
+        is."""
+        if win.whole:
+            res = win.landmarker.detect_for_video(
+                self._mp.Image(image_format=self._mp.ImageFormat.SRGB, data=rgb), self._ts_ms)
+            if not res.pose_landmarks:
+                return None
+            return blazepose_to_layout(self._landmarks(res.pose_landmarks[0]),
+                                       rgb.shape[1], rgb.shape[0])
         M = np.array([[1.0, 0.0, -win.x0], [0.0, 1.0, -win.y0]])
         crop = self._cv2.warpAffine(rgb, M, (win.side, win.side),
                                     flags=self._cv2.INTER_LINEAR,
@@ -514,6 +714,10 @@ class BlazePoseMultiDetector:
         leaves the window's central part or no longer fits its size."""
         box = keypoint_box(kp, 0.3)
         if box is None:
+            return
+        if win.whole:
+            if box[2] < self.whole_frame_leave_height * max(w, h):
+                self._to_window(win, kp, w, h)
             return
         x0, y0, side = self._window_for(kp, w, h)
         margin = self.recentre_margin * win.side

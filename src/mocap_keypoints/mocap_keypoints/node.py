@@ -137,9 +137,19 @@ PARAMETERS = (
               'many frames, in regions of the image taken in turn (between, each person is '
               'tracked in their own window); while nobody new appears the interval doubles, up '
               'to 3x this', min_value=1, max_value=1000, read_only=True),
+    ParamSpec('still_detection_interval', 60, 'blazepose_multi: once the search for new '
+              'people has found nobody in a whole round of regions at its longest interval, a '
+              'search is skipped while nothing changes in the picture outside the people '
+              'followed (a static camera), but made at least every this many frames; 0 = never '
+              'skipped', min_value=0, max_value=100000, read_only=True),
     ParamSpec('landmark_threads', 2, 'blazepose_multi: the people\'s landmark models run in '
               'up to this many threads at once (1: one after the other)', min_value=1,
               max_value=16, read_only=True),
+    ParamSpec('whole_frame_min_height', 0.4, 'blazepose_multi: a person followed alone whose '
+              'keypoints span at least this fraction of the image\'s long side is tracked on '
+              'the whole image, as the single-person detector does (cheaper than a window); '
+              'back to a window below 0.75x this or when a second person is found; 0 = never',
+              min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('min_person_height_px', 48.0, 'Persons whose seen keypoints span fewer pixels '
               'in height are ignored', min_value=0.0, read_only=True),
     ParamSpec('id_after_frames', 0, 'A new person gets an id (and is published) after being '
@@ -360,10 +370,14 @@ class KeypointsNode(Node):
                     name, max_persons=p['max_persons'],
                     detection_interval=p['detection_interval'] if p['tracking'] else 1,
                     max_detection_interval=3 * p['detection_interval'] if p['tracking'] else 1,
+                    still_detection_interval=(p['still_detection_interval'] if p['tracking']
+                                              else 0),
                     min_person_px=p['min_person_height_px'],
                     min_detection_confidence=p['min_detection_confidence'],
                     min_tracking_confidence=p['min_tracking_confidence'],
-                    threads=p['landmark_threads'])
+                    threads=p['landmark_threads'],
+                    whole_frame_min_height=p['whole_frame_min_height'],
+                    whole_frame_leave_height=0.75 * p['whole_frame_min_height'])
             else:
                 detector = create_detector(
                     name, tracking=p['tracking'],

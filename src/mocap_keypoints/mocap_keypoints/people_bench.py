@@ -1,9 +1,13 @@
 """Several-people detector benchmark (``mocap bench multipose``): the single-person BlazePose
 (the legacy API, ``max_persons 1``) and the multi-person detector
 (:class:`~mocap_keypoints.multipose.BlazePoseMultiDetector`, ``max_persons 4``) with the
-tracker, side by side on the same decoded frames of real clips: time per frame (median, both
-measured in one run, alternating frame by frame), people found per frame, the ids the
-tracker gave and for how many frames each.
+tracker, side by side on the same decoded frames of real clips: time per frame (median and
+mean, all measured in one run, taking turns frame by frame, the order rotating), people found
+per frame, the ids the tracker gave and for how many frames each. The mean includes the
+multi-person detector's periodic search for new people, so it is the one that says what a
+live keypoint node spends. A third column runs the multi-person detector with its windows
+only (``whole_frame_min_height`` 0: no whole-image tracking of a lone person), the design
+before it. A clip shorter than ``--frames`` is played forwards and backwards (no cut).
 
 Clips: the committed test clip, and where ``../shared/data/videos`` exists the real videos
 (two basketball players, a walk filmed by a moving camera, a two-person demo, a street).
@@ -40,6 +44,8 @@ def clips() -> Dict[str, Path]:
 
 
 def _frames(path: Path, limit: int) -> List[np.ndarray]:
+    """Up to ``limit`` decoded BGR frames; a shorter clip is played forwards, backwards,
+    forwards ... (:func:`ping_pong`)."""
     import cv2
     cap = cv2.VideoCapture(str(path))
     out = []
@@ -49,7 +55,26 @@ def _frames(path: Path, limit: int) -> List[np.ndarray]:
             break
         out.append(img)
     cap.release()
-    return out
+    return ping_pong(out, limit)
+
+
+def ping_pong(frames: List, limit: int) -> List:
+    """``frames`` forwards, then backwards without repeating the turning frame, and so on,
+    until ``limit`` items: a short clip made longer with no cut in the motion."""
+    if len(frames) < 2:
+        return list(frames[:limit])
+    out = list(frames)
+    back = True
+    while len(out) < limit:
+        seq = frames[-2::-1] if back else frames[1:]
+        out.extend(seq[:limit - len(out)])
+        back = not back
+    return out[:limit]
+
+
+#: the detectors compared: label -> (factory keyword arguments of the multi-person detector,
+#: or None for the single-person one)
+DETECTORS = {'single': None, 'multi': {}, 'windows': {'whole_frame_min_height': 0.0}}
 
 
 def measure(path: Path, limit: int) -> Dict[str, object]:
@@ -60,38 +85,45 @@ def measure(path: Path, limit: int) -> Dict[str, object]:
     from .multipose import BlazePoseMultiDetector
 
     frames = _frames(path, limit)
-    single, multi = BlazePoseDetector(), BlazePoseMultiDetector(max_persons=4)
+    dets = {k: BlazePoseDetector() if kw is None else BlazePoseMultiDetector(max_persons=4, **kw)
+            for k, kw in DETECTORS.items()}
+    names = list(dets)
+    multi = dets['multi']
     tracker = PersonTracker(TrackerParams(max_persons=4))
-    t_single, t_multi, found_single, found_multi = [], [], Counter(), Counter()
+    times = {k: [] for k in names}
+    found = {k: Counter() for k in names}
     id_frames: Counter = Counter()
     try:
         for k, img in enumerate(frames):
-            t0 = time.perf_counter()
-            a = single.detect(img)
-            t1 = time.perf_counter()
-            b = multi.detect(img)
-            t2 = time.perf_counter()
-            t_single.append(t1 - t0)
-            t_multi.append(t2 - t1)
-            found_single[len(a)] += 1
-            found_multi[len(b)] += 1
-            for p in tracker.update(b, k / 30.0):
+            got = {}
+            for j in range(len(names)):          # the order rotates frame by frame
+                name = names[(k + j) % len(names)]
+                t0 = time.perf_counter()
+                got[name] = dets[name].detect(img)
+                times[name].append(time.perf_counter() - t0)
+                found[name][len(got[name])] += 1
+            for p in tracker.update(got['multi'], k / 30.0):
                 id_frames[p.id] += 1
     finally:
-        single.close()
-        multi.close()
+        for d in dets.values():
+            d.close()
     h, w = frames[0].shape[:2] if frames else (0, 0)
-    return {
-        'frames': len(frames), 'size': f'{w}x{h}',
-        'single_ms': 1e3 * float(np.median(t_single)) if t_single else float('nan'),
-        'multi_ms': 1e3 * float(np.median(t_multi)) if t_multi else float('nan'),
-        'single_found': dict(sorted(found_single.items())),
-        'multi_found': dict(sorted(found_multi.items())),
+
+    def ms(v, f):
+        return 1e3 * float(f(v)) if v else float('nan')
+    out = {'frames': len(frames), 'size': f'{w}x{h}'}
+    for name in names:
+        out[f'{name}_ms'] = ms(times[name], np.median)
+        out[f'{name}_mean_ms'] = ms(times[name], np.mean)
+        out[f'{name}_found'] = dict(sorted(found[name].items()))
+    out.update({
         'ids': dict(sorted(id_frames.items())),
         'detections': multi.detections, 'windows_opened': multi.windows_opened,
+        'whole_frame_switches': multi.whole_switches,
         'tracker': {'births': tracker.stats.births, 'reidentified': tracker.stats.reidentified,
                     'false_detections_ignored': tracker.stats.blips},
-    }
+    })
+    return out
 
 
 def render(results: Dict[str, dict], limit: int) -> str:
@@ -100,23 +132,46 @@ def render(results: Dict[str, dict], limit: int) -> str:
         '# Several people: the multi-person detector on real clips',
         '',
         f'`mocap bench multipose --frames {limit}` on {platform.node()} ({machine}), '
-        f'{time.strftime("%Y-%m-%d")}. Both detectors see the same decoded frames, '
-        'alternating frame by frame, one thread each; medians per frame.',
+        f'{time.strftime("%Y-%m-%d")}. The detectors see the same decoded frames, '
+        'taking turns frame by frame (the order rotating), one thread each. "single": '
+        'BlazePose, one person (`max_persons 1`); "multi": the multi-person detector '
+        '(`max_persons 4`, defaults); "windows": the same with windows only '
+        '(`whole_frame_min_height 0`, no whole-image tracking of a lone person). Short clips '
+        'are played forwards and backwards up to the frame count.',
         '',
-        '| clip | frames | size | single-person ms | multi-person ms | ratio | people found '
-        '(single) | people found (multi) | ids (frames each) |',
-        '|---|---|---|---|---|---|---|---|---|',
+        '## Time per frame',
+        '',
+        'Median and mean (ms); the mean includes the periodic search for new people and is what '
+        'a live node spends. Ratios: multi / single.',
+        '',
+        '| clip | frames | size | single median | multi median | windows median | '
+        'single mean | multi mean | windows mean | ratio of medians | ratio of means |',
+        '|---|---|---|---|---|---|---|---|---|---|---|',
     ]
+
+    def ratio(a, b):
+        return a / b if b > 0 else float('nan')
     for name, r in results.items():
-        ratio = r['multi_ms'] / r['single_ms'] if r['single_ms'] > 0 else float('nan')
-        fs = ', '.join(f'{k}: {v}' for k, v in r['single_found'].items())
-        fm = ', '.join(f'{k}: {v}' for k, v in r['multi_found'].items())
+        lines.append(
+            f"| {name} | {r['frames']} | {r['size']} | {r['single_ms']:.1f} | "
+            f"{r['multi_ms']:.1f} | {r['windows_ms']:.1f} | {r['single_mean_ms']:.1f} | "
+            f"{r['multi_mean_ms']:.1f} | {r['windows_mean_ms']:.1f} | "
+            f"{ratio(r['multi_ms'], r['single_ms']):.2f} | "
+            f"{ratio(r['multi_mean_ms'], r['single_mean_ms']):.2f} |")
+    lines += ['', '## People found', '',
+              '| clip | single | multi | windows | ids of multi (frames each) | whole-image '
+              'switches |', '|---|---|---|---|---|---|']
+    for name, r in results.items():
+        cells = [', '.join(f'{k}: {v}' for k, v in r[f'{d}_found'].items())
+                 for d in DETECTORS]
         ids = ', '.join(f'{k}: {v}' for k, v in r['ids'].items()) or 'none'
-        lines.append(f"| {name} | {r['frames']} | {r['size']} | {r['single_ms']:.1f} | "
-                     f"{r['multi_ms']:.1f} | {ratio:.2f} | {fs} | {fm} | {ids} |")
-    lines += ['', '"people found": frames by number of people the detector returned. "ids": '
-              'the tracker\'s ids over the multi-person detections (keypoint node defaults) '
-              'and the frames each was published.', '']
+        lines.append(f"| {name} | {' | '.join(cells)} | {ids} | "
+                     f"{r['whole_frame_switches']} |")
+    lines += ['', '"single", "multi", "windows": frames by number of people the detector '
+              'returned. "ids": the tracker\'s ids over the multi-person detections (keypoint '
+              'node defaults) and the frames each was published. "whole-image switches": '
+              'times the multi-person detector took a lone person onto the whole image or '
+              'back to a window.', '']
     return '\n'.join(lines)
 
 
@@ -132,8 +187,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     for name, path in clips().items():
         r = measure(path, args.frames)
         results[name] = r
-        print(f"{name}: single {r['single_ms']:.1f} ms, multi {r['multi_ms']:.1f} ms per "
-              f"frame; people (multi) {r['multi_found']}; ids {r['ids']}")
+        print(f"{name}: per frame median / mean: single {r['single_ms']:.1f} / "
+              f"{r['single_mean_ms']:.1f} ms, multi {r['multi_ms']:.1f} / "
+              f"{r['multi_mean_ms']:.1f} ms, windows only {r['windows_ms']:.1f} / "
+              f"{r['windows_mean_ms']:.1f} ms; people (multi) {r['multi_found']}; "
+              f"ids {r['ids']}")
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(render(results, args.frames))
     args.output.with_suffix('.json').write_text(json.dumps(results, indent=1))

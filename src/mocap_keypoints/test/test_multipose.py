@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from mocap_core.skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
-from mocap_keypoints.multipose import BlazePoseMultiDetector, pose_bundle
+from mocap_keypoints.multipose import (BlazePoseMultiDetector, changed_outside, picture_range,
+                                       pose_bundle)
 
 BODY = [KEYPOINT_INDEX[n] for n in ('left_shoulder', 'right_shoulder', 'left_hip', 'right_hip',
                                     'left_knee', 'right_knee', 'left_ankle', 'right_ankle')]
@@ -38,9 +39,39 @@ def test_one_person_as_the_single_person_detector(clip_frames, clip_detections, 
             got = det.detect(f.image)
             assert got.shape[1:] == (NUM_KEYPOINTS, 3) and len(got) <= 1
             multi.append(got[0] if len(got) else np.zeros((NUM_KEYPOINTS, 3)))
+        # the clip's person is large and alone: tracked on the whole image, as the
+        # single-person detector does, from the first frame to the end
+        assert det.num_windows == 1 and det._windows[0].whole
+        assert det.whole_switches == 0 and det.windows_opened == 1
     multi = np.array(multi)
     err, shared = _error_px(multi[fully_visible], single[fully_visible])
     assert shared > 0.85 and err < 6.0, (err, shared)
+
+
+def test_a_lone_person_goes_back_to_a_window_when_somebody_comes(clip_frames, clip_detections):
+    """The clip next to a grey half: one person, tracked on the whole image (threshold
+    lowered to their size in the wider image); then their mirror image appears in the grey
+    half: the lone person's landmarker goes back to a window, and both are found where the
+    single-person detector sees them."""
+    frames = clip_frames[::2][:45]
+    single = np.concatenate(clip_detections[0])[::2][:45]
+    w = frames[0].image.shape[1]
+    whole, found = [], []
+    with BlazePoseMultiDetector(max_persons=4, detection_interval=1,
+                                whole_frame_min_height=0.15,
+                                whole_frame_leave_height=0.1) as det:
+        for k, (f, s) in enumerate(zip(frames, single)):
+            other = np.full_like(f.image, 127) if k < 15 else f.image[:, ::-1]
+            got = det.detect(np.concatenate([f.image, other], axis=1))
+            whole.append(any(win.whole for win in det._windows))
+            found.append(len(got))
+            if k >= 15 and len(got) == 2 and s[BODY, 2].min() >= 0.5:
+                left = got[np.argmin(got[:, BODY, 0].mean(axis=1))]
+                assert np.median(np.abs(left[BODY, :2] - s[BODY, :2])) < 10.0
+    assert all(whole[3:15]) and found[3:15] == [1] * 12, (whole, found)
+    scan = len(BlazePoseMultiDetector.regions(2 * w, frames[0].image.shape[0]))
+    assert not any(whole[15 + scan:]), whole
+    assert np.mean(np.array(found[15 + scan:]) == 2) >= 0.8, found
 
 
 @pytest.mark.parametrize('threads', [1, 2])
@@ -77,8 +108,71 @@ def test_bad_parameters_and_closing():
         BlazePoseMultiDetector(detection_interval=0)
     with pytest.raises(ValueError):
         BlazePoseMultiDetector(threads=0)
+    with pytest.raises(ValueError):
+        BlazePoseMultiDetector(whole_frame_min_height=1.5)
+    with pytest.raises(ValueError):
+        BlazePoseMultiDetector(whole_frame_min_height=0.3, whole_frame_leave_height=0.4)
     det = BlazePoseMultiDetector()
     det.close()
     det.close()
     with pytest.raises(RuntimeError):
         det.detect(np.zeros((64, 64, 3), np.uint8))
+
+
+def test_change_outside_the_people_followed():
+    rng = np.random.default_rng(0)
+    ref = rng.integers(0, 256, (90, 160)).astype(np.uint8)
+    ref = np.repeat(np.repeat(ref[::6, ::6], 6, axis=0), 6, axis=1)[:90, :160]  # blocky
+    rr = picture_range(ref)
+    assert not changed_outside(rr, ref.copy(), [])
+    # the camera shaken by a pixel: every edge moves, nothing came in
+    assert not changed_outside(rr, np.roll(ref, 1, axis=1), [(0, 0, 1, 90)])
+    # somebody comes in: a patch changes
+    now = ref.copy()
+    now[40:52, 100:104] = 255 - now[40:52, 100:104]
+    assert changed_outside(rr, now, [])
+    # ... unless it is where a person followed is (or was)
+    assert not changed_outside(rr, now, [(98, 38, 106, 54)])
+    assert changed_outside(rr, now[:80], [])         # another image size: a change
+
+
+def _wide(img, side):
+    return np.concatenate([img, side], axis=1)
+
+
+def test_searches_skipped_while_the_picture_is_still(clip_frames):
+    """The committed clip, one person alone beside a grey side: once a whole round of
+    regions at the longest interval found nobody, most searches are skipped (nothing else
+    changes), one still made every ``still_detection_interval`` frames. Then a copy of the
+    person steps into the grey side: searches are made again, and both are followed."""
+    frames = [f.image for f in clip_frames[:90]]
+    frames = (frames + frames[-2::-1] + frames[1:]) * 2      # forwards, backwards, ...
+    h, w = frames[0].shape[:2]
+    grey = np.full((h, w // 2, 3), 127, np.uint8)
+    counts = {}
+    for still in (60, 0):
+        with BlazePoseMultiDetector(max_persons=4, still_detection_interval=still) as det:
+            for img in frames[:420]:
+                det.detect(_wide(img, grey))
+            counts[still] = (det.detections, det.searches_skipped)
+            if not still:
+                continue
+            searches = det.detections
+            for img in frames[:30]:                # the clip again: only the person moves
+                det.detect(_wide(img, grey))
+            assert det.detections - searches <= 1
+            first = det.detections
+            found = []
+            for k, img in enumerate(frames[30:170]):
+                other = img[:, ::-1][:, 200:200 + w // 2]   # the mirrored person comes in
+                shift = max(0, w // 2 - 20 * k)
+                side = grey.copy()
+                side[:, shift:] = other[:, :w // 2 - shift]
+                found.append(len(det.detect(_wide(img, side))))
+            # searching again as things moved (at the longest interval, as without the
+            # gate: each of the 5 regions every 75 frames), and the newcomer is found
+            assert det.detections - first >= 6
+            assert found[-30:].count(2) >= 27, found
+    (gated, skipped), (plain, never) = counts[60], counts[0]
+    assert never == 0 and skipped >= 10, counts
+    assert gated <= plain - 8, counts
