@@ -49,7 +49,8 @@ the BlazePose way, per person:
   when two windows follow the same person (the less confident one ends). When the landmarker
   jumps to somebody else in its window (:func:`jumped`: the torso moves by more than its own
   length in one frame; a person passing in front or behind), that frame counts as missed and
-  the window's landmarker starts afresh.
+  the window's landmarker starts afresh. A new window's first landmarks are compared with
+  the search's coarser keypoints more leniently (:data:`FRESH_MAX_RATIO`).
 
 Identities are not this module's job: :class:`mocap_core.tracking.PersonTracker` gives them
 downstream, and also merges the duplicates that remain.
@@ -198,6 +199,13 @@ TILE_FRACTION = 2.0 / 3.0
 #: the extra regions would only slow the discovery of everybody else.
 SMALL_TILE_MIN_SIDE = 480
 
+#: :func:`jumped`'s largest torso-length ratio between a window's first landmarks and the
+#: search's keypoints that opened it. The search sees the whole region at 224 x 224, so a
+#: small person's torso comes out short: on the pexels walk the search gave 45 px and the
+#: window 62 px (1.38x), and the default 1.3 threw the window's first seven frames away as
+#: "somebody else" against that coarse reference, until the window ended.
+FRESH_MAX_RATIO = 2.0
+
 #: Keypoints of the torso (shoulders and hips), for :func:`jumped`.
 _TORSO = tuple(KEYPOINT_INDEX[n] for n in ('left_shoulder', 'right_shoulder', 'left_hip',
                                            'right_hip'))
@@ -249,6 +257,7 @@ class _Window:
     last: Optional[np.ndarray] = None   # (23, 3) image keypoints of the last frame
     prev: Optional[np.ndarray] = None   # those of the frame before (None after a miss)
     whole: bool = False     # the landmarker sees the whole image (x0, y0, side unused)
+    fresh: bool = True      # ``last`` is still the search's keypoints (coarser; see detect)
 
 
 class BlazePoseMultiDetector:
@@ -368,7 +377,8 @@ class BlazePoseMultiDetector:
         self._ts_ms += 33          # VIDEO mode wants increasing stamps; only order matters
         people: List[np.ndarray] = []
         for win, kp in self._track_windows(rgb):
-            if kp is not None and win.last is not None and jumped(win.last, kp):
+            if kp is not None and win.last is not None and \
+                    jumped(win.last, kp, max_ratio=FRESH_MAX_RATIO if win.fresh else 1.3):
                 # the landmarker took somebody else in its window (a person passing in
                 # front or behind), or lost its person: this frame has nobody from this
                 # window, and a fresh landmarker looks for the person again (the others
@@ -390,9 +400,10 @@ class BlazePoseMultiDetector:
                 if win.missed >= self.max_missed:
                     self._end(win)
                 continue
-            win.prev = win.last if win.missed == 0 else None
+            win.prev = win.last if win.missed == 0 and not win.fresh else None
             win.missed = 0
             win.last = kp
+            win.fresh = False
             people.append(kp)
             self._recentre(win, kp, w, h)
         self._drop_duplicate_windows(people)
