@@ -400,7 +400,7 @@ class BlazePoseMultiDetector:
                 if win.missed >= self.max_missed:
                     self._end(win)
                 continue
-            win.prev = win.last if win.missed == 0 and not win.fresh else None
+            win.prev = win.last if win.missed == 0 else None
             win.missed = 0
             win.last = kp
             win.fresh = False
