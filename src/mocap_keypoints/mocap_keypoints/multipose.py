@@ -389,10 +389,9 @@ class BlazePoseMultiDetector:
                     # and search soon (no whole image until then)
                     self._to_window(win, win.last, w, h)
                     self._whole_blocked = True
-                    self._interval, self._quiet, self._settled = self.detection_interval, 0, False
+                    self._search_soon()
                 else:
-                    win.landmarker.close()
-                    win.landmarker = self._new_landmarker()
+                    self._restart(win)
                 kp = None
             if kp is None:
                 win.missed += 1
@@ -501,7 +500,7 @@ class BlazePoseMultiDetector:
         whole round of regions with nobody new doubles it, up to ``max_detection_interval``
         (a scene that stays the same costs little; a window that ends resets it too)."""
         if opened:
-            self._interval, self._quiet, self._settled = self.detection_interval, 0, False
+            self._search_soon()
             return
         self._quiet += 1
         if self._quiet >= regions:
@@ -633,8 +632,7 @@ class BlazePoseMultiDetector:
             return
         win.whole = True
         self.whole_switches += 1
-        win.landmarker.close()
-        win.landmarker = self._new_landmarker()
+        self._restart(win)
 
     def _to_window(self, win: _Window, kp: Optional[np.ndarray], w: int, h: int) -> None:
         """Back from the whole image to a window on ``kp`` (the landmarker restarts); a
@@ -646,14 +644,24 @@ class BlazePoseMultiDetector:
             win.x0, win.y0, win.side = (w - side) // 2, (h - side) // 2, side
         win.whole = False
         self.whole_switches += 1
+        self._restart(win)
+
+    def _restart(self, win: _Window) -> None:
+        """A fresh landmarker for the window (it detects the person again on its next
+        frame)."""
         win.landmarker.close()
         win.landmarker = self._new_landmarker()
 
     def _end(self, win: _Window) -> None:
         win.landmarker.close()
         self._windows.remove(win)
-        self._interval, self._quiet = self.detection_interval, 0   # look again soon
-        self._settled = False
+        self._search_soon()
+
+    def _search_soon(self) -> None:
+        """Back to the shortest search interval, and a full round of regions before any
+        search is skipped (someone new came, a window ended, or a lone person's landmarker
+        saw somebody else)."""
+        self._interval, self._quiet, self._settled = self.detection_interval, 0, False
 
     def _track_windows(self, rgb: np.ndarray):
         """Yield ``(window, keypoints or None)`` of every window on this frame. With
@@ -690,12 +698,7 @@ class BlazePoseMultiDetector:
         one next to them. A window on the whole image (a lone person) takes the image as it
         is."""
         if win.whole:
-            res = win.landmarker.detect_for_video(
-                self._mp.Image(image_format=self._mp.ImageFormat.SRGB, data=rgb), self._ts_ms)
-            if not res.pose_landmarks:
-                return None
-            return blazepose_to_layout(self._landmarks(res.pose_landmarks[0]),
-                                       rgb.shape[1], rgb.shape[0])
+            return self._landmarks_in(win, rgb, 0, 0)
         M = np.array([[1.0, 0.0, -win.x0], [0.0, 1.0, -win.y0]])
         crop = self._cv2.warpAffine(rgb, M, (win.side, win.side),
                                     flags=self._cv2.INTER_LINEAR,
@@ -710,14 +713,21 @@ class BlazePoseMultiDetector:
                 if box is not None:
                     _fill(crop, box, win.x0, win.y0)
             crop[oy0:oy1, ox0:ox1] = keep
+        return self._landmarks_in(win, crop, win.x0, win.y0)
+
+    def _landmarks_in(self, win: _Window, image: np.ndarray, x0: int, y0: int
+                      ) -> Optional[np.ndarray]:
+        """The window's landmarker on ``image`` (RGB), whose top-left corner is image pixel
+        (``x0``, ``y0``): (23, 3) image keypoints, or None when it found nobody."""
         res = win.landmarker.detect_for_video(
-            self._mp.Image(image_format=self._mp.ImageFormat.SRGB, data=crop), self._ts_ms)
+            self._mp.Image(image_format=self._mp.ImageFormat.SRGB, data=image), self._ts_ms)
         if not res.pose_landmarks:
             return None
-        kp = blazepose_to_layout(self._landmarks(res.pose_landmarks[0]), win.side, win.side)
+        kp = blazepose_to_layout(self._landmarks(res.pose_landmarks[0]), image.shape[1],
+                                 image.shape[0])
         seen = kp[:, 2] > 0
-        kp[seen, 0] += win.x0
-        kp[seen, 1] += win.y0
+        kp[seen, 0] += x0
+        kp[seen, 1] += y0
         return kp
 
     def _recentre(self, win: _Window, kp: np.ndarray, w: int, h: int) -> None:
@@ -739,8 +749,7 @@ class BlazePoseMultiDetector:
         if inside and 1.0 / self.resize_ratio <= side / win.side <= self.resize_ratio:
             return
         self.recentred += 1
-        win.landmarker.close()
-        win.landmarker = self._new_landmarker()
+        self._restart(win)
         win.x0, win.y0, win.side = x0, y0, side
 
     def _same(self, a: np.ndarray, b: np.ndarray) -> bool:
