@@ -471,13 +471,19 @@ def test_process_batch_jobs_isolation_and_resume(tmp_path):
 def test_process_batch_on_a_ray_cluster(tmp_path):
     """The same batch as Ray tasks on a local cluster started here (as a second machine
     would join it): the bad input fails alone, the others finish and hold the pipeline's
-    output; the cluster is stopped at the end."""
+    output; a task whose Ray worker dies fails its job alone. The cluster is this test's
+    own (``ray start --block``, stopped with SIGTERM): ``ray stop`` would stop every
+    cluster on the machine, another test run's too."""
     import json
     import shutil
+    import signal
     import socket
     import tempfile
+    import time
 
     pytest.importorskip('ray')
+    from mocap_core.cli import batch as batch_mod
+
     ray_cmd = shutil.which('ray', path=str(Path(sys.executable).parent)) or shutil.which('ray')
     assert ray_cmd, 'ray is installed but its command is not on the PATH'
     with socket.socket() as s:
@@ -486,13 +492,20 @@ def test_process_batch_on_a_ray_cluster(tmp_path):
     env = dict(os.environ, RAY_USAGE_STATS_ENABLED='0')
     # a short temp dir: Ray's socket paths must fit in 107 characters
     temp = tempfile.mkdtemp(prefix='ray', dir='/tmp')
-    start = subprocess.run([ray_cmd, 'start', '--head', f'--port={port}', '--num-cpus=2',
-                            '--node-ip-address=127.0.0.1', '--include-dashboard=false',
-                            '--disable-usage-stats', '--object-store-memory=100000000',
-                            f'--temp-dir={temp}'],
-                           capture_output=True, text=True, timeout=180, env=env)
-    assert start.returncode == 0, start.stdout + start.stderr
+    log = tmp_path / 'ray_start.log'
+    with log.open('w') as out_file:
+        head = subprocess.Popen([ray_cmd, 'start', '--head', '--block', f'--port={port}',
+                                 '--num-cpus=2', '--node-ip-address=127.0.0.1',
+                                 '--include-dashboard=false', '--disable-usage-stats',
+                                 '--object-store-memory=100000000', f'--temp-dir={temp}'],
+                                stdout=out_file, stderr=subprocess.STDOUT, env=env,
+                                start_new_session=True)
     try:
+        deadline = time.monotonic() + 180
+        while 'Ray runtime started' not in log.read_text():
+            assert head.poll() is None, log.read_text()
+            assert time.monotonic() < deadline, log.read_text()
+            time.sleep(0.2)
         junk = tmp_path / 'junk.mcap'
         junk.write_bytes(b'not a bag at all' * 10)
         out = tmp_path / 'batch'
@@ -504,9 +517,27 @@ def test_process_batch_on_a_ray_cluster(tmp_path):
         status = {Path(j['input']).name: j['status'] for j in summary['inputs']}
         assert status == {'gt_cmu_walk_12_02': 'done', 'junk.mcap': 'failed'}, summary
         assert len(_stamps(out / 'gt_cmu_walk_12_02' / 'bag', '/mocap/world/motion')) == 168
+
+        def dies(job, params, extra, one_thread):      # the worker process is killed
+            os._exit(3)
+
+        def works(job, params, extra, one_thread):
+            job.status = 'done'
+            return job
+
+        jobs = [batch_mod.Job('a', str(tmp_path / 'a')), batch_mod.Job('b', str(tmp_path / 'b'))]
+        got = list(batch_mod._on_ray(jobs[:1], (), (), f'127.0.0.1:{port}', task_fn=dies))
+        assert [j.status for j in got] == ['failed'], got
+        assert 'Ray task failed: WorkerCrashedError' in got[0].error, got[0].error
+        got = list(batch_mod._on_ray(jobs[1:], (), (), f'127.0.0.1:{port}', task_fn=works))
+        assert [j.status for j in got] == ['done'], got              # the cluster goes on
     finally:
-        subprocess.run([ray_cmd, 'stop', '--force'], capture_output=True, timeout=120,
-                       env=env)
+        head.send_signal(signal.SIGTERM)
+        try:
+            head.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            os.killpg(head.pid, signal.SIGKILL)
+            head.wait()
         shutil.rmtree(temp, ignore_errors=True)
 
 

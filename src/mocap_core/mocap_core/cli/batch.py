@@ -39,7 +39,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Iterator, List, Optional, Sequence
+from typing import Callable, Iterator, List, Optional, Sequence
 
 from .inputs import VIDEO_SUFFIXES, is_bag
 
@@ -193,11 +193,16 @@ def _reachable(address: Optional[str], timeout_s: float = 5.0) -> None:
                               '`ray start --head` or give --ray-address') from None
 
 
-def _on_ray(todo: List[Job], params, extra, address: Optional[str]) -> Iterator[Job]:
+def _on_ray(todo: List[Job], params, extra, address: Optional[str],
+            task_fn: Callable[..., Job] = process_one) -> Iterator[Job]:
     """The jobs as Ray tasks (one CPU each), in order of completion. Connects to the cluster
-    at ``address``, or starts one on this machine for the run."""
+    at ``address``, or starts one on this machine for the run. A task that Ray itself
+    fails (its worker or machine died, after Ray's retries) fails its job alone, with Ray's
+    reason as the error; the other jobs go on. ``task_fn`` runs one job (``process_one``;
+    tests give another)."""
     try:
         import ray
+        from ray.exceptions import RayError
     except ImportError as exc:
         raise RuntimeError('the ray backend needs Ray (pip install -r requirements/ray.txt, '
                            'which scripts/setup.sh does)') from exc
@@ -211,11 +216,21 @@ def _on_ray(todo: List[Job], params, extra, address: Optional[str]) -> Iterator[
           f"{len(ray.nodes())} node(s), {cpus} CPUs ({address or 'started for this run'})",
           file=sys.stderr, flush=True)
     try:
-        task = ray.remote(num_cpus=1)(process_one)
-        pending = [task.remote(j, params, extra, True) for j in todo]
+        task = ray.remote(num_cpus=1)(task_fn)
+        job_of = {}
+        for job in todo:
+            job_of[task.remote(job, params, extra, True)] = job
+        pending = list(job_of)
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(ready[0])
+            try:
+                result = ray.get(ready[0])
+            except RayError as exc:
+                result = job_of[ready[0]]
+                reason = (str(exc).strip().splitlines() or [''])[0]
+                result.status = 'failed'
+                result.error = f'Ray task failed: {type(exc).__name__}: {reason}'[:200]
+            yield result
     finally:
         if started:
             ray.shutdown()
