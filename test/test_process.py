@@ -343,6 +343,10 @@ def test_process_bad_inputs_give_one_clear_line(tmp_path):
     assert 'Traceback' not in res.stderr
     res = _mocap('process', GT_BAG, '-o', tmp_path / 'o3', '--param', 'lifter.mode=sideways')
     assert res.returncode == 2 and 'cannot start the lifter node' in res.stderr, res.stderr
+    res = _mocap('process', VIDEO, '-o', tmp_path / 'o5', '--param',
+                 'keypoints.camera_motion_rotation=sideways')
+    assert res.returncode == 2 and 'cannot start the keypoints node' in res.stderr and \
+        'camera_motion_rotation must be plane or homography' in res.stderr, res.stderr
     res = _mocap('process', GT_BAG, '-o', tmp_path / 'o4', '--start', 'physics')
     assert res.returncode == 2 and 'lacks its topic' in res.stderr
 

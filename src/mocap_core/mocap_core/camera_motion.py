@@ -23,12 +23,11 @@ Per frame the evidence gives a state:
 * ``moving``: the residual shows translation (a camera that walks, drives or orbits); the
   camera's position is unknown. Its rotation cannot be the best pure rotation then: a
   translating camera's flow over the floor takes the step for a turn (0.3-0.6 deg per frame
-  on rendered walks). With ``moving_rotation`` 'plane' (opt-in) the rotation comes, until
-  the floor is known (below), from the dominant plane's homography decomposed
-  (``cv2.decomposeHomographyMat``; the solution that keeps the points in front of both
-  cameras and whose plane normal is closest to the optical frame's vertical: a floor under a
-  camera held roughly level). It fails for a camera pitched down 40 degrees or more, so the
-  default, 'homography', keeps the pure rotation (docs/global.md);
+  on rendered walks). With ``moving_rotation`` 'plane' (the default) the rotation comes,
+  until the floor is known (below), from the dominant plane's homography decomposed
+  (``cv2.decomposeHomographyMat``): of the solutions that keep the points in front of both
+  cameras, the one whose rotation is nearest the best pure rotation. 'homography' keeps
+  the pure rotation (docs/global.md);
 * ``unknown``: fewer than ``min_features`` background points could be tracked (a dark or
   texture-less scene, the person fills the image): the rotation is held at its last value.
 
@@ -72,11 +71,6 @@ import numpy as np
 from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
-#: ``moving_rotation`` 'plane': when two decompositions of the floor's homography put the
-#: points in front of the camera, the more vertical normal is taken only if it has at least
-#: this component along the optical frame's vertical (cos 37 deg: a camera pitched or rolled
-#: less than about 37 deg); otherwise the pure rotation is kept.
-PLANE_MIN_VERTICAL = 0.8
 
 
 @dataclass(frozen=True)
@@ -104,7 +98,7 @@ class CameraMotionParams:
     floor_max_distance: float = 25.0  # floor points further than this many camera heights
     floor_iterations: int = 64       # RANSAC pairs tried per frame
     floor_max_speed: float = 5.0     # m/s: a faster step is rejected as a failure
-    moving_rotation: str = 'homography'  # rotation of a 'moving' frame without a floor:
+    moving_rotation: str = 'plane'   # rotation of a 'moving' frame without a floor:
     #                                  'homography' (the turn that best explains the flow)
     #                                  or 'plane' (the dominant plane's homography decomposed)
 
@@ -348,6 +342,8 @@ class CameraMotionEstimator:
         self._origin = np.zeros((0, 2))             # (N, 2) pixel at the keyframe (or NaN)
         self._kf_R0 = np.eye(3)                     # orientation at the keyframe
         self._kf_age = 0                            # frames since the keyframe
+        # 'plane': the rotation last chosen from the keyframe (keeps the decomposition's branch)
+        self._kf_plane: Optional[np.ndarray] = None
         self._scale = 1.0
         self._Kw = self.K.copy()                     # intrinsics at the working size
         self._Kw_inv = np.linalg.inv(self._Kw)
@@ -511,6 +507,7 @@ class CameraMotionEstimator:
         self._origin = self._pts.reshape(-1, 2).astype(np.float64).copy()
         self._kf_R0 = R0.copy()
         self._kf_age = 0
+        self._kf_plane = None          # the plane rotation last chosen over this keyframe
 
     def _empty_tracks(self) -> None:
         self._pts = np.zeros((0, 1, 2), np.float32)
@@ -534,17 +531,21 @@ class CameraMotionEstimator:
         resid = np.linalg.norm(self._project(self._bearings(a[inl]) @ R) - b[inl], axis=1)
         return R, inl, float(np.median(resid)) / ref
 
-    def _plane_rotation(self, a: np.ndarray, b: np.ndarray, ref: float
-                        ) -> Optional[np.ndarray]:
+    def _plane_rotation(self, a: np.ndarray, b: np.ndarray, ref: float,
+                        previous: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
         """The rotation taking frame-b bearings to frame-a bearings from matched pixels ``a``,
         ``b`` (N, 2) of a camera that turns *and* translates over a floor: the homography of
         the dominant plane (RANSAC) decomposed (``cv2.decomposeHomographyMat``), keeping the
         solutions that put the inliers in front of both cameras
-        (``cv2.filterHomographyDecompByVisibleRefpoints`` on normalised points) and of them
-        the one whose plane normal is closest to the optical frame's vertical. None (the
-        caller keeps the pure rotation) when it fails, or when two solutions remain and the
-        more vertical normal is not clearly a floor under a camera held roughly level
-        (``|n_y|`` below :data:`PLANE_MIN_VERTICAL`: a camera tilted steeply down)."""
+        (``cv2.filterHomographyDecompByVisibleRefpoints`` on normalised points). Two survive
+        as a rule (a plane's homography is ambiguous: the other solution's normal lies along
+        the camera's step and its step along the true normal); of them the one whose
+        rotation is nearest ``previous`` is kept (the one chosen a frame earlier over the
+        same keyframe: the two solutions part slowly as the baseline grows), or without it
+        the one nearest the best pure rotation of the same inliers: over a short baseline
+        the pure rotation's bias from the step is smaller than the wrong solution's error.
+        Unlike the normal's direction, this choice does not depend on how the camera is
+        pitched (docs/global.md). None (the caller keeps the pure rotation) when it fails."""
         p = self.params
         if len(a) < p.min_features:
             return None
@@ -564,14 +565,12 @@ class CameraMotionEstimator:
         idx = list(range(n)) if keep is None else [int(k) for k in np.ravel(keep)]
         if not idx:
             return None
-        best = max(idx, key=lambda k: abs(float(normals[k][1, 0])))
-        # two solutions survive the visibility test as a rule (a plane's homography is
-        # ambiguous): the floor's normal is the more vertical one only for a camera held
-        # roughly level; a camera pitched down more steeply sees the other solution's normal
-        # (along its own step) as the more vertical. Undecided: the caller's pure rotation.
-        if len(idx) > 1 and abs(float(normals[best][1, 0])) < PLANE_MIN_VERTICAL:
-            return None
-        return np.asarray(Rs[best]).T    # H maps a to b: x_b ~ R x_a; we want b_a = R_rel b_b
+        # H maps a to b: x_b ~ R x_a; we want b_a = R_rel b_b, i.e. R.T
+        near = previous if previous is not None else \
+            fit_rotation(self._bearings(a[inl]), self._bearings(b[inl]))
+        best = min(idx, key=lambda k: float(np.linalg.norm(matrix_to_axis_angle(
+            np.asarray(Rs[k]) @ near))))
+        return np.asarray(Rs[best]).T
 
     def _normalised(self, pts: np.ndarray) -> np.ndarray:
         """(N, 2) pixels at the working size -> (N, 1, 2) float32 normalised image points."""
@@ -637,6 +636,7 @@ class CameraMotionEstimator:
         flow = float(np.median(np.linalg.norm(cur - prv, axis=1))) / ref
         inl = np.ones(tracked, bool)
         parallax, rate, R0_cur = flow, float('nan'), self._R0
+        R_ff = np.eye(3)                   # the turn since the previous frame
         if flow >= p.static_flow_px:
             R_ff, inl, parallax = self._rotation_between(prv, cur, ref)
             R0_cur = self._R0 @ R_ff
@@ -655,12 +655,18 @@ class CameraMotionEstimator:
         if self._kf_age >= p.parallax_min_age and rate > p.parallax_rate_px:
             state = 'moving'
         if state == 'moving' and p.moving_rotation == 'plane' and not self.has_floor:
-            # a translating camera: the best pure turn absorbs the parallax of the step
-            kf = has.sum() >= p.min_features
-            R_p = self._plane_rotation(self._origin[has] if kf else prv,
-                                       cur[has] if kf else cur, ref)
-            if R_p is not None:
-                R0_cur = (self._kf_R0 if kf else self._R0) @ R_p
+            # a translating camera: the best pure turn absorbs the parallax of the step, the
+            # more the longer the baseline (a walking camera: 10-15 deg over 25 frames)
+            R_p = None
+            if has.sum() >= p.min_features:
+                R_p = self._plane_rotation(self._origin[has], cur[has], ref, self._kf_plane)
+                if R_p is not None:
+                    self._kf_plane = R_p
+                    R0_cur = self._kf_R0 @ R_p
+            if R_p is None:
+                # no plane over the keyframe's baseline: one frame's, or its pure turn
+                R_1 = self._plane_rotation(prv, cur, ref)
+                R0_cur = self._R0 @ (R_1 if R_1 is not None else R_ff)
         step: Optional[np.ndarray] = None
         n_floor = n_inl = 0
         if state == 'static':

@@ -223,6 +223,11 @@ PARAMETERS = (
               'person in the world; empty: rotation only', read_only=True),
     ParamSpec('camera_motion_max_width', 640, 'Frames wider than this are scaled down for the '
               'camera-motion estimate (speed)', min_value=64, read_only=True),
+    ParamSpec('camera_motion_rotation', 'plane', "The rotation of a camera that translates, "
+              "before the physics floor is known: 'plane' (the floor's homography decomposed, "
+              "the solution nearest the pure turn) or 'homography' (the best pure turn, which "
+              "takes a walking camera's step for a turn: 12-18 deg/s off on rendered walks; "
+              'docs/global.md)', read_only=True, additional_constraints="'plane' or 'homography'"),
 )
 
 ANNOTATED_TOPIC = topics.ANNOTATED
@@ -387,7 +392,11 @@ class KeypointsNode(Node):
         self.detector = detector
         motion = None
         if p['camera_motion'] and self.kind != 'openpose_json':
-            motion = CameraMotionParams(max_width=p['camera_motion_max_width'])
+            if p['camera_motion_rotation'] not in ('plane', 'homography'):
+                raise ValueError("camera_motion_rotation must be plane or homography, got "
+                                 f"{p['camera_motion_rotation']!r}")
+            motion = CameraMotionParams(max_width=p['camera_motion_max_width'],
+                                        moving_rotation=p['camera_motion_rotation'])
         # unrelated images (tracking false): a person gets an id at first sight and nobody
         # is carried from one image to the next
         self.tracker = PersonTracker(TrackerParams(
