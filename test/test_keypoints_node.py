@@ -201,6 +201,7 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
     assert float(values['input_rate_hz']) > 0 and values['frames_dropped'] == '0'
     assert 'taiji_640x360.mp4' in values['source']
     assert values['detector'] == 'mediapipe_blazepose_full_multi'     # max_persons 4
+    assert values['camera_motion_rotation'] == 'plane'
     assert values['person_ids'] == '1' and values['ids_given'] == '1'
     assert 'calibration file' in values['intrinsics']
 

@@ -452,6 +452,8 @@ class KeypointsNode(Node):
         self.diag.set_value('source', description)
         self.diag.set_value('detector', self.detector_name)
         self.diag.set_value('intrinsics', 'none yet')
+        self.diag.set_value('camera_motion_rotation', p['camera_motion_rotation']
+                            if motion is not None else 'off')
         self.detector_stats = LatencyStats()
         self.results: Deque[tuple] = collections.deque()
         self.behind = 0       # detected frames dropped because the executor fell behind
