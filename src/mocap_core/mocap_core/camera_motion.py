@@ -71,6 +71,8 @@ import numpy as np
 from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
+#: values of ``CameraMotionParams.moving_rotation`` (module docstring, ``moving``)
+MOVING_ROTATIONS: Tuple[str, ...] = ('plane', 'homography')
 
 
 @dataclass(frozen=True)
@@ -111,7 +113,7 @@ class CameraMotionParams:
         bad += [n for n in ('static_flow_px', 'parallax_px', 'parallax_rate_px', 'ransac_px',
                             'fb_error_px', 'parallax_min_age', 'parallax_max_age',
                             'min_distance_px', 'feature_quality') if not getattr(self, n) > 0]
-        if self.moving_rotation not in ('homography', 'plane'):
+        if self.moving_rotation not in MOVING_ROTATIONS:
             bad.append('moving_rotation')
         if not 0 <= self.person_margin <= 2:
             bad.append('person_margin')

@@ -68,7 +68,7 @@ from std_msgs.msg import UInt32MultiArray
 
 from mocap_core import topics
 from mocap_core.camera import CameraCalibration, read_camera_info_yaml
-from mocap_core.camera_motion import CameraMotionParams
+from mocap_core.camera_motion import MOVING_ROTATIONS, CameraMotionParams
 from mocap_core.tracking import PersonTracker, TrackerParams
 from mocap_core.data.openpose import infer_image_size
 from mocap_core.diagnostics import NodeDiagnostics
@@ -392,9 +392,9 @@ class KeypointsNode(Node):
         self.detector = detector
         motion = None
         if p['camera_motion'] and self.kind != 'openpose_json':
-            if p['camera_motion_rotation'] not in ('plane', 'homography'):
-                raise ValueError("camera_motion_rotation must be plane or homography, got "
-                                 f"{p['camera_motion_rotation']!r}")
+            if p['camera_motion_rotation'] not in MOVING_ROTATIONS:
+                raise ValueError('camera_motion_rotation must be ' + ' or '.join(MOVING_ROTATIONS)
+                                 + f", got {p['camera_motion_rotation']!r}")
             motion = CameraMotionParams(max_width=p['camera_motion_max_width'],
                                         moving_rotation=p['camera_motion_rotation'])
         # unrelated images (tracking false): a person gets an id at first sight and nobody
