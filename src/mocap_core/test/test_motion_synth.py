@@ -3,7 +3,8 @@ import pytest
 
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.data.motion import (contact_labels, contact_point_positions, floor_height,
-                                    floor_plane, process_motion, resample)
+                                    floor_plane, process_motion, resample,
+                                    retime)
 from mocap_core.data.synth2d import (CameraSampling, ConfidenceModel, Corruption, VirtualCamera,
                                      canonicalize, corrupt_keypoints, in_view, keypoints_3d,
                                      look_at, mirror_keypoints, mirror_motion, motion_to_camera,
@@ -40,6 +41,26 @@ def test_resample_keeps_endpoints_and_interpolates():
     assert np.max(np.abs(mid)) < 1e-9  # slerp midpoint is equidistant
     with pytest.raises(ValueError):
         resample(rot, root, 0.0, 30.0)
+
+
+def test_retime_plays_the_motion_slower_at_the_same_frame_rate():
+    sk, rot, root = _walk(61)
+    m = process_motion('walk', sk, rot, root, 30.0, 30.0)
+    slow = retime(m, 0.5)
+    assert slow.fps == 30.0 and slow.num_frames == 121 and slow.contacts.shape == (121, 4)
+    # the same path, twice the frames: every second frame is an input frame
+    np.testing.assert_allclose(slow.root_positions[::2], m.root_positions, atol=1e-12)
+    assert np.max(quat_angle(slow.rotations[::2], m.rotations)) < 1e-9
+    np.testing.assert_array_equal(slow.contacts[::2], m.contacts)
+    step = np.linalg.norm(np.diff(m.root_positions[:, :2], axis=0), axis=1).mean()
+    step_slow = np.linalg.norm(np.diff(slow.root_positions[:, :2], axis=0), axis=1).mean()
+    assert step_slow == pytest.approx(0.5 * step, rel=1e-6)
+    fast = retime(m, 2.0)
+    assert fast.num_frames == 31
+    np.testing.assert_allclose(fast.root_positions, m.root_positions[::2], atol=1e-12)
+    assert retime(m, 1.0) is m
+    with pytest.raises(ValueError, match='speed'):
+        retime(m, 0.0)
 
 
 def test_process_motion_puts_floor_at_zero_and_labels_contacts():

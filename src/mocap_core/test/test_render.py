@@ -168,6 +168,8 @@ def test_render_command_rejects_bad_arguments_in_one_line(capsys):
     assert 'no such BVH file' in capsys.readouterr().err
     assert main(['data', 'render', '--min-travel', '-1']) == 1
     assert '--min-travel must be >= 0' in capsys.readouterr().err
+    assert main(['data', 'render', '--speed', '0']) == 1
+    assert '--speed must be > 0' in capsys.readouterr().err
 
 
 def test_render_without_a_working_renderer_says_what_is_missing(tmp_path):

@@ -751,6 +751,42 @@ def test_sampler_lifted_inputs_follow_the_window_through_mirror_and_reversal():
                                                for c in other])
 
 
+def test_time_scale_augmentation_plays_the_clip_slower_input_and_targets_alike():
+    """At half speed (range (0.5, 0.5)) a window is the clip resampled at twice its rate
+    (slerp and linear root, as ``mocap_core.data.motion.resample``): the targets step half as
+    far per frame, and a lifted input equal to the truth stays the target pose frame by
+    frame. At playback speed 1 nothing is interpolated."""
+    from mocap_core.data.motion import resample
+    from mocap_global.training.lifted import LiftedClip
+
+    R, T = circle_walk(90)
+    m = _motion(R, T, seed=2)
+    aug = Augmentation(reverse_prob=0.0, mirror_prob=0.0, scale_range=0.0, noise_prob=0.0,
+                       short_prob=0.0, lifted_prob=1.0, time_scale_prob=1.0,
+                       time_scale_range=(0.5, 0.5))
+    same = [LiftedClip(m.rotations[None].astype(np.float32),
+                       m.skeleton.group_lengths()[None].astype(np.float32))]
+    sampler = WindowSampler([m], 40, 30.0, seed=0, aug=aug, lifted=same)
+    slow_rot, slow_root = resample(m.rotations, m.root_positions, 30.0, 60.0)
+    for _ in range(5):
+        w = sampler.sample()
+        assert len(w['rot']) == 40
+        # the window starts at some half frame of the clip: find it by the root
+        k = int(np.argmin(np.linalg.norm(slow_root - w['root'][0], axis=1)))
+        np.testing.assert_allclose(w['root'], slow_root[k:k + 40], atol=1e-5)
+        dots = np.abs(np.sum(w['rot'] * slow_rot[k:k + 40], axis=-1))
+        np.testing.assert_allclose(dots, 1.0, atol=1e-5)
+        np.testing.assert_allclose(w['rot_in'], w['rot'], atol=1e-5)
+    step_slow = np.linalg.norm(np.diff(w['root'], axis=0), axis=1).mean()
+    step_clip = np.linalg.norm(np.diff(T, axis=0), axis=1).mean()
+    assert step_slow == pytest.approx(0.5 * step_clip, rel=0.02)
+    with pytest.raises(ValueError, match='time_scale_range'):
+        Augmentation(time_scale_range=(1.5, 0.5))
+    plain = WindowSampler([m], 40, 30.0, seed=0, aug=Augmentation.none()).sample()
+    k = int(np.argmin(np.linalg.norm(T - plain['root'][0], axis=1)))
+    np.testing.assert_array_equal(plain['root'], T[k:k + 40].astype(np.float32))
+
+
 def test_static_camera_frames_are_the_floor_input_moved_rigidly():
     """A camera that stands still, floor input, static time constants 0: every output frame
     is the input pose moved by one rigid transform (a turn about z and a shift), so every

@@ -389,6 +389,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise CommandError('--jobs must be >= 1 and --max-seconds > 0')
     if not args.min_travel >= 0:
         raise CommandError('--min-travel must be >= 0 (metres)')
+    if not args.speed > 0:
+        raise CommandError('--speed must be > 0 (1: the captured pace, 0.5: slow motion)')
     for f in args.bvh:
         if not Path(f).is_file():
             raise CommandError(f'{f}: no such BVH file')
@@ -401,13 +403,14 @@ def cmd_render(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format='%(message)s')
     out = Path(args.out) if args.out else DEFAULT_OUT
     jobs = plan(splits, args.seed, args.limit, args.bvh, min_travel=args.min_travel,
-                max_seconds=args.max_seconds)
+                max_seconds=args.max_seconds, speed=args.speed)
     print(f'{_PROG} render: {len(jobs)} clips ({", ".join(splits) or "user BVH"}) -> {out}; '
           f'{args.jobs} worker(s), at most {args.max_seconds:g} s per clip', file=sys.stderr)
     try:
         summary = run(jobs, out, seed=args.seed, workers=args.jobs,
                       max_frames=int(round(args.max_seconds * 30.0)), camera=args.camera,
-                      write_bag=not args.no_bag, progress=not args.quiet, hours=args.hours)
+                      write_bag=not args.no_bag, progress=not args.quiet, hours=args.hours,
+                      speed=args.speed)
     except RendererUnavailable as exc:
         raise CommandError(str(exc)) from None
     r = summary['this_run']
@@ -596,6 +599,10 @@ def add_data_parser(sub) -> None:
                    'over a --max-seconds stretch (at the clip\'s mean speed), before '
                    '--limit: a world-frame benchmark of people who go somewhere '
                    '(e.g. --min-travel 1.5 -o ~/.cache/mocap/render_travel)')
+    q.add_argument('--speed', type=float, default=1.0,
+                   help='play every motion at this pace (default 1; 0.5: slow motion, as a '
+                   'slow-motion video or a slow walker shows it; the ground truth is the '
+                   'slowed motion). Use another -o: clips are cached by name')
     q.add_argument('--hours', type=float, help='stop starting new clips after this long')
     q.add_argument('--no-bag', action='store_true', help='skip the per-clip MCAP bag')
     q.add_argument('--quiet', action='store_true', help='no progress bar')

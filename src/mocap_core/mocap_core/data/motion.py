@@ -79,6 +79,23 @@ def resample(rotations: np.ndarray, root_positions: np.ndarray, fps_in: float,
     return out_rot, out_root
 
 
+def retime(motion: 'Motion', speed: float) -> 'Motion':
+    """The motion played at ``speed`` times its pace, at its own frame rate: 0.5 is slow
+    motion (twice the frames, each step half as far), 2 is fast forward. Rotations are
+    slerped and the root interpolated linearly (:func:`resample`); each output frame takes
+    the contact labels of the nearest input frame. ``speed`` 1 returns the motion itself."""
+    if not speed > 0:
+        raise ValueError(f'speed must be > 0, got {speed}')
+    if speed == 1.0:
+        return motion
+    rot, root = resample(motion.rotations, motion.root_positions, motion.fps,
+                         motion.fps / speed)
+    near = np.minimum(np.round(np.arange(len(rot)) * speed).astype(np.int64),
+                      motion.num_frames - 1)
+    return Motion(motion.name, motion.fps, motion.skeleton, rot, root,
+                  np.asarray(motion.contacts)[near])
+
+
 def contact_point_positions(skeleton: Skeleton, rotations: np.ndarray,
                             root_positions: np.ndarray) -> np.ndarray:
     """(F, 4, 3) world positions of the heel and toe points (:data:`CONTACT_POINT_NAMES`)."""

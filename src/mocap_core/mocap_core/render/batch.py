@@ -57,11 +57,12 @@ def travel_per_stretch(root_positions: np.ndarray, fps: float, seconds: float) -
 
 def plan(splits: Sequence[str], seed: int, limit: Optional[int] = None,
          bvh_files: Sequence[str] = (), min_travel: float = 0.0,
-         max_seconds: float = 8.0) -> List[Job]:
+         max_seconds: float = 8.0, speed: float = 1.0) -> List[Job]:
     """The jobs, in rendering order (module docstring). ``limit`` caps the clips per split;
     ``min_travel`` > 0 (m) keeps only the split's clips whose pelvis travels at least that far
-    over a ``max_seconds`` stretch (:func:`travel_per_stretch`; a benchmark of the world frame
-    needs people who go somewhere), before the limit."""
+    over a ``max_seconds`` stretch of the video (:func:`travel_per_stretch`, at playback
+    ``speed``; a benchmark of the world frame needs people who go somewhere), before the
+    limit."""
     jobs: List[Job] = []
     for path in bvh_files:
         jobs.append(Job('user', str(Path(path).resolve()), bvh=str(Path(path).resolve())))
@@ -74,7 +75,7 @@ def plan(splits: Sequence[str], seed: int, limit: Optional[int] = None,
             if min_travel > 0:
                 motions = (ds.motion(i) for i in order)
                 order = [i for i, m in zip(order, motions) if travel_per_stretch(
-                    m.root_positions, m.fps, max_seconds) >= min_travel]
+                    m.root_positions, m.fps, max_seconds * speed) >= min_travel]
             if limit is not None:
                 order = order[:limit]
             jobs += [Job(split, names[i], dataset_index=i) for i in order]
@@ -112,9 +113,10 @@ def _motion(job: Job):
 
 
 def _run_job(job: Job, out: str, seed: int, max_frames: Optional[int], camera: str,
-             write_bag: bool) -> dict:
+             write_bag: bool, speed: float = 1.0) -> dict:
     try:
-        motion = _motion(job)
+        from ..data.motion import retime
+        motion = retime(_motion(job), speed)
         res = _WORKER['renderer'].render(
             motion, job.clip, job.split, Path(out) / job.split / clip_key(job.clip), seed,
             max_frames=max_frames, camera_kind=camera, write_bag=write_bag)
@@ -154,11 +156,13 @@ def summarize(out: Path) -> dict:
 
 def run(jobs: Iterable[Job], out: Path, seed: int = 0, workers: int = 2,
         max_frames: Optional[int] = 240, camera: str = '', write_bag: bool = True,
-        detector: str = 'blazepose', progress: bool = True, hours: Optional[float] = None
-        ) -> dict:
+        detector: str = 'blazepose', progress: bool = True, hours: Optional[float] = None,
+        speed: float = 1.0) -> dict:
     """Render ``jobs`` into ``out`` with ``workers`` processes; returns the summary.
 
-    Clips already done are skipped. ``hours`` stops submitting new clips after that long
+    ``speed`` plays every motion at that pace (:func:`mocap_core.data.motion.retime`; 0.5:
+    slow motion, the ground truth written is the slowed motion). Clips already done are
+    skipped. ``hours`` stops submitting new clips after that long
     (the clips in flight finish), for runs spread over several sessions.
     """
     out = Path(out)
@@ -188,7 +192,7 @@ def run(jobs: Iterable[Job], out: Path, seed: int = 0, workers: int = 2,
                     pending.clear()
                     return
                 running.add(pool.submit(_run_job, pending.pop(), str(out), seed, max_frames,
-                                        camera, write_bag))
+                                        camera, write_bag, speed))
 
         submit()
         while running:

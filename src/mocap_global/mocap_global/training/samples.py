@@ -12,7 +12,13 @@ Augmentations (:class:`Augmentation`):
 * beyond the paper: left/right mirroring (the skeleton is symmetric), a global body scale
   (bone lengths and trajectory together), and lifter-like noise on the input local pose and
   bone lengths (:func:`mocap_global.features.noisy_local_pose`) for robustness to estimated
-  poses.
+  poses;
+* time scale: a share of the windows (``time_scale_prob``) plays the clip slower or faster,
+  at a playback speed drawn log-uniformly from ``time_scale_range`` (0.5 = half speed, as a
+  slow-motion video or a slow walker shows it). The frames are interpolated (slerp for the
+  rotations, linear for the root) at the fractional clip positions, the input's as well as
+  the targets', so every step of the root moves with the legs that make it. Without it a
+  slow gait reads as standing (``docs/global.md``, the real walk).
 
 Targets: ``dR`` (T-1, 3, 3), ``dT`` (T-1, 3) global motions (:mod:`mocap_global.se3`),
 ``up`` (T, 3) the world's up direction in the root frame, ``joints`` (T, J, 3) joint positions
@@ -22,12 +28,12 @@ in the root frame (for the joint-motion loss).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from mocap_core.data.motion import Motion
-from mocap_core.rotations import quat_to_matrix
+from mocap_core.rotations import quat_slerp, quat_to_matrix
 from mocap_core.skeleton import NUM_JOINTS
 
 from .. import features as F
@@ -48,10 +54,44 @@ class Augmentation:
     #: share of windows whose input is the shipped lifter's output of the clip (given to the
     #: sampler as ``lifted``, :mod:`mocap_global.training.lifted`) instead of the ground truth
     lifted_prob: float = 0.0
+    #: share of windows played at another speed, and the (slowest, fastest) playback speed
+    time_scale_prob: float = 0.0
+    time_scale_range: Tuple[float, float] = (0.5, 1.5)
+
+    def __post_init__(self) -> None:
+        lo, hi = (float(v) for v in self.time_scale_range)
+        if not 0.0 < lo <= hi:
+            raise ValueError(f'time_scale_range must be 0 < slowest <= fastest, got '
+                             f'{self.time_scale_range}')
+        self.time_scale_range = (lo, hi)
 
     @classmethod
     def none(cls) -> 'Augmentation':
         return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, lifted_prob=0.0)
+
+
+def interpolate_frames(rotations: np.ndarray, positions: np.ndarray,
+                       at: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Frames at fractional indices: slerp between the two neighbouring rotations and linear
+    interpolation of the positions.
+
+    Args:
+        rotations: (N, J, 4) quaternions x, y, z, w (either sign).
+        positions: (N, 3), or None.
+        at: (T,) fractional frame indices in [0, N - 1].
+    Returns:
+        (T, J, 4) unit quaternions and (T, 3) positions (None if ``positions`` is None).
+    """
+    at = np.asarray(at, dtype=np.float64)
+    i0 = np.clip(np.floor(at).astype(np.int64), 0, len(rotations) - 1)
+    i1 = np.minimum(i0 + 1, len(rotations) - 1)
+    w = at - i0
+    rot = quat_slerp(rotations[i0].astype(np.float64), rotations[i1].astype(np.float64),
+                     np.broadcast_to(w[:, None], rotations[i0].shape[:-1]))
+    if positions is None:
+        return rot, None
+    pos = (1.0 - w[:, None]) * positions[i0] + w[:, None] * positions[i1]
+    return rot, pos.astype(np.float64)
 
 
 def frame_step(source_fps: float, fps: float) -> int:
@@ -106,23 +146,37 @@ class WindowSampler:
         """One augmented window (unpadded)."""
         rng, aug = self.rng, self.aug
         c = int(rng.choice(len(self.lengths), p=self.prob))
+        speed = 1.0
+        if aug.time_scale_prob > 0 and rng.random() < aug.time_scale_prob:
+            lo, hi = np.log(aug.time_scale_range)
+            speed = float(np.exp(rng.uniform(lo, hi)))
+        stride = self.step * speed                  # clip frames per model frame
         phase = int(rng.integers(0, self.step)) if self.lengths[c] > 2 * self.step else 0
-        avail = (self.lengths[c] - 1 - phase) // self.step + 1
+        avail = int(np.floor((self.lengths[c] - 1 - phase) / stride + 1e-9)) + 1
         t = min(self.window, avail)
         if rng.random() < aug.short_prob and t > aug.min_length:
             t = int(rng.integers(aug.min_length, t + 1))
         s = int(rng.integers(0, avail - t + 1))
-        idx = self.offsets[c] + phase + self.step * (s + np.arange(t))
-        rot = self.rotations[idx].astype(np.float64)
-        root = self.roots[idx].astype(np.float64)
+        at = phase + stride * (s + np.arange(t))    # fractional frame of the clip
+        first, last = self.offsets[c], self.offsets[c + 1]
         gl = self.group_lengths[c].copy()
         off = self.bone_offsets[c].copy()
+        use_lifted = (self.lifted_rot is not None and aug.lifted_prob > 0
+                      and rng.random() < aug.lifted_prob)
+        cam = int(rng.integers(self.lifted_rot.shape[0])) if use_lifted else 0
+        if speed == 1.0:
+            idx = first + np.round(at).astype(np.int64)
+            rot = self.rotations[idx].astype(np.float64)
+            root = self.roots[idx].astype(np.float64)
+            rot_l = self.lifted_rot[cam, idx].astype(np.float64) if use_lifted else None
+        else:
+            rot, root = interpolate_frames(self.rotations[first:last],
+                                           self.roots[first:last], at)
+            rot_l = (interpolate_frames(self.lifted_rot[cam, first:last], None, at)[0]
+                     if use_lifted else None)
         lifted = None
-        if self.lifted_rot is not None and aug.lifted_prob > 0 and \
-                rng.random() < aug.lifted_prob:
-            cam = int(rng.integers(self.lifted_rot.shape[0]))
-            lifted = (self.lifted_rot[cam, idx].astype(np.float64),
-                      self.lifted_lengths[c, cam].astype(np.float64))
+        if use_lifted:
+            lifted = (rot_l, self.lifted_lengths[c, cam].astype(np.float64))
         sc = 1.0
         if aug.scale_range > 0:
             sc = 1.0 + aug.scale_range * (2.0 * rng.random() - 1.0)
