@@ -870,3 +870,43 @@ def test_a_moving_cameras_fused_frames_keep_the_foot_lock():
         assert abs(moved - want) < tol * want, (moved, want)
     with pytest.raises(ValueError, match='moving_lock_time_constant_s'):
         OnlineGMR(_small_model(), lookahead=3, moving_lock_time_constant_s=-1.0)
+
+
+def test_playback_speed_evaluation_measures_the_pace(monkeypatch):
+    """``evaluate_speeds`` scores each clip retimed: a predictor that returns the retimed
+    clip's true motion scores step ratio 1 and RTE 0 at every speed, one that returns half of
+    it 0.5; clips that do not travel are left out."""
+    from mocap_core.rotations import matrix_to_axis_angle
+    from mocap_global.training import evaluate as E
+
+    R, T = circle_walk(120)
+    walk = _motion(R, T, seed=1)
+    still = _motion(R[:1].repeat(120, 0), T[:1].repeat(120, 0), seed=2)
+    seen = {}
+    arrays = E.clip_arrays
+
+    def keep(*a, **k):
+        seen['c'] = arrays(*a, **k)
+        return seen['c']
+
+    for scale in (1.0, 0.5):
+        def truth(model, feats, *a, scale=scale, **k):
+            c = seen['c']
+            assert len(feats) == len(c['R'])
+            return {'axis_angle': matrix_to_axis_angle(c['dR']),
+                    'translation': scale * c['dT'], 'up': c['up']}
+        monkeypatch.setattr(E, 'clip_arrays', keep)
+        monkeypatch.setattr(E, 'predict_clip', truth)
+        rows = E.evaluate_speeds(_small_model(), [walk, still], ('none',), (0.5, 1.0, 1.4))
+        assert [r['speed'] for r in rows] == [0.5, 1.0, 1.4]
+        assert all(r['clips'] == 1 for r in rows)
+        for r in rows:
+            assert r['step_ratio'] == pytest.approx(scale, abs=1e-6)
+            if scale == 1.0:
+                assert r['rte_pct'] < 1e-3
+    # the truth of a slowed clip steps half as far per frame
+    E.evaluate_speeds(_small_model(), [walk], ('none',), (0.5,))
+    slow = np.linalg.norm(seen['c']['dT'], axis=1).mean()
+    E.evaluate_speeds(_small_model(), [walk], ('none',), (1.0,))
+    assert slow == pytest.approx(0.5 * np.linalg.norm(seen['c']['dT'], axis=1).mean(),
+                                 rel=0.02)

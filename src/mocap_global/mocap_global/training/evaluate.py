@@ -36,7 +36,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 import numpy as np
 import torch
 
-from mocap_core.data.motion import Motion
+from mocap_core.data.motion import Motion, retime
 from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat,
                                   quat_to_matrix)
 
@@ -473,10 +473,59 @@ def evaluate_bags(model: GMR, bags: Sequence[Path], noise: str, lookahead: int,
 # ---------------------------------------------------------------------------------------------
 # everything, and the report
 # ---------------------------------------------------------------------------------------------
+#: playback speeds of :func:`evaluate_speeds` (0.5: slow motion, or a gait at half its pace)
+PLAYBACK_SPEEDS = (0.5, 0.7, 1.0, 1.4)
+#: clips of :func:`evaluate_speeds`: at least 3 s that travel at least this far (m)
+SPEED_MIN_TRAVEL_M = 1.5
+
+
+def _travel_m(root: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(np.asarray(root)[:, :2], axis=0), axis=1).sum())
+
+
+def evaluate_speeds(model: GMR, motions: Sequence[Motion],
+                    noises: Sequence[str] = ('none', 'lifter'),
+                    speeds: Sequence[float] = PLAYBACK_SPEEDS, lookahead: int = 15,
+                    device: str = 'cpu', window: int = NODE_WINDOW) -> List[Dict]:
+    """GMR online on the travelling clips (3 s or more, :data:`SPEED_MIN_TRAVEL_M` or more)
+    played slower and faster (:func:`mocap_core.data.motion.retime`), input and truth alike.
+
+    Returns one row per (speed, input): ``clips``, ``rte_pct`` (median over clips),
+    ``step_ratio`` (median over clips of the predicted over the true horizontal path of
+    the per-frame translations in the body frame: 1 = the right pace, 0 = on the spot) and
+    its 10th percentile ``step_ratio_p10``, ``tme_mm`` (mean per step)."""
+    clips = [m for m in motions if m.num_frames >= 3 * m.fps
+             and _travel_m(m.root_positions) >= SPEED_MIN_TRAVEL_M]
+    rows = []
+    for speed in speeds:
+        for noise in noises:
+            rte, ratio, tme = [], [], []
+            for m in clips:
+                c = clip_arrays(retime(m, speed), float(model.cfg.fps), noise,
+                                *_input_options(model))
+                p = predict_clip(model, c['features'], lookahead, device, window=window)
+                dR = axis_angle_to_matrix(p['axis_angle'])
+                rte.append(M.trajectory_errors(dR, p['translation'], c['R'],
+                                               c['root'])['rte_pct'])
+                truth = np.linalg.norm(c['dT'][:, :2], axis=1).sum()
+                ratio.append(np.linalg.norm(p['translation'][:, :2], axis=1).sum()
+                             / max(truth, 1e-9))
+                tme.append(M.tme_mm(p['translation'], c['dT']).mean())
+            rows.append({'speed': float(speed), 'noise': noise, 'clips': len(clips),
+                         'rte_pct': float(np.nanmedian(rte)) if rte else float('nan'),
+                         'step_ratio': float(np.median(ratio)) if ratio else float('nan'),
+                         'step_ratio_p10': float(np.percentile(ratio, 10)) if ratio
+                         else float('nan'),
+                         'tme_mm': float(np.mean(tme)) if tme else float('nan')})
+    return rows
+
+
 def evaluate_all(model: GMR, motions: Sequence[Motion], noises: Sequence[str] = ('none',),
                  lookahead: int = 15, device: str = 'cpu', bags: Optional[Sequence[Path]] = None,
-                 progress: bool = False, window: int = NODE_WINDOW) -> Dict:
-    """The full report: model modes x inputs, baselines, fusion."""
+                 progress: bool = False, window: int = NODE_WINDOW,
+                 speeds: Sequence[float] = PLAYBACK_SPEEDS) -> Dict:
+    """The full report: model modes x inputs, baselines, fusion, playback speeds
+    (:func:`evaluate_speeds`; ``speeds`` empty: none)."""
     def say(msg):
         if progress:
             print(msg, flush=True)
@@ -508,10 +557,15 @@ def evaluate_all(model: GMR, motions: Sequence[Motion], noises: Sequence[str] = 
         for noise in tuple(noises) + ('motionet',):
             say(f'static-camera fusion on {len(bags)} bags, input {noise} ...')
             bag_rows += evaluate_bags(model, bags, noise, lookahead, device, window)
+    speed_rows = []
+    if speeds:
+        say('playback speeds ...')
+        speed_rows = evaluate_speeds(model, motions, [n for n in noises if n != 'lifted'],
+                                     speeds, lookahead, device, window)
     return {'model': {'config': model.cfg.__dict__, 'info': getattr(model, 'info', {})},
             'lookahead': lookahead, 'window': window, 'results': results, 'baselines': baselines,
             'fusion_validation': fusion, 'fusion_bags': bag_rows,
-            'root_noise': ROOT_NOISE}
+            'root_noise': ROOT_NOISE, 'speeds': speed_rows}
 
 
 _COLS = [('ome_deg', 'OME deg'), ('tme_mm', 'TME mm'), ('jme_mm', 'JME mm'),
@@ -598,6 +652,20 @@ def write_report(report: Dict, out_dir: Path, title: str) -> Path:
                          + ' | ' + ' | '.join(_fmt(r[f'{k}_tilt_deg']) for k in
                                               ('gmr', 'gmr_tilt', 'fused', 'fused_known_up'))
                          + ' |')
+    if report.get('speeds'):
+        r0 = report['speeds'][0]
+        lines += ['', '## Playback speed', '',
+                  f"Online, on the {r0['clips']} validation clips of at least 3 s that travel at "
+                  f'least {SPEED_MIN_TRAVEL_M:g} m, played slower or faster at the same frame '
+                  'rate (0.5: slow motion, or a gait at half its pace). Step ratio: the '
+                  'predicted over the true path of the per-frame translations (1: the right '
+                  'pace; 0: on the spot), median and 10th percentile over clips; RTE: median.',
+                  '', '| speed | input | step ratio | step ratio p10 | RTE % | TME mm |',
+                  '|---|---|---|---|---|---|']
+        for r in report['speeds']:
+            lines.append(f"| {r['speed']:g} | {r['noise']} | {r['step_ratio']:.2f} | "
+                         f"{r['step_ratio_p10']:.2f} | {_fmt(r['rte_pct'])} | "
+                         f"{_fmt(r['tme_mm'])} |")
     lines += ['', f"Evaluation time: {report.get('eval_seconds', '-')} s."]
     path = out_dir / 'eval.md'
     path.write_text('\n'.join(lines) + '\n')
