@@ -55,3 +55,36 @@ def test_training_resumes_from_its_checkpoint_and_refuses_a_crafted_one(tmp_path
     with pytest.raises(WeightsError, match='refused'):
         train(motions, motions, run, _config(6), progress=False)
     assert not (tmp_path / 'created').exists()
+
+
+def test_reset_joints_restart_those_rotations_at_the_rest_pose():
+    """``reset_joints`` puts the named joints' rotation outputs back to the identity (zero
+    weights, identity bias) and leaves every other output as it was; an unknown name is
+    refused; a config file's list becomes a tuple."""
+    from mocap_core.skeleton import JOINT_INDEX
+    from mocap_lifter.model import LifterConfig, MotioNet
+    from mocap_lifter.training.train import TrainConfig, reset_rotation_outputs
+
+    torch.manual_seed(0)
+    model = MotioNet(LifterConfig()).eval()
+    with torch.no_grad():
+        model.e_q.shrink.weight.normal_()
+        model.e_q.shrink.bias.normal_()
+    before = model.e_q.shrink.weight.detach().clone()
+    reset_rotation_outputs(model, ('right_knee',))
+    j = JOINT_INDEX['right_knee']
+    w, b = model.e_q.shrink.weight.detach(), model.e_q.shrink.bias.detach()
+    assert torch.all(w[4 * j:4 * j + 4] == 0)
+    assert b[4 * j:4 * j + 4].tolist() == [0.0, 0.0, 0.0, 1.0]
+    keep = torch.ones(len(w), dtype=torch.bool)
+    keep[4 * j:4 * j + 4] = False
+    assert torch.equal(w[keep], before[keep])
+    from mocap_lifter.features import NUM_FEATURES
+    with torch.no_grad():
+        q, _, _ = model.e_q(torch.randn(1, NUM_FEATURES, 40))
+    np.testing.assert_allclose(q[0, :, j].numpy(), np.tile([0, 0, 0, 1.0], (q.shape[1], 1)),
+                               atol=1e-6)
+    with pytest.raises(ValueError, match='unknown joints'):
+        reset_rotation_outputs(model, ('right_kneecap',))
+    assert TrainConfig.from_dict({'reset_joints': ['right_knee']}).reset_joints == \
+        ('right_knee',)

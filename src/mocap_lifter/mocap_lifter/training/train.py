@@ -27,7 +27,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
@@ -72,6 +72,11 @@ class TrainConfig:
     tpose_fraction: float = 0.0    # share of T-pose windows (reference T-pose loss)
     w_tpose: float = 0.0           # weight of the T-pose loss (identity rotations)
     init: Optional[str] = None     # weights to start from (fine-tuning) instead of random
+    #: joints whose rotation outputs are re-initialised after ``init`` (the output rows of
+    #: E_Q for them: zero weights, identity bias). For a joint stuck in a bad state that
+    #: fine-tuning cannot leave: the sign-invariant rotation loss pulls a rotation that is
+    #: about 90 deg off in opposite directions on different frames (docs/lifter.md).
+    reset_joints: Tuple[str, ...] = ()
     #: share of keypoint windows placed where the real detector puts its points
     #: (mocap_core/data/detector_placement.json) instead of on the joints
     placement_fraction: float = 0.0
@@ -97,6 +102,8 @@ class TrainConfig:
     def from_dict(cls, d: Dict) -> 'TrainConfig':
         d = dict(d)
         model = LifterConfig(**d.pop('model', {}))
+        if 'reset_joints' in d:
+            d['reset_joints'] = tuple(d['reset_joints'])
         return cls(model=model, **d)
 
 
@@ -142,6 +149,23 @@ def total_loss(terms: Dict[str, torch.Tensor], cfg: TrainConfig) -> torch.Tensor
             + cfg.w_acceleration * terms['acceleration']
             + cfg.w_tpose * terms.get('tpose', torch.zeros(()))
             + cfg.w_adversarial * terms.get('adversarial', torch.zeros(())))
+
+
+def reset_rotation_outputs(model: MotioNet, joints: Sequence[str]) -> None:
+    """Re-initialise the rotation outputs of ``joints`` (names of
+    :data:`mocap_core.skeleton.JOINT_NAMES`): their four rows of E_Q's last 1x1 convolution
+    get zero weights and the identity quaternion (x, y, z, w = 0, 0, 0, 1) as bias, so each
+    starts at the rest pose and learns from there. Raises ValueError for an unknown name."""
+    from mocap_core.skeleton import JOINT_INDEX
+    unknown = [j for j in joints if j not in JOINT_INDEX]
+    if unknown:
+        raise ValueError(f'reset_joints: unknown joints {unknown}')
+    shrink = model.e_q.shrink
+    with torch.no_grad():
+        for name in joints:
+            rows = slice(4 * JOINT_INDEX[name], 4 * JOINT_INDEX[name] + 4)
+            shrink.weight[rows] = 0.0
+            shrink.bias[rows] = torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=shrink.bias.dtype)
 
 
 def feature_statistics(sampler: WindowSampler, batches: int = 20, size: int = 32):
@@ -203,6 +227,7 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
             raise ValueError(f'--init weights {cfg.init} have another network configuration: '
                              f'{asdict(init.cfg)} vs {asdict(model.cfg)}')
         model.load_state_dict(init.state_dict())
+        reset_rotation_outputs(model, cfg.reset_joints)
     else:
         mean, std = feature_statistics(sampler)
         model.set_normalisation(mean, std)
