@@ -1,0 +1,71 @@
+"""Both knees of the shipped lifter flex as the walker's do (docs/lifter.md, "The rigid right
+knee"): on the committed walking bags, lifted in one pass from their keypoints, each knee's
+flexion range (5th to 95th percentile of the angle between thigh and shin) is at least half
+the truth's, and the two legs' ranges are within a factor 1.6 of each other."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+BAGS = ('gt_cmu_walk_12_02', 'gt_bandai_walk_exhausted', 'rendered_cmu_05_01')
+
+
+def knee_flexion_deg(joints: np.ndarray, side: str) -> np.ndarray:
+    """(F,) knee flexion (deg, 0 = straight leg) of ``side`` from (F, J, 3) joint positions."""
+    from mocap_core.skeleton import JOINT_INDEX as J
+    thigh = joints[:, J[f'{side}_hip']] - joints[:, J[f'{side}_knee']]
+    shin = joints[:, J[f'{side}_ankle']] - joints[:, J[f'{side}_knee']]
+    cos = np.sum(thigh * shin, -1) / (np.linalg.norm(thigh, axis=-1)
+                                      * np.linalg.norm(shin, axis=-1))
+    return 180.0 - np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _range(a: np.ndarray) -> float:
+    lo, hi = np.percentile(a, [5, 95])
+    return float(hi - lo)
+
+
+def knee_ranges(bag: Path, weights: Path):
+    """{side: (lifted range, true range)} in degrees for one ground-truth bag."""
+    import torch
+
+    from mocap_core.kinematics import forward_kinematics
+    from mocap_global.bags import read_groundtruth_bag
+    from mocap_lifter.features import lifter_features
+    from mocap_lifter.weights import load_weights
+
+    b = read_groundtruth_bag(bag)
+    model = load_weights(weights).eval()
+    feats, root, scale, _ = lifter_features(b['keypoints'], b['intrinsics'])
+    with torch.no_grad():
+        out = model(torch.as_tensor(feats[None]), torch.as_tensor(root[None]).float(),
+                    torch.as_tensor(scale[None]).float())
+    lifted = out['positions'][0].numpy()
+    truth = np.concatenate([forward_kinematics(p.skeleton.parents, p.skeleton.offsets,
+                                               p.rotations[None], p.root_position[None])[0]
+                            for p in b['poses']])
+    return {s: (_range(knee_flexion_deg(lifted, s)), _range(knee_flexion_deg(truth, s)))
+            for s in ('left', 'right')}
+
+
+@pytest.mark.xfail(strict=True, reason='the shipped windowed weights keep the right knee near '
+                   '30 deg (docs/lifter.md, "The rigid right knee"); fixed weights lift this')
+@pytest.mark.parametrize('bag', BAGS)
+def test_both_knees_of_the_default_lifter_flex(bag):
+    from mocap_lifter.weights import default_weights
+    r = knee_ranges(ROOT / 'bags' / bag, default_weights('windowed'))
+    for side, (lifted, truth) in r.items():
+        assert lifted >= 0.5 * truth, f'{side} knee flexes {lifted:.0f} deg of {truth:.0f}'
+    left, right = r['left'][0], r['right'][0]
+    assert max(left, right) <= 1.6 * min(left, right), f'left {left:.0f}, right {right:.0f} deg'
+
+
+def test_the_check_passes_on_weights_trained_with_the_rotation_loss_from_the_start():
+    """The same check on ``motionet_windowed_strict.pt`` (never stuck): the check can pass."""
+    strict = ROOT / 'src' / 'mocap_lifter' / 'weights' / 'motionet_windowed_strict.pt'
+    r = knee_ranges(ROOT / 'bags' / 'gt_bandai_walk_exhausted', strict)
+    assert all(lifted >= 0.5 * truth for lifted, truth in r.values())
