@@ -88,3 +88,52 @@ def test_reset_joints_restart_those_rotations_at_the_rest_pose():
         reset_rotation_outputs(model, ('right_kneecap',))
     assert TrainConfig.from_dict({'reset_joints': ['right_knee']}).reset_joints == \
         ('right_knee',)
+
+
+def test_train_reset_only_changes_nothing_but_those_rows():
+    """With ``reset_only_parameters`` an optimiser step on any loss moves the reset joints'
+    output rows and nothing else: not the other rows, not the trunk."""
+    from mocap_core.skeleton import JOINT_INDEX
+    from mocap_lifter.features import NUM_FEATURES
+    from mocap_lifter.model import LifterConfig, MotioNet
+    from mocap_lifter.training.train import reset_only_parameters, reset_rotation_outputs
+
+    torch.manual_seed(1)
+    model = MotioNet(LifterConfig())
+    reset_rotation_outputs(model, ('right_knee',))
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    params = reset_only_parameters(model, ('right_knee',))
+    opt = torch.optim.Adam(params, lr=0.1)
+    model.eval()
+    q, depth, contacts = model.e_q(torch.randn(2, NUM_FEATURES, 30))
+    (q * torch.randn_like(q)).sum().add(depth.sum() + contacts.sum()).backward()
+    opt.step()
+    after = model.state_dict()
+    j = JOINT_INDEX['right_knee']
+    rows = torch.zeros(len(before['e_q.shrink.bias']), dtype=torch.bool)
+    rows[4 * j:4 * j + 4] = True
+    assert not torch.equal(after['e_q.shrink.weight'][rows], before['e_q.shrink.weight'][rows])
+    assert torch.equal(after['e_q.shrink.weight'][~rows], before['e_q.shrink.weight'][~rows])
+    assert torch.equal(after['e_q.shrink.bias'][~rows], before['e_q.shrink.bias'][~rows])
+    changed = [k for k in before if k not in ('e_q.shrink.weight', 'e_q.shrink.bias')
+               and not torch.equal(before[k], after[k])]
+    assert changed == []
+    with pytest.raises(ValueError, match='needs reset_joints'):
+        reset_only_parameters(MotioNet(LifterConfig()), ())
+
+
+def test_freeze_keeps_the_named_modules_as_they_were():
+    """``freeze_modules``: the named modules' parameters stop requiring gradients (and so stay
+    as they are through training) while the rest still learns; an unknown name is refused."""
+    from mocap_lifter.model import LifterConfig, MotioNet
+    from mocap_lifter.training.train import freeze_modules
+
+    model = MotioNet(LifterConfig())
+    frozen = freeze_modules(model, ('e_q.expand', 'e_q.blocks.0', 'e_s'))
+    names = {n for n, p in model.named_parameters() if not p.requires_grad}
+    assert names and all(n.startswith(('e_q.expand.', 'e_q.blocks.0.', 'e_s.')) for n in names)
+    assert all(p.requires_grad for n, p in model.named_parameters()
+               if n.startswith(('e_q.blocks.1.', 'e_q.blocks.2.', 'e_q.shrink.')))
+    assert any(isinstance(m, torch.nn.BatchNorm1d) for m in frozen)
+    with pytest.raises(ValueError, match='no module'):
+        freeze_modules(model, ('e_q.blocks.9',))

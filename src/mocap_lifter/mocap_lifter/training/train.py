@@ -77,6 +77,13 @@ class TrainConfig:
     #: fine-tuning cannot leave: the sign-invariant rotation loss pulls a rotation that is
     #: about 90 deg off in opposite directions on different frames (docs/lifter.md).
     reset_joints: Tuple[str, ...] = ()
+    #: train only the reset joints' output rows (:func:`reset_only_parameters`): the rest of
+    #: the network, its batch-norm statistics included, stays exactly as ``init`` left it
+    train_reset_only: bool = False
+    #: modules left as ``init`` made them (names or name prefixes of ``named_modules``, e.g.
+    #: ``e_q.expand``, ``e_q.blocks.0``): their parameters get no gradient and their batch
+    #: norm and dropout stay in inference mode
+    freeze: Tuple[str, ...] = ()
     #: share of keypoint windows placed where the real detector puts its points
     #: (mocap_core/data/detector_placement.json) instead of on the joints
     placement_fraction: float = 0.0
@@ -102,8 +109,9 @@ class TrainConfig:
     def from_dict(cls, d: Dict) -> 'TrainConfig':
         d = dict(d)
         model = LifterConfig(**d.pop('model', {}))
-        if 'reset_joints' in d:
-            d['reset_joints'] = tuple(d['reset_joints'])
+        for key in ('reset_joints', 'freeze'):
+            if key in d:
+                d[key] = tuple(d[key])
         return cls(model=model, **d)
 
 
@@ -168,6 +176,48 @@ def reset_rotation_outputs(model: MotioNet, joints: Sequence[str]) -> None:
             shrink.bias[rows] = torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=shrink.bias.dtype)
 
 
+def freeze_modules(model: MotioNet, names: Sequence[str]) -> List[nn.Module]:
+    """Stop the gradients of the modules named (or prefixed) by ``names`` and return those
+    modules (the training loop keeps them in inference mode). Raises ValueError for a name
+    that matches no module."""
+    mods = dict(model.named_modules())
+    out: List[nn.Module] = []
+    for name in names:
+        hit = [m for n, m in mods.items() if n == name or n.startswith(name + '.')]
+        if not hit:
+            raise ValueError(f'freeze: no module {name!r} in the network')
+        for m in hit:
+            for p in m.parameters():
+                p.requires_grad_(False)
+        out += hit
+    return out
+
+
+def reset_only_parameters(model: MotioNet, joints: Sequence[str]) -> List[torch.Tensor]:
+    """Freeze the network except the rotation outputs of ``joints`` (their rows of E_Q's last
+    1x1 convolution, as :func:`reset_rotation_outputs`): every other parameter stops
+    requiring a gradient, and the gradients of the other rows of that layer are masked to
+    zero. Returns the parameters to optimise (that layer's weight and bias); with zero
+    gradients Adam leaves the masked rows as they are. Raises ValueError without joints."""
+    from mocap_core.skeleton import JOINT_INDEX
+    if not joints:
+        raise ValueError('train_reset_only needs reset_joints')
+    unknown = [j for j in joints if j not in JOINT_INDEX]
+    if unknown:
+        raise ValueError(f'reset_joints: unknown joints {unknown}')
+    for p in model.parameters():
+        p.requires_grad_(False)
+    shrink = model.e_q.shrink
+    mask = torch.zeros(shrink.bias.shape[0], device=shrink.bias.device)
+    for name in joints:
+        mask[4 * JOINT_INDEX[name]:4 * JOINT_INDEX[name] + 4] = 1.0
+    shrink.weight.requires_grad_(True)
+    shrink.bias.requires_grad_(True)
+    shrink.weight.register_hook(lambda g: g * mask[:, None, None])
+    shrink.bias.register_hook(lambda g: g * mask)
+    return [shrink.weight, shrink.bias]
+
+
 def feature_statistics(sampler: WindowSampler, batches: int = 20, size: int = 32):
     """Per-channel mean and std of the input features over random training windows."""
     feats = np.concatenate([sampler.batch(size)['features'].reshape(-1, NUM_FEATURES)
@@ -204,7 +254,10 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
 
     model = MotioNet(cfg.model).to(device)
     disc = RotationDiscriminator().to(device) if cfg.w_adversarial > 0 else None
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    frozen = freeze_modules(model, cfg.freeze)
+    params = (reset_only_parameters(model, cfg.reset_joints) if cfg.train_reset_only
+              else [p for p in model.parameters() if p.requires_grad])
+    opt = torch.optim.Adam(params, lr=cfg.lr)
     opt_d = torch.optim.Adam(disc.parameters(), lr=cfg.lr) if disc is not None else None
     step = 0
     ckpt = run_dir / 'last.pt'
@@ -247,7 +300,9 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
         lr = cosine_lr(step, cfg.steps, cfg.lr, cfg.lr_final)
         for g in opt.param_groups:
             g['lr'] = lr
-        model.train()
+        model.train(not cfg.train_reset_only)   # frozen: batch norm and dropout as at init
+        for m in frozen:
+            m.eval()
         gt = to_torch(sampler.batch(cfg.batch), device)
         out = model(gt['features'], gt['root_2d'], gt['scale'])
         terms = losses(out, gt, cfg, disc)
