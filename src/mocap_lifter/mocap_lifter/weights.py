@@ -33,16 +33,15 @@ Lifter = Union[MotioNet, VTM]
 
 
 #: Shipped files that are the default of a (model, mode) other than ``<model>_<mode>.pt``.
-#: Windowed MotioNet: stage 6 (session 33), the weights fine-tuned with wide cameras,
-#: detector-placed keypoints and the real detector's output on 685 rendered training clips.
-#: On the rendered benchmark (the real detector on people, motions, scenes and cameras never
-#: trained on; 58 clips, 2026-11-26), with the node's output smoothing, they reach 78.3 / 41.6
-#: mm MPJPE / PA-MPJPE (median over clips) against 122.1 / 78.2 for ``motionet_windowed.pt``,
-#: the default until 2026-11-26. Stage 7 (``motionet_windowed_rendered_v5.pt``, session 34,
-#: opt-in) lifts the rendered people better (74.8 / 41.2) but shortens the world paths (the
-#: real moving-camera walk, the rendered clips that travel) and is 68 mm off on the CMU walk
-#: bag: ``weights/README.md`` has the whole comparison.
-DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered_v4.pt'}
+#: Windowed MotioNet: stage 8 (session 39), the stage-6 weights (wide cameras, detector-placed
+#: keypoints, the real detector's output on 685 rendered training clips) with the right
+#: knee's output reset and the last fusion block retrained: stage 6 kept the right knee near
+#: 30 deg (docs/lifter.md, "The rigid right knee"). On the rendered benchmark (the real
+#: detector on people, motions, scenes and cameras never trained on; 58 clips, second pass
+#: of the pipeline) they reach 76.1 / 40.0 mm MPJPE / PA-MPJPE (median over clips) against
+#: 78.0 / 41.6 for stage 6 (``motionet_windowed_rendered_v4.pt``, opt-in since session 39)
+#: and 122.1 / 78.2 for ``motionet_windowed.pt``: ``weights/README.md`` has the comparison.
+DEFAULT_FILES = {('motionet', 'windowed'): 'motionet_windowed_rendered_v6.pt'}
 
 
 def default_weights(mode: str, model: str = 'motionet') -> Path:
