@@ -8,7 +8,7 @@ quaternions (x, y, z, w) relative to the rest pose (row 0 = root orientation in 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -70,13 +70,32 @@ def resample(rotations: np.ndarray, root_positions: np.ndarray, fps_in: float,
     duration = (n - 1) / fps_in
     count = int(np.floor(duration * fps_out + 1e-9)) + 1
     t = np.arange(count) * (fps_in / fps_out)  # in input frames
-    i0 = np.minimum(np.floor(t).astype(int), n - 1)
+    return frames_at(make_continuous(rotations), root_positions, t)
+
+
+def frames_at(rotations: np.ndarray, positions: Optional[np.ndarray], at: np.ndarray
+              ) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+    """Frames at fractional indices: slerp between the two neighbouring rotations (along the
+    shortest path) and linear interpolation of the positions.
+
+    Args:
+        rotations: (N, J, 4) quaternions x, y, z, w.
+        positions: (N, 3) or None.
+        at: (T,) fractional frame indices in [0, N - 1].
+    Returns:
+        (T, J, 4) unit quaternions and (T, 3) positions (None if ``positions`` is None).
+    """
+    rotations = np.asarray(rotations, dtype=np.float64)
+    at = np.asarray(at, dtype=np.float64)
+    n = len(rotations)
+    i0 = np.clip(np.floor(at).astype(np.int64), 0, n - 1)
     i1 = np.minimum(i0 + 1, n - 1)
-    w = (t - i0)[:, None]
-    rot = make_continuous(rotations)
-    out_rot = quat_normalize(quat_slerp(rot[i0], rot[i1], w))
-    out_root = (1.0 - w) * root_positions[i0] + w * root_positions[i1]
-    return out_rot, out_root
+    w = (at - i0)[:, None]
+    rot = quat_normalize(quat_slerp(rotations[i0], rotations[i1], w))
+    if positions is None:
+        return rot, None
+    positions = np.asarray(positions, dtype=np.float64)
+    return rot, (1.0 - w) * positions[i0] + w * positions[i1]
 
 
 def retime(motion: 'Motion', speed: float) -> 'Motion':

@@ -32,8 +32,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from mocap_core.data.motion import Motion
-from mocap_core.rotations import quat_slerp, quat_to_matrix
+from mocap_core.data.motion import Motion, frames_at
+from mocap_core.rotations import quat_to_matrix
 from mocap_core.skeleton import NUM_JOINTS
 
 from .. import features as F
@@ -68,30 +68,6 @@ class Augmentation:
     @classmethod
     def none(cls) -> 'Augmentation':
         return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, lifted_prob=0.0)
-
-
-def interpolate_frames(rotations: np.ndarray, positions: np.ndarray,
-                       at: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Frames at fractional indices: slerp between the two neighbouring rotations and linear
-    interpolation of the positions.
-
-    Args:
-        rotations: (N, J, 4) quaternions x, y, z, w (either sign).
-        positions: (N, 3), or None.
-        at: (T,) fractional frame indices in [0, N - 1].
-    Returns:
-        (T, J, 4) unit quaternions and (T, 3) positions (None if ``positions`` is None).
-    """
-    at = np.asarray(at, dtype=np.float64)
-    i0 = np.clip(np.floor(at).astype(np.int64), 0, len(rotations) - 1)
-    i1 = np.minimum(i0 + 1, len(rotations) - 1)
-    w = at - i0
-    rot = quat_slerp(rotations[i0].astype(np.float64), rotations[i1].astype(np.float64),
-                     np.broadcast_to(w[:, None], rotations[i0].shape[:-1]))
-    if positions is None:
-        return rot, None
-    pos = (1.0 - w[:, None]) * positions[i0] + w[:, None] * positions[i1]
-    return rot, pos.astype(np.float64)
 
 
 def frame_step(source_fps: float, fps: float) -> int:
@@ -170,9 +146,9 @@ class WindowSampler:
             root = self.roots[idx].astype(np.float64)
             rot_l = self.lifted_rot[cam, idx].astype(np.float64) if use_lifted else None
         else:
-            rot, root = interpolate_frames(self.rotations[first:last],
+            rot, root = frames_at(self.rotations[first:last],
                                            self.roots[first:last], at)
-            rot_l = (interpolate_frames(self.lifted_rot[cam, first:last], None, at)[0]
+            rot_l = (frames_at(self.lifted_rot[cam, first:last], None, at)[0]
                      if use_lifted else None)
         lifted = None
         if use_lifted:

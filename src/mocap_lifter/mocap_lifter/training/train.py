@@ -159,19 +159,23 @@ def total_loss(terms: Dict[str, torch.Tensor], cfg: TrainConfig) -> torch.Tensor
             + cfg.w_adversarial * terms.get('adversarial', torch.zeros(())))
 
 
-def reset_rotation_outputs(model: MotioNet, joints: Sequence[str]) -> None:
-    """Re-initialise the rotation outputs of ``joints`` (names of
-    :data:`mocap_core.skeleton.JOINT_NAMES`): their four rows of E_Q's last 1x1 convolution
-    get zero weights and the identity quaternion (x, y, z, w = 0, 0, 0, 1) as bias, so each
-    starts at the rest pose and learns from there. Raises ValueError for an unknown name."""
+def _output_rows(joints: Sequence[str]) -> List[slice]:
+    """The rows of E_Q's last 1x1 convolution that give ``joints``' rotations (names of
+    :data:`mocap_core.skeleton.JOINT_NAMES`, four rows each). ValueError for an unknown name."""
     from mocap_core.skeleton import JOINT_INDEX
     unknown = [j for j in joints if j not in JOINT_INDEX]
     if unknown:
         raise ValueError(f'reset_joints: unknown joints {unknown}')
+    return [slice(4 * JOINT_INDEX[j], 4 * JOINT_INDEX[j] + 4) for j in joints]
+
+
+def reset_rotation_outputs(model: MotioNet, joints: Sequence[str]) -> None:
+    """Re-initialise the rotation outputs of ``joints`` (:func:`_output_rows`): zero weights
+    and the identity quaternion (x, y, z, w = 0, 0, 0, 1) as bias, so each starts at the
+    rest pose and learns from there. Raises ValueError for an unknown name."""
     shrink = model.e_q.shrink
     with torch.no_grad():
-        for name in joints:
-            rows = slice(4 * JOINT_INDEX[name], 4 * JOINT_INDEX[name] + 4)
+        for rows in _output_rows(joints):
             shrink.weight[rows] = 0.0
             shrink.bias[rows] = torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=shrink.bias.dtype)
 
@@ -199,18 +203,15 @@ def reset_only_parameters(model: MotioNet, joints: Sequence[str]) -> List[torch.
     requiring a gradient, and the gradients of the other rows of that layer are masked to
     zero. Returns the parameters to optimise (that layer's weight and bias); with zero
     gradients Adam leaves the masked rows as they are. Raises ValueError without joints."""
-    from mocap_core.skeleton import JOINT_INDEX
     if not joints:
         raise ValueError('train_reset_only needs reset_joints')
-    unknown = [j for j in joints if j not in JOINT_INDEX]
-    if unknown:
-        raise ValueError(f'reset_joints: unknown joints {unknown}')
+    rows = _output_rows(joints)
     for p in model.parameters():
         p.requires_grad_(False)
     shrink = model.e_q.shrink
     mask = torch.zeros(shrink.bias.shape[0], device=shrink.bias.device)
-    for name in joints:
-        mask[4 * JOINT_INDEX[name]:4 * JOINT_INDEX[name] + 4] = 1.0
+    for r in rows:
+        mask[r] = 1.0
     shrink.weight.requires_grad_(True)
     shrink.bias.requires_grad_(True)
     shrink.weight.register_hook(lambda g: g * mask[:, None, None])
