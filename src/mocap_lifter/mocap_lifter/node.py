@@ -61,7 +61,7 @@ from mocap_core.urdf import skeleton_to_urdf
 
 from .intrinsics import StreamIntrinsics
 from .online import LiftedFrame, OnlineLifter, PeopleStep, PeopleStreams
-from .output_smoothing import DEFAULT_OUTPUT_SIGMA
+from .output_smoothing import DEFAULT_OUTPUT_ROOT_SIGMA, DEFAULT_OUTPUT_SIGMA
 from .weights import MODELS, architecture, default_weights, load_weights
 
 PARAMETERS = (
@@ -96,12 +96,16 @@ PARAMETERS = (
               'are not yet there, so with chunk > 1 the output differs from frame-by-frame '
               'lifting (by up to ~1 cm); one-sided (a lag) in causal mode', min_value=0.0,
               max_value=10.0, read_only=True),
-    ParamSpec('output_sigma', -1.0, 'Gaussian smoothing of the lifted frames (rotations, '
-              'root) along time, sigma in frames, delaying the output by ceil(2 sigma) '
-              'frames (-1: 2 frames in windowed mode, off in causal mode; 0: off). On rendered '
-              'people through the real detector it cuts the jitter from 7.4x to 1.7x the '
-              'true motion\'s for 0.4 mm of MPJPE (docs/lifter.md); frame by frame and in chunks '
-              'the output is the same', min_value=-1.0, max_value=10.0, read_only=True),
+    ParamSpec('output_sigma', -1.0, 'Gaussian smoothing of the lifted joint rotations along '
+              'time, sigma in frames, delaying the output by ceil(2 sigma) frames (-1: 1.5 '
+              'frames in windowed mode, off in causal mode; 0: off). More flattens a walk\'s '
+              'knee and hip swings (docs/lifter.md, "Output smoothing"); frame by frame and in '
+              'chunks the output is the same', min_value=-1.0, max_value=10.0, read_only=True),
+    ParamSpec('output_root_sigma', -1.0, 'Gaussian smoothing of the lifted root position '
+              'along time, sigma in frames (-1: 3 frames in windowed mode, off in causal '
+              'mode; 0: off). Most of the output\'s jitter on real detections is the root\'s '
+              'depth; the output is delayed by ceil(2 sigma) frames of the larger sigma',
+              min_value=-1.0, max_value=10.0, read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
               'effort: older ones are lost when the queue is full)', min_value=1,
               read_only=True),
@@ -153,12 +157,15 @@ class LifterNode(Node):
             raise ValueError(f'{path} holds {architecture(model)} weights but model:={arch}')
         output_sigma = p['output_sigma'] if p['output_sigma'] >= 0 else (
             DEFAULT_OUTPUT_SIGMA if mode == 'windowed' else 0.0)
+        root_sigma = p['output_root_sigma'] if p['output_root_sigma'] >= 0 else (
+            DEFAULT_OUTPUT_ROOT_SIGMA if mode == 'windowed' else 0.0)
 
         def make_lifter() -> OnlineLifter:
             return OnlineLifter(model, mode, None if p['latency'] < 0 else p['latency'],
                                 p['skeleton_frames'], p['max_gap_s'], p['device'],
                                 chunk=p['chunk'], flip=p['test_time_flip'],
-                                smooth=p['smooth_sigma'], output_sigma=output_sigma)
+                                smooth=p['smooth_sigma'], output_sigma=output_sigma,
+                                output_root_sigma=root_sigma)
 
         lifter = make_lifter()
         self.people = PeopleStreams(make_lifter, StreamIntrinsics(p['horizontal_fov_deg']),
@@ -190,8 +197,9 @@ class LifterNode(Node):
         self.diag = NodeDiagnostics(self, 'lifter', hardware_id=str(path.name))
         self.diag.set_value('model', f'{arch} ({mode})')
         self.diag.set_value('latency_frames', lifter.delay)
-        self.diag.set_value('output_smoothing', f'sigma {output_sigma:g} frames'
-                            if output_sigma > 0 else 'off')
+        self.diag.set_value('output_smoothing',
+                            f'sigma {output_sigma:g} frames (rotations), {root_sigma:g} (root)'
+                            if max(output_sigma, root_sigma) > 0 else 'off')
         # frame by frame through the streaming encoder where exact (default look-ahead, no
         # smoothing, chunk 1), otherwise a network pass over the context window per frame
         self.diag.set_value('inference', 'streaming (one new column per layer and frame)'

@@ -88,16 +88,19 @@ class OnlineLifter:
             (twice the network time; 42.8 -> 39.9 mm MPJPE on the validation split).
         streaming: lift frame by frame with :class:`~mocap_lifter.streaming.StreamingEncoder`
             where that is exact (module docstring); False: always the window pass.
-        output_sigma: Gaussian smoothing of the lifted frames along time (sigma in frames;
-            0 = off): :class:`~mocap_lifter.output_smoothing.FrameSmoother`, which delays the
-            output by ``ceil(2 * output_sigma)`` frames more (:attr:`delay`).
+        output_sigma: Gaussian smoothing of the lifted joint rotations along time (sigma in
+            frames; 0 = off): :class:`~mocap_lifter.output_smoothing.FrameSmoother`, which
+            delays the output by ``ceil(2 * sigma)`` frames more (:attr:`delay`) for the
+            larger of the two sigmas.
+        output_root_sigma: the same for the root position (None: ``output_sigma``).
     """
 
     def __init__(self, model: MotioNet, mode: str = 'causal', latency: Optional[int] = None,
                  skeleton_frames: int = 90, max_gap_s: float = 1.0,
                  device: str = 'cpu', chunk: int = 1, flip: bool = False,
                  smooth: float = 0.0, streaming: bool = True,
-                 output_sigma: float = 0.0) -> None:
+                 output_sigma: float = 0.0, output_root_sigma: Optional[float] = None
+                 ) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -120,9 +123,12 @@ class OnlineLifter:
         if smooth < 0:
             raise ValueError(f'smooth must be >= 0, got {smooth}')
         self.smooth = float(smooth)
-        if output_sigma < 0:
-            raise ValueError(f'output_sigma must be >= 0, got {output_sigma}')
-        self._smoother = FrameSmoother(output_sigma) if output_sigma > 0 else None
+        root_sigma = output_sigma if output_root_sigma is None else output_root_sigma
+        if output_sigma < 0 or root_sigma < 0:
+            raise ValueError(f'output_sigma and output_root_sigma must be >= 0, got '
+                             f'{output_sigma} and {root_sigma}')
+        self._smoother = FrameSmoother(output_sigma, root_sigma=root_sigma) \
+            if max(output_sigma, root_sigma) > 0 else None
         self._stream: Optional[StreamingEncoder] = None
         if streaming and self.chunk == 1 and self.smooth == 0 and device == 'cpu' \
                 and context_frames is None and isinstance(model, MotioNet):

@@ -98,9 +98,10 @@ def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds,
     values = _values(node)
     assert values['persons'] == '0' and values['person_ids'] == 'none'
     assert values['inference'].startswith('streaming'), values    # live defaults
-    # windowed defaults: output smoothing sigma 2, its 4 frames on top of the look-ahead
-    assert values['output_smoothing'] == 'sigma 2 frames', values
-    assert values['latency_frames'] == str(14 + 4), values
+    # windowed defaults: output smoothing sigma 1.5 (rotations) and 3 (root), the root's 6
+    # frames on top of the look-ahead
+    assert values['output_smoothing'] == 'sigma 1.5 frames (rotations), 3 (root)', values
+    assert values['latency_frames'] == str(14 + 6), values
     assert values['errors'] == '0' and values['frames_dropped'] == '0'
     assert 'last_error' not in values
     assert values['intrinsics'].startswith('approximate ') and \

@@ -153,3 +153,36 @@ def test_batch_smoothing_matches_the_stream_on_the_root():
     frames = [frame(i, f.pose.rotations, r) for i, (f, r) in enumerate(zip(frames, roots))]
     got = np.array([f.pose.root_position for f in run(FrameSmoother(1.5), frames)])
     np.testing.assert_allclose(smooth_along_time(roots, 1.5), got, atol=1e-12)
+
+
+def test_the_root_gets_its_own_width():
+    """Rotations smoothed with ``sigma``, the root with ``root_sigma``; the delay is the
+    larger radius, and each part is what a smoother of its own width alone gives."""
+    frames, _ = turning(40, noise_deg=3.0, seed=4)
+    roots = np.array([f.pose.root_position for f in frames])
+    roots[:, 2] += np.random.default_rng(5).normal(0, 0.03, 40)     # depth noise
+    frames = [frame(i, f.pose.rotations, r) for i, (f, r) in enumerate(zip(frames, roots))]
+    s = FrameSmoother(1.0, root_sigma=3.0)
+    assert s.radius == 6
+    got = run(s, frames, 5)
+    rot_alone = run(FrameSmoother(1.0), frames)
+    np.testing.assert_allclose([f.pose.rotations for f in got],
+                               [f.pose.rotations for f in rot_alone], atol=1e-12)
+    np.testing.assert_allclose([f.pose.root_position for f in got],
+                               smooth_along_time(roots, 3.0), atol=1e-12)
+    assert [f.depth for f in got] == [f.pose.root_position[2] for f in got]
+    # the wider root window takes out more of the depth noise than the rotations' width
+    narrow = np.array([f.pose.root_position[2] for f in rot_alone])
+    wide = np.array([f.pose.root_position[2] for f in got])
+    assert np.abs(np.diff(wide, 2)).mean() < 0.5 * np.abs(np.diff(narrow, 2)).mean()
+
+
+def test_rotations_left_alone_with_sigma_zero():
+    frames, _ = turning(20, noise_deg=3.0)
+    got = run(FrameSmoother(0.0, root_sigma=2.0), frames, 3)
+    np.testing.assert_array_equal([f.pose.rotations for f in got],
+                                  [f.pose.rotations for f in frames])
+    with pytest.raises(ValueError):
+        FrameSmoother(0.0, root_sigma=0.0)
+    with pytest.raises(ValueError):
+        FrameSmoother(1.0, root_sigma=-1.0)

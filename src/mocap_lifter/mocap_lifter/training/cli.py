@@ -160,8 +160,12 @@ def add_eval_parser(sub) -> None:
                    '(frames; the node parameter smooth_sigma)')
     p.add_argument('--output-sigma', type=float, default=0.0, metavar='SIGMA',
                    help='Gaussian smoothing of the lifted output along time (frames; the node '
-                   'parameter output_sigma, 2 in windowed mode by default; applied here to the '
-                   'positions and root)')
+                   'parameter output_sigma, 1.5 in windowed mode by default; applied here to the '
+                   'positions, and to the root unless --output-root-sigma is given)')
+    p.add_argument('--output-root-sigma', type=float, default=None, metavar='SIGMA',
+                   help='Gaussian smoothing of the lifted root along time (frames; the node '
+                   'parameter output_root_sigma, 3 in windowed mode by default; default: '
+                   '--output-sigma)')
     p.add_argument('--rendered', nargs='?', const='', default=None, metavar='DIR',
                    help='also lift the rendered validation clips (mocap data render; default '
                    'folder ~/.cache/mocap/render) from the detector, from clean projections '
@@ -286,7 +290,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     noises = ('none', 'motionet') if args.noise == 'both' else (args.noise,)
     t0 = time.time()
     results = [evaluate(model, val, n, args.device, placement=pl, families=families,
-                        flip=args.flip, smooth=args.smooth, output_sigma=args.output_sigma)
+                        flip=args.flip, smooth=args.smooth, output_sigma=args.output_sigma,
+                        output_root_sigma=args.output_root_sigma)
                for pl in placements for n in noises]
     seconds = time.time() - t0
     baseline = {n: baseline_mean_pose(train_for_baseline, val, n) for n in noises}
@@ -297,7 +302,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if real_dirs:
         real = evaluate_real(model, [Path(d) for d in real_dirs], device=args.device,
                              flip=args.flip, smooth=args.smooth,
-                             output_sigma=args.output_sigma)
+                             output_sigma=args.output_sigma,
+                             output_root_sigma=args.output_root_sigma)
         real['groundtruth'] = groundtruth_plausibility(val)
         s = real['summary']
         print(f"real OpenPose ({real['sequences']} sequences, {real['frames']} frames): jitter "
@@ -307,7 +313,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"{real['groundtruth']['skating_mm']:.1f})")
     extra = {'baseline_mean_pose': baseline, 'weights': str(weights),
              'eval_seconds': round(seconds, 1), 'flip': args.flip, 'smooth': args.smooth,
-             'output_sigma': args.output_sigma}
+             'output_sigma': args.output_sigma, 'output_root_sigma': args.output_root_sigma}
     if args.rendered is not None:
         from mocap_core.render.batch import DEFAULT_OUT
         from mocap_core.render.clip import iter_done
@@ -329,7 +335,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         for inputs in ('detector', 'projected') + (('placed',) if placed else ()):
             r = evaluate_rendered(model, dirs, inputs, args.device, flip=args.flip,
                                   smooth=args.smooth, placement=placed,
-                                  output_sigma=args.output_sigma)
+                                  output_sigma=args.output_sigma,
+                             output_root_sigma=args.output_root_sigma)
             rendered[inputs] = {k: r[k] for k in ('clips', 'frames', 'summary')}
             s = r['summary']
             print(f"rendered ({inputs:9s}, {r['clips']} clips): MPJPE {s['mpjpe_mm']:.1f} mm "

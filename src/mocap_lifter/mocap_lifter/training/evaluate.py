@@ -38,15 +38,16 @@ def _clip_seed(name: str) -> int:
 
 @torch.no_grad()
 def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.ndarray,
-         device: str = 'cpu', flip: bool = False, output_sigma: float = 0.0
-         ) -> Dict[str, np.ndarray]:
+         device: str = 'cpu', flip: bool = False, output_sigma: float = 0.0,
+         output_root_sigma: Optional[float] = None) -> Dict[str, np.ndarray]:
     """Run the model on one (T, C) feature sequence -> numpy outputs without the batch axis
     (contacts as probabilities). ``flip``: test-time flip augmentation: the mirrored input is
     lifted too and its positions, root and contacts, mirrored back, averaged in (rotations
     are the unflipped pass's). ``output_sigma`` > 0: the node's output smoothing
     (:mod:`mocap_lifter.output_smoothing`, sigma in frames), applied here to the positions
-    and the root (the node smooths the rotations and the root; the two agree to the
-    millimetre for the few degrees neighbouring frames differ by)."""
+    and ``output_root_sigma`` (None: ``output_sigma``) to the root (the node smooths the
+    rotations and the root; the two agree to the millimetre for the few degrees neighbouring
+    frames differ by)."""
     def run(f, r):
         out = model(torch.as_tensor(f[None], device=device),
                     torch.as_tensor(r[None], device=device),
@@ -64,17 +65,20 @@ def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.n
         res['positions'] = 0.5 * (res['positions'] + pos)
         res['root'] = 0.5 * (res['root'] + root)
         res['contacts'] = 0.5 * (res['contacts'] + m['contacts'][:, [2, 3, 0, 1]])
+    root_sigma = output_sigma if output_root_sigma is None else output_root_sigma
+    from ..output_smoothing import smooth_along_time
     if output_sigma > 0:
-        from ..output_smoothing import smooth_along_time
         res['positions'] = smooth_along_time(res['positions'], output_sigma)
-        res['root'] = smooth_along_time(res['root'], output_sigma)
+    if root_sigma > 0:
+        res['root'] = smooth_along_time(res['root'], root_sigma)
     return res
 
 
 def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
              device: str = 'cpu', max_frames: int = 900, placement=None,
              families: Optional[Sequence[str]] = None, flip: bool = False,
-             smooth: float = 0.0, output_sigma: float = 0.0) -> Dict:
+             smooth: float = 0.0, output_sigma: float = 0.0,
+             output_root_sigma: Optional[float] = None) -> Dict:
     """Metrics over validation clips (frame-weighted means); per-clip rows included.
 
     ``placement``: a ``DetectorPlacement`` puts the keypoints where the real detector puts them
@@ -92,7 +96,7 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
         rng = np.random.default_rng(_clip_seed(m.name))
         s = make_sample(m, 0, n, rng, aug)
         out = lift(model, s['features'], s['root_2d'], s['scale'], device, flip=flip,
-                   output_sigma=output_sigma)
+                   output_sigma=output_sigma, output_root_sigma=output_root_sigma)
         p, g = out['positions'], s['positions']
         rows.append({
             'clip': m.name, 'frames': n,
@@ -208,7 +212,8 @@ def _largest_person(people: np.ndarray) -> np.ndarray:
 
 def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.0,
                   fov: float = 60.0, device: str = 'cpu', flip: bool = False,
-                  smooth: float = 0.0, output_sigma: float = 0.0) -> Dict:
+                  smooth: float = 0.0, output_sigma: float = 0.0,
+                  output_root_sigma: Optional[float] = None) -> Dict:
     """Lift OpenPose JSON folders (one sequence each; the most confident person per frame;
     intrinsics from ``fov`` over the inferred image size, as ``mocap data from-openpose``)
     and measure jitter (mm/s^2), foot skating (mm per frame, camera frame, during predicted
@@ -235,7 +240,8 @@ def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.
         w, h = infer_image_size(files)
         feats, root_2d, scale, _ = lifter_features(kp, CameraIntrinsics.from_fov(w, h, fov))
         out = lift(model, feats, root_2d.astype(np.float32), scale.astype(np.float32), device,
-                   flip=flip, output_sigma=output_sigma)
+                   flip=flip, output_sigma=output_sigma,
+                   output_root_sigma=output_root_sigma)
         p = out['positions']
         rows.append({'sequence': Path(d).name, 'frames': len(kp),
                      'jitter_mm_s2': M.jitter_mm(p) * fps ** 2,
@@ -251,7 +257,8 @@ def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.
 
 def evaluate_rendered(model: MotioNet, clip_dirs: Sequence[Path], inputs: str = 'detector',
                       device: str = 'cpu', flip: bool = False, smooth: float = 0.0,
-                      placement=None, output_sigma: float = 0.0) -> Dict:
+                      placement=None, output_sigma: float = 0.0,
+                      output_root_sigma: Optional[float] = None) -> Dict:
     """The lifter alone on rendered clips (``mocap data render``), against their exact joints
     (camera frame), from one of three inputs of the same frames and cameras:
 
@@ -295,7 +302,8 @@ def evaluate_rendered(model: MotioNet, clip_dirs: Sequence[Path], inputs: str = 
             kp = smooth_keypoints(kp, smooth)
         feats, root_2d, scale, _ = lifter_features(kp, intr)
         out = lift(model, feats, root_2d.astype(np.float32), scale.astype(np.float32), device,
-                   flip=flip, output_sigma=output_sigma)
+                   flip=flip, output_sigma=output_sigma,
+                   output_root_sigma=output_root_sigma)
         p, g = out['positions'], a['joints_camera']
         rows.append({'clip': meta['clip'], 'frames': len(p), 'mpjpe_mm': M.mpjpe_mm(p, g),
                      'pa_mpjpe_mm': M.pa_mpjpe_mm(p, g),
