@@ -1,5 +1,7 @@
 """MotioNet training checkpoints: resumed through load_checkpoint (tensors only)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -137,3 +139,15 @@ def test_freeze_keeps_the_named_modules_as_they_were():
     assert any(isinstance(m, torch.nn.BatchNorm1d) for m in frozen)
     with pytest.raises(ValueError, match='no module'):
         freeze_modules(model, ('e_q.blocks.9',))
+
+
+def test_eval_scores_the_weights_the_node_loads():
+    """`mocap eval lifter` without --weights scores the node's default (DEFAULT_FILES), not
+    the older `motionet_windowed.pt`."""
+    from mocap_lifter.training.cli import eval_weights
+    from mocap_lifter.weights import DEFAULT_FILES, default_weights
+    got = eval_weights('motionet', 'windowed', None)
+    assert got == default_weights('windowed')
+    assert got.name == DEFAULT_FILES[('motionet', 'windowed')]
+    assert eval_weights('vtm', 'windowed', None).name == 'vtm_windowed.pt'
+    assert eval_weights('motionet', 'windowed', '/x/y.pt') == Path('/x/y.pt')

@@ -138,8 +138,8 @@ def add_eval_parser(sub) -> None:
     p.add_argument('--model', choices=('motionet', 'vtm'), default='motionet',
                    help='which shipped lifter to evaluate (default motionet); VTM adds its '
                    'motion auto-encoder alone (the paper\'s Table 2 row)')
-    p.add_argument('--weights', help='weights file (default: the shipped ones of --model and '
-                   '--mode)')
+    p.add_argument('--weights', help='weights file (default: what the node loads for --model and '
+                   '--mode, mocap_lifter.weights.default_weights)')
     p.add_argument('--vtm-root', choices=('decoder', 'reprojection'),
                    help="VTM: where the root comes from (default: the weights' setting): the "
                    "root decoder's depth (the paper) or the reprojection fit of the lifted "
@@ -248,6 +248,14 @@ def default_real_sequences() -> List[str]:
     return [str(example)] if example.is_dir() else []
 
 
+def eval_weights(model: str, mode: str, given: Optional[str]) -> Path:
+    """The weights ``mocap eval lifter`` scores: ``given``, else what the node loads for
+    ``model`` and ``mode`` (:func:`mocap_lifter.weights.default_weights`; for the windowed
+    MotioNet that is not ``motionet_windowed.pt``, an older stage)."""
+    from ..weights import default_weights
+    return Path(given) if given else default_weights(mode, model)
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from mocap_core.checkpoint import WeightsError
 
@@ -258,8 +266,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.model == 'vtm' and args.mode == 'causal':
         print('mocap eval lifter: error: VTM is windowed only', file=sys.stderr)
         return 2
-    weights = Path(args.weights) if args.weights else \
-        WEIGHTS_DIR / f'{args.model}_{args.mode}.pt'
+    weights = eval_weights(args.model, args.mode, args.weights)
     if not weights.exists():
         print(f'mocap eval lifter: error: weights not found: {weights}', file=sys.stderr)
         return 1
