@@ -343,7 +343,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
             r = evaluate_rendered(model, dirs, inputs, args.device, flip=args.flip,
                                   smooth=args.smooth, placement=placed,
                                   output_sigma=args.output_sigma,
-                             output_root_sigma=args.output_root_sigma)
+                                  output_root_sigma=args.output_root_sigma)
             rendered[inputs] = {k: r[k] for k in ('clips', 'frames', 'summary')}
             s = r['summary']
             print(f"rendered ({inputs:9s}, {r['clips']} clips): MPJPE {s['mpjpe_mm']:.1f} mm "
