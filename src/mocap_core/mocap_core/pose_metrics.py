@@ -67,6 +67,35 @@ def alignment_angle_deg(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
+def twist_angle_deg(pred: np.ndarray, gt: np.ndarray, axis) -> np.ndarray:
+    """(N,) signed angle (degrees, right-handed about ``axis``) of the twist about the unit
+    (3,) ``axis`` of the rotation that best aligns each frame of (N, J, 3) ``pred`` with
+    ``gt`` (the swing-twist split of :func:`alignment_angle_deg`'s rotation). With camera-frame
+    poses and the optical x axis this is the body's tilt toward or away from the camera: the
+    part of the orientation a camera's pitch hides from the 2D keypoints."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    r = np.transpose(_umeyama(pred, gt)[0], (0, 2, 1))   # column vectors: g ~ r p
+    # quaternion of r: the vector part's projection on the axis and w give the twist
+    w = 0.5 * np.sqrt(np.maximum(1.0 + np.trace(r, axis1=1, axis2=2), 0.0))
+    v = 0.5 * np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0],
+                        r[:, 1, 0] - r[:, 0, 1]], axis=-1) / np.maximum(2.0 * w[:, None], 1e-12)
+    # (near 180 deg, w -> 0, the twist is ill-defined; those frames give about +-180)
+    return np.degrees(2.0 * np.arctan2(v @ a, w))
+
+
+def rotate_about_root(points: np.ndarray, axis, angle_deg) -> np.ndarray:
+    """(N, J, 3) ``points`` rotated about their root joint by (N,) or scalar ``angle_deg``
+    (right-handed) about the (3,) ``axis``."""
+    from scipy.spatial.transform import Rotation
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    ang = np.broadcast_to(np.radians(np.asarray(angle_deg, dtype=np.float64)), (len(points),))
+    rot = Rotation.from_rotvec(ang[:, None] * a).as_matrix()
+    root = points[:, :1]
+    return np.einsum('nij,nkj->nki', rot, points - root) + root
+
+
 def pa_mpjpe_mm(pred: np.ndarray, gt: np.ndarray) -> float:
     """Procrustes-aligned MPJPE (mm)."""
     p = pred.reshape(-1, *pred.shape[-2:])

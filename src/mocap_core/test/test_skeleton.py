@@ -100,3 +100,16 @@ def test_invalid_skeletons_raise():
         sk.Skeleton(offsets=bad)
     with pytest.raises(KeyError, match='known'):
         sk.joint_index('tail')
+
+
+def test_scaled_skeleton_and_its_stature():
+    skel = sk.Skeleton.default()
+    big = skel.scaled(1.1)
+    np.testing.assert_allclose(big.bone_lengths(), 1.1 * skel.bone_lengths())
+    np.testing.assert_allclose(big.height(), 1.1 * skel.height())
+    # the stature map is affine: scaling by k moves the stature by slope * (k - 1) * height
+    assert abs(big.stature() - skel.stature() - sk.STATURE_SLOPE * 0.1 * skel.height()) < 1e-9
+    assert 1.4 < skel.stature() < 2.1
+    for bad in (0.0, -1.0, float('nan')):
+        with pytest.raises(ValueError):
+            skel.scaled(bad)

@@ -93,14 +93,20 @@ class OnlineLifter:
             delays the output by ``ceil(2 * sigma)`` frames more (:attr:`delay`) for the
             larger of the two sigmas.
         output_root_sigma: the same for the root position (None: ``output_sigma``).
+        subject_height: the person's stature in metres (floor to the top of the head), when
+            it is known (0 = estimate the size from the keypoints). The estimated skeleton is
+            scaled to this stature (:meth:`~mocap_core.skeleton.Skeleton.stature`) and the
+            root position by the same factor along its camera ray, so the image projection
+            is unchanged: a person of the same image size who is taller stands further
+            away (docs/lifter.md, "A known stature").
     """
 
     def __init__(self, model: MotioNet, mode: str = 'causal', latency: Optional[int] = None,
                  skeleton_frames: int = 90, max_gap_s: float = 1.0,
                  device: str = 'cpu', chunk: int = 1, flip: bool = False,
                  smooth: float = 0.0, streaming: bool = True,
-                 output_sigma: float = 0.0, output_root_sigma: Optional[float] = None
-                 ) -> None:
+                 output_sigma: float = 0.0, output_root_sigma: Optional[float] = None,
+                 subject_height: float = 0.0) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -129,6 +135,11 @@ class OnlineLifter:
                              f'{output_sigma} and {root_sigma}')
         self._smoother = FrameSmoother(output_sigma, root_sigma=root_sigma) \
             if max(output_sigma, root_sigma) > 0 else None
+        if not np.isfinite(subject_height) or subject_height != 0 and not \
+                0.5 <= subject_height <= 3.0:
+            raise ValueError(f'subject_height must be 0 (estimate) or a stature of 0.5-3 m, '
+                             f'got {subject_height}')
+        self.subject_height = float(subject_height)
         self._stream: Optional[StreamingEncoder] = None
         if streaming and self.chunk == 1 and self.smooth == 0 and device == 'cpu' \
                 and context_frames is None and isinstance(model, MotioNet):
@@ -156,7 +167,7 @@ class OnlineLifter:
         self._stamps: Deque[int] = collections.deque(maxlen=size)
         self._intr: Optional[CameraIntrinsics] = None
         self.lengths: Optional[torch.Tensor] = None
-        self._held_skeleton: Optional[Tuple[torch.Tensor, Skeleton]] = None
+        self._held_skeleton: Optional[Tuple[torch.Tensor, Skeleton, float]] = None
         self.frames_seen = 0
         self._last_emitted = -1
         # chunk > 1: the skeleton estimate after each push (frames_seen -> lengths), so that
@@ -285,7 +296,7 @@ class OnlineLifter:
                 lengths = lengths.expand(2, -1)
             out = self.model(xs, rs, scs, lengths=lengths)
             rows = list(indices)
-        skeletons: Dict[int, Skeleton] = {}
+        skeletons: Dict[int, Tuple[Skeleton, float]] = {}
         rot = out['rotations'][0].cpu().numpy().astype(np.float64)
         root = out['root'][0].cpu().numpy().astype(np.float64)
         contacts = torch.sigmoid(out['contacts'][0]).cpu().numpy().astype(np.float64)
@@ -303,11 +314,11 @@ class OnlineLifter:
         for i, k, (lengths_i, fixed_i) in zip(indices, rows, per_frame):
             key = id(lengths_i)
             if key not in skeletons:
-                skeletons[key] = Skeleton.from_group_lengths(
-                    lengths_i[0].cpu().numpy().astype(np.float64))
+                skeletons[key] = self._sized(lengths_i)
+            skeleton, size = skeletons[key]
             self._last_emitted = stamps[i]
-            frames.append(LiftedFrame(stamps[i], Pose(skeletons[key], rot[k], root[k]),
-                                      contacts[k], fixed_i, float(depth[k])))
+            frames.append(LiftedFrame(stamps[i], Pose(skeleton, rot[k], size * root[k]),
+                                      contacts[k], fixed_i, float(size * depth[k])))
         return frames
 
     def _emit_streamed(self, index: int, y: np.ndarray, root_2d: np.ndarray,
@@ -340,12 +351,22 @@ class OnlineLifter:
         self._last_emitted = stamp
         cached = self._held_skeleton
         if fixed and cached is not None and cached[0] is lengths:
-            skeleton = cached[1]                      # the held skeleton, built once
+            skeleton, size = cached[1:]               # the held skeleton, built once
         else:
-            skeleton = Skeleton.from_group_lengths(lengths[0].cpu().numpy().astype(np.float64))
+            skeleton, size = self._sized(lengths)
             if fixed:
-                self._held_skeleton = (lengths, skeleton)
-        return [LiftedFrame(stamp, Pose(skeleton, rot, rt), ct, fixed, float(dp))]
+                self._held_skeleton = (lengths, skeleton, size)
+        return [LiftedFrame(stamp, Pose(skeleton, rot, size * rt), ct, fixed, float(size * dp))]
+
+    def _sized(self, lengths: torch.Tensor) -> Tuple[Skeleton, float]:
+        """The skeleton of (1, G) estimated bone-group lengths, and the factor its root
+        position and depth take: with a known ``subject_height`` the skeleton scaled to that
+        stature and the factor of that scaling, else the estimate as it is and 1."""
+        skeleton = Skeleton.from_group_lengths(lengths[0].cpu().numpy().astype(np.float64))
+        if self.subject_height <= 0:
+            return skeleton, 1.0
+        size = skeleton.size_for_stature(self.subject_height)
+        return skeleton.scaled(size), size
 
     def _features_np(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Features over the buffer: (T, C) float32, root keypoint (T, 2), scale (T,)."""

@@ -102,6 +102,7 @@ def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds,
     # frames on top of the look-ahead
     assert values['output_smoothing'] == 'sigma 1.5 frames (rotations), 3 (root)', values
     assert values['latency_frames'] == str(14 + 6), values
+    assert values['body_size'] == 'estimated from the keypoints', values
     assert values['errors'] == '0' and values['frames_dropped'] == '0'
     assert 'last_error' not in values
     assert values['intrinsics'].startswith('approximate ') and \
@@ -229,3 +230,25 @@ def test_starting_the_node_imports_no_training_code():
 
     assert [m for m in loaded if matches(m, TRAINING)] == []
     assert [m for m in set(loaded) - set(before) if matches(m, TRAINING_LIBRARIES)] == []
+
+
+def test_subject_height_is_reported_and_a_bad_one_refused():
+    """``subject_height``: in the diagnostics when given; a value no person has stops the
+    node at construction with what is allowed."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from mocap_lifter.node import LifterNode
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        node = LifterNode(context=context,
+                          parameter_overrides=[Parameter('subject_height', value=1.62)])
+        assert _values(node)['body_size'] == 'stature given: 1.62 m'
+        node.destroy_node()
+        with pytest.raises(ValueError, match='stature of 0.5-3 m'):
+            LifterNode(context=context,
+                       parameter_overrides=[Parameter('subject_height', value=0.2)])
+    finally:
+        context.try_shutdown()

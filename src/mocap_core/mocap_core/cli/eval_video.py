@@ -199,12 +199,13 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
 
 def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
              params: Dict[str, Dict], progress: bool = False, camera_motion: bool = True,
-             camera_floor: str = 'physics'):
+             camera_floor: str = 'physics', known_height: bool = False):
     """Process one rendered clip (reusing a finished output) and score it. With
     ``camera_motion`` and start ``keypoints``, the input bag carries the camera-motion
     estimate from the clip's video (start ``video``: the keypoint node makes it), its
     translation measured over ``camera_floor`` ('physics': the physics floor of a first run;
-    'true': the render's floor, an oracle)."""
+    'true': the render's floor, an oracle). With ``known_height`` the lifter is given the
+    rendered body's stature (``lifter.subject_height``)."""
     from .. import topics as T
     from ..camera import CameraCalibration, CameraIntrinsics, write_camera_info_yaml
     from ..render.clip import load_clip
@@ -217,6 +218,8 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     if not (out / 'done').exists():
         out.mkdir(parents=True, exist_ok=True)
         p = {k: dict(v) for k, v in params.items()}
+        if known_height:
+            p.setdefault('lifter', {})['subject_height'] = float(meta['body_height_m'])
         if start == 'video':
             src = clip_dir / 'video.mp4'
             # one person per render: the single-person detector, as the recorded detections
@@ -372,6 +375,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
         tag += '_nocm'
     if args.camera_floor == 'true':
         tag += '_truefloor'
+    if args.known_height:
+        tag += '_height'
     if args.known_camera_pose:
         tag += '_pose'
         args.param = list(args.param) + [
@@ -390,7 +395,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
         try:
             scores.append(run_clip(d, work, args.start, args.intrinsics, params,
                                    camera_motion=not args.no_camera_motion,
-                                   camera_floor=args.camera_floor))
+                                   camera_floor=args.camera_floor,
+                                   known_height=args.known_height))
         except NoOutput as exc:
             no_output.append(str(exc))
         except (EvalError, ProcessError, ValueError, OSError) as exc:
@@ -408,7 +414,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
         shown = str(renders)
     setup = ['`mocap eval video' + (f' --renders {shown}' if args.renders else '')
              + f' --split {args.split} --start {args.start} --intrinsics '
-             f'{args.intrinsics}' + ''.join(f' --param {p}' for p in args.param) + '`'
+             f'{args.intrinsics}' + ''.join(f' --param {p}' for p in args.param)
+             + (' --known-height' if args.known_height else '') + '`'
              + (f' (first {args.limit} clips)' if args.limit else ''),
              f'Rendered clips: `{shown}` ({args.split} split: subjects, contents and styles '
              'never trained on).',
@@ -447,6 +454,9 @@ def add_eval_parser(sub) -> None:
                    help="give the world stage the render camera's true pose "
                    '(/mocap/groundtruth/camera_pose; --start keypoints): its output is then '
                    'in the true world frame, scored without alignment')
+    p.add_argument('--known-height', action='store_true',
+                   help="give the lifter each rendered body's stature "
+                   '(lifter.subject_height), as a user who knows the performer\'s height would')
     p.add_argument('--no-camera-motion', action='store_true',
                    help='--start keypoints: leave the camera-motion estimate from the video '
                    'out of the input (the world stage then runs without it)')

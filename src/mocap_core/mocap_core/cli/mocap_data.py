@@ -453,6 +453,36 @@ def cmd_fit_placement(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_fit_stature(args: argparse.Namespace) -> int:
+    """Fit stature against Skeleton.height() on rendered clips; check on the validation ones."""
+    from ..render.batch import DEFAULT_OUT
+    from ..render.clip import iter_done
+    from ..render.stature import fit_stature, stature_errors, stature_pairs
+    from ..skeleton import STATURE_OFFSET, STATURE_SLOPE
+
+    renders = Path(args.renders) if args.renders else DEFAULT_OUT
+    train = stature_pairs(iter_done(renders, 'train'))
+    if len(train) < args.min_clips:
+        raise CommandError(f'{len(train)} rendered train clips under {renders}; at least '
+                           f'{args.min_clips} needed (mocap data render --split train)')
+    slope, offset = fit_stature(train)
+    print(f'{len(train)} training bodies: stature = {slope:.4f} * height() + {offset:.4f} m '
+          f'(shipped: {STATURE_SLOPE:.4f} * height() + {STATURE_OFFSET:.4f})')
+    sets = [('train', train)] + [(name, stature_pairs(iter_done(Path(r), 'validation')))
+                                 for name, r in [('validation', renders)]
+                                 + [(str(x), x) for x in args.check]]
+    for name, pairs in sets:
+        if not len(pairs):
+            continue
+        for label, (a, b) in (('fitted', (slope, offset)),
+                              ('shipped', (STATURE_SLOPE, STATURE_OFFSET)),
+                              ('height() alone', (1.0, 0.0))):
+            e = 100 * np.abs(stature_errors(pairs, a, b))
+            print(f'  {name} ({len(pairs)} bodies), {label}: |error| median {np.median(e):.2f} '
+                  f'cm, p95 {np.percentile(e, 95):.2f} cm')
+    return 0
+
+
 class _SplitAction(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         setattr(namespace, self.dest, values)
@@ -571,6 +601,15 @@ def add_data_parser(sub) -> None:
     q.add_argument('-o', '--output', help='output JSON (default: the shipped '
                    'mocap_core/data/detector_placement.json)')
     q.set_defaults(func=_guard(cmd_fit_placement))
+
+    q = dsub.add_parser('fit-stature', help='fit a person\'s stature against the skeleton\'s '
+                        'rest height on rendered clips of known body height (the constants of '
+                        'Skeleton.stature); checked on the validation renders')
+    q.add_argument('--renders', help='rendered clips (default ~/.cache/mocap/render)')
+    q.add_argument('--check', nargs='*', default=[], help='more render folders whose '
+                   'validation split to check on (e.g. ~/.cache/mocap/render_travel)')
+    q.add_argument('--min-clips', type=int, default=20, help='refuse fewer clips (default 20)')
+    q.set_defaults(func=_guard(cmd_fit_stature))
 
     q = dsub.add_parser(
         'render', help='render people (Anny + pyrender) driven by motion capture, run the '

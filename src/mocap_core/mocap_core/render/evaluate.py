@@ -48,7 +48,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..camera import optical_to_world, project_pinhole
-from ..pose_metrics import alignment_angle_deg, procrustes_align
+from ..pose_metrics import (alignment_angle_deg, procrustes_align, rotate_about_root,
+                            twist_angle_deg)
 from ..skeleton import JOINT_INDEX, KEYPOINT_INDEX, PARENTS
 
 #: Frames whose true left and right legs are closer than this (m, mean over knee, ankle,
@@ -329,6 +330,12 @@ class ClipScore:
     #: that alignment's rotation: the error of the global orientation
     ra_mpjpe: np.ndarray = field(default_factory=lambda: np.zeros(0))
     orientation_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (scored,) the body's tilt toward / away from the camera (degrees, the twist about the
+    #: optical x axis of that rotation, :func:`~mocap_core.pose_metrics.twist_angle_deg`)
+    #: and (scored,) mm per frame with the clip's median tilt taken out (an oracle: how much
+    #: of the MPJPE one per-clip angle, such as a camera pitch the 2D cannot show, explains)
+    tilt_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    tilt_free_mpjpe: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def summary(self) -> Dict[str, float]:
         s = self.swaps[self.swaps >= 0]
@@ -341,6 +348,9 @@ class ClipScore:
         if len(self.ra_mpjpe):
             out['ra_mpjpe'] = float(np.mean(self.ra_mpjpe))
             out['orientation_deg'] = float(np.median(self.orientation_deg))
+        if len(self.tilt_deg):
+            out['tilt_bias_deg'] = float(abs(np.median(self.tilt_deg)))
+            out['tilt_free_mpjpe'] = float(np.mean(self.tilt_free_mpjpe))
         for stage, r in self.root.items():
             for k, v in r.items():
                 out[f'{stage}_{k}'] = v
@@ -472,11 +482,15 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
                 root[stage].update(world_segment_errors(full[ok], sidx[ok],
                                                         gt['joints_world']))
     height = height_class(float(meta.get('body_height_m', 1.7)))
+    tilt = twist_angle_deg(P, g, (1.0, 0.0, 0.0))
+    untilted = rotate_about_root(pr, (1.0, 0.0, 0.0), float(np.median(tilt)))
+    tilt_free = 1000 * np.linalg.norm(untilted - gr, axis=-1).mean(axis=1)
     return ClipScore(clip, motion_group(clip), height, meta['camera']['kind'], F, len(idx),
                      float(meta.get('detected_fraction', float('nan'))), mpjpe, pa, mrpe,
                      np.asarray(gt['view'])[idx], swaps, mble, jit, jit_gt, root,
                      detector_swaps(gt), np.asarray(gt['view']), ra_mpjpe=ra,
-                     orientation_deg=alignment_angle_deg(P, g))
+                     orientation_deg=alignment_angle_deg(P, g), tilt_deg=tilt,
+                     tilt_free_mpjpe=tilt_free)
 
 
 # ------------------------------------------------------------------------------------------
@@ -582,6 +596,10 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
              f"{_f(p.get('ra_mpjpe', float('nan')))}); orientation error "
              f"{_f(m.get('orientation_deg'))} deg (pooled median "
              f"{_f(p.get('orientation_deg', float('nan')))}) |",
+             "| ... the body's tilt toward / away from the camera, per clip (median of the "
+             "clips' absolute median tilt; what a camera pitch hides from the 2D) | "
+             f"{_f(m.get('tilt_bias_deg'))} deg; MPJPE with each clip's median tilt taken out "
+             f"(an oracle): {_f(m.get('tilt_free_mpjpe'))} mm |",
              f"| lifter MRPE (pelvis position) | {_f(m.get('mrpe'))} mm |",
              f"| lifter MBLE (bone lengths) | {_f(m.get('mble'))} mm |",
              f"| left/right leg swaps | {_f(100 * m.get('swap_rate', float('nan')), '{:.2f}')} "
@@ -683,6 +701,10 @@ COMPARISON_ROWS = (
     ('lifter PA-MPJPE (mm)', 'pa_mpjpe', '{:.1f}'),
     ('lifter RA-MPJPE: rigidly aligned, no scale (mm)', 'ra_mpjpe', '{:.1f}'),
     ('lifter global orientation error (deg)', 'orientation_deg', '{:.1f}'),
+    ('lifter tilt toward/away from the camera, per clip (deg)', 'tilt_bias_deg', '{:.1f}'),
+    ("lifter MPJPE, each clip's median tilt taken out (oracle, mm)", 'tilt_free_mpjpe',
+     '{:.1f}'),
+    ('lifter MRPE: pelvis position in the camera frame (mm)', 'mrpe', '{:.0f}'),
     ("lifter jitter / the truth's", 'jitter_ratio', '{:.2f}'),
     ('physics PA-MPJPE change from the lifter, same frames (mm)', 'physics_pa_mpjpe_change',
      '{:+.1f}'),
