@@ -177,6 +177,9 @@ def test_process_ground_truth_bag_every_topic_same_stamps_accurate(gt_run):
     for stage in ('lifter', 'physics', 'world'):
         assert pl[stage]['bone_spread_final_mm'] < 1e-3, (stage, pl)
     assert pl['world']['root_path_m'] > 2.0, pl           # a 5.6 s walk goes somewhere
+    # the person's stature from the lifted skeleton: a person's, and the same in every stage
+    assert 1.4 < pl['lifter']['stature_m'] < 2.1, pl
+    assert pl['physics']['stature_m'] == pytest.approx(pl['lifter']['stature_m'], abs=1e-3)
     assert set(run.diagnostics) >= {'lifter: lifter', 'physics: physics', 'gmr: gmr'}
     # the final status is refreshed although timers do not run offline
     assert 'DoF' in run.diagnostics['physics: physics']['model'], run.diagnostics

@@ -397,6 +397,13 @@ def report_markdown(run: PipelineRun, plaus: Dict[str, Dict[str, float]],
             f"{_fmt(f['jitter_mm_s2'] / 1000, 2)} | {_fmt(f.get('skating_mm', float('nan')))} "
             f"| {_fmt(f.get('penetration_mm', float('nan')), 2)} | "
             f"{_fmt(f.get('grf_over_weight', float('nan')), 2)} |")
+    stature = plaus.get('lifter', {}).get('stature_m', float('nan'))
+    if np.isfinite(stature):
+        lines += ['', f"The person's stature from the lifted skeleton: {stature:.2f} m (the "
+                  "lifter's estimate from the keypoints, unless `lifter.subject_height` was "
+                  'given; a known stature, `--param lifter.subject_height=METRES`, sizes the '
+                  'body and places it at the right depth: docs/lifter.md, "What the keypoints '
+                  'cannot tell").']
     if acc:
         lines += ['', '## Accuracy against ground truth', '',
                   '| stage | frames | MPJPE (mm) | PA-MPJPE (mm) | contact accuracy |',

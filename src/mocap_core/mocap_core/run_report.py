@@ -22,7 +22,7 @@ import numpy as np
 
 from . import pose_metrics as M
 from . import topics as T
-from .skeleton import CONTACT_POINT_NAMES, NUM_JOINTS
+from .skeleton import CONTACT_POINT_NAMES, NUM_JOINTS, Skeleton
 
 STAGES = ('lifter', 'physics', 'world')
 
@@ -191,8 +191,17 @@ def _jitter_mm_per_s2(joints: np.ndarray, dt: float) -> float:
     return M.jitter_mm(joints) / dt ** 2 if len(joints) >= 3 else float('nan')
 
 
+def _stature(group_lengths: np.ndarray) -> float:
+    """The stature (m) of a skeleton of (G,) bone-group lengths (NaN if it is not one)."""
+    try:
+        return Skeleton.from_group_lengths(group_lengths).stature()
+    except ValueError:
+        return float('nan')
+
+
 def plausibility(run: PipelineRun, contact_threshold: float = 0.5) -> Dict[str, Dict[str, float]]:
-    """Per stage: frames; bone-length spread (mm) of the skeleton over the run (the lifter
+    """Per stage: frames; the stature (m, :meth:`~mocap_core.skeleton.Skeleton.stature`) of
+    the last skeleton; bone-length spread (mm) of the skeleton over the run (the lifter
     refines it during its first ``skeleton_frames`` frames, then holds it), the number of
     skeleton changes, the frame of the last one, and the spread of the bone lengths measured
     on the joint positions from then on; jitter (mm/s^2); foot skating (mm per frame of a
@@ -213,6 +222,7 @@ def plausibility(run: PipelineRun, contact_threshold: float = 0.5) -> Dict[str, 
             # the bone lengths it was given
             'bone_spread_final_mm': M.bone_length_spread_mm(s.joints[last:]),
             'jitter_mm_s2': _jitter_mm_per_s2(s.joints, dt),
+            'stature_m': _stature(s.bone_groups[-1]) if len(s.bone_groups) else float('nan'),
         }
         up = 1 if name == 'lifter' else 2           # camera optical frame: y down
         if name == 'lifter':

@@ -44,6 +44,10 @@ def test_report_lists_stages_and_nodes():
     assert text.startswith('# A run') and '- note one' in text
     assert '| lifter: lifter | 4 | 4 |' in text and '| lifter | 4 | 0.0 |' in text
     assert '2.0 frames/s' in text
+    assert 'stature' not in text                 # no stature in the table: no line
+    plaus['lifter']['stature_m'] = 1.734
+    text = report_markdown(run, plaus, {}, 'A run', [], wall_s=2.0)
+    assert "The person's stature from the lifted skeleton: 1.73 m" in text
 
 
 def _walking_run(n=150, period=30, mass=70.0):
