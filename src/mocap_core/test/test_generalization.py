@@ -274,7 +274,7 @@ def test_video_runs_compared_side_by_side(tmp_path):
         path = tmp_path / f'{name}.json'
         path.write_text(json.dumps({'aggregate': {'clips': 3, 'median': {
             'pa_mpjpe': 70.0, 'physics_pa_mpjpe_change': change,
-            'world_frames_below_5mm': 0.25}}}))
+            'world_frames_below_5mm': 0.25, 'world_root_error_unaligned': 128.96}}}))
         reports[name] = path
     parser = argparse.ArgumentParser()
     add_eval_parser(parser.add_subparsers(dest='model'))
@@ -286,6 +286,8 @@ def test_video_runs_compared_side_by_side(tmp_path):
     assert '| physics PA-MPJPE change from the lifter, same frames (mm) | +2.0 | -1.5 |' in md
     assert '| world frames with a foot joint > 5 mm below the floor (%) | 25.0 | 25.0 |' in md
     assert '| physics skating in contact (mm/frame) | – | – |' in md
+    assert ('| world root error, no alignment (meaningful with a known camera pose, mm) | 129 '
+            '| 129 |') in md
     bad = parser.parse_args(['video', '--compare', 'nameonly', '-o', str(out)])
     assert bad.func(bad) == 2
     missing = parser.parse_args(['video', '--compare', f'x={tmp_path / "none.json"}',
