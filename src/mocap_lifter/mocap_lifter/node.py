@@ -207,8 +207,11 @@ class LifterNode(Node):
         self.diag.set_value('output_smoothing',
                             f'sigma {output_sigma:g} frames (rotations), {root_sigma:g} (root)'
                             if max(output_sigma, root_sigma) > 0 else 'off')
-        self.diag.set_value('body_size', f"stature given: {p['subject_height']:g} m"
-                            if p['subject_height'] > 0 else 'estimated from the keypoints')
+        # the main person's size; with their stature once a skeleton is published
+        self._size_source = 'given' if p['subject_height'] > 0 else \
+            'estimated from the keypoints'
+        self.diag.set_value('body_size', f"given: stature {p['subject_height']:.2f} m"
+                            if p['subject_height'] > 0 else self._size_source)
         # frame by frame through the streaming encoder where exact (default look-ahead, no
         # smoothing, chunk 1), otherwise a network pass over the context window per frame
         self.diag.set_value('inference', 'streaming (one new column per layer and frame)'
@@ -391,6 +394,8 @@ class LifterNode(Node):
             self.pub['urdf'].publish(rc.urdf_to_msg(
                 skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
             self.published_lengths = lengths
+            self.diag.set_value('body_size', f'{self._size_source}: stature '
+                                f'{pose.skeleton.stature():.2f} m')
         self.pub['motion'].publish(cdr.pose_to_motion(pose, header))
         # the others only while someone listens (mocap_core.publishing)
         publish_if_heard(self.pub['joints3d'],

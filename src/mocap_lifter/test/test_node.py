@@ -102,7 +102,10 @@ def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds,
     # frames on top of the look-ahead
     assert values['output_smoothing'] == 'sigma 1.5 frames (rotations), 3 (root)', values
     assert values['latency_frames'] == str(14 + 6), values
-    assert values['body_size'] == 'estimated from the keypoints', values
+    # the main person's stature from the published skeleton
+    size = values['body_size']
+    assert size.startswith('estimated from the keypoints: stature ') and size.endswith(' m')
+    assert 1.3 < float(size.split()[-2]) < 2.2, size
     assert values['errors'] == '0' and values['frames_dropped'] == '0'
     assert 'last_error' not in values
     assert values['intrinsics'].startswith('approximate ') and \
@@ -245,7 +248,7 @@ def test_subject_height_is_reported_and_a_bad_one_refused():
     try:
         node = LifterNode(context=context,
                           parameter_overrides=[Parameter('subject_height', value=1.62)])
-        assert _values(node)['body_size'] == 'stature given: 1.62 m'
+        assert _values(node)['body_size'] == 'given: stature 1.62 m'
         node.destroy_node()
         with pytest.raises(ValueError, match='stature of 0.5-3 m'):
             LifterNode(context=context,
