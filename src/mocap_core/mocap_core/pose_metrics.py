@@ -73,25 +73,23 @@ def twist_angle_deg(pred: np.ndarray, gt: np.ndarray, axis) -> np.ndarray:
     ``gt`` (the swing-twist split of :func:`alignment_angle_deg`'s rotation). With camera-frame
     poses and the optical x axis this is the body's tilt toward or away from the camera: the
     part of the orientation a camera's pitch hides from the 2D keypoints."""
+    from .rotations import matrix_to_quat
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
-    r = np.transpose(_umeyama(pred, gt)[0], (0, 2, 1))   # column vectors: g ~ r p
-    # quaternion of r: the vector part's projection on the axis and w give the twist
-    w = 0.5 * np.sqrt(np.maximum(1.0 + np.trace(r, axis1=1, axis2=2), 0.0))
-    v = 0.5 * np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0],
-                        r[:, 1, 0] - r[:, 0, 1]], axis=-1) / np.maximum(2.0 * w[:, None], 1e-12)
-    # (near 180 deg, w -> 0, the twist is ill-defined; those frames give about +-180)
-    return np.degrees(2.0 * np.arctan2(v @ a, w))
+    q = matrix_to_quat(np.transpose(_umeyama(pred, gt)[0], (0, 2, 1)))   # x, y, z, w; g ~ r p
+    # the vector part's projection on the axis and w give the twist (near 180 deg the twist
+    # is ill-defined; those frames give about +-180)
+    return np.degrees(2.0 * np.arctan2(q[:, :3] @ a, q[:, 3]))
 
 
 def rotate_about_root(points: np.ndarray, axis, angle_deg) -> np.ndarray:
     """(N, J, 3) ``points`` rotated about their root joint by (N,) or scalar ``angle_deg``
     (right-handed) about the (3,) ``axis``."""
-    from scipy.spatial.transform import Rotation
+    from .rotations import axis_angle_to_matrix
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     ang = np.broadcast_to(np.radians(np.asarray(angle_deg, dtype=np.float64)), (len(points),))
-    rot = Rotation.from_rotvec(ang[:, None] * a).as_matrix()
+    rot = axis_angle_to_matrix(ang[:, None] * a)
     root = points[:, :1]
     return np.einsum('nij,nkj->nki', rot, points - root) + root
 

@@ -109,7 +109,7 @@ PARAMETERS = (
     ParamSpec('subject_height', 0.0, 'The person\'s stature in metres (floor to the top of '
               'the head), when it is known: the skeleton is scaled to it and the root moved '
               'along its camera ray by the same factor (0: estimated from the keypoints; on '
-              'rendered video a known stature takes the median MPJPE from 75 to about 66 mm, '
+              'rendered video a known stature takes the median MPJPE from 75 to 64 mm, '
               'docs/lifter.md). One value for every person in the picture', min_value=0.0,
               max_value=3.0, read_only=True),
     ParamSpec('queue_depth', 30, 'Keypoint messages queued while a frame is processed (best '
@@ -208,10 +208,8 @@ class LifterNode(Node):
                             f'sigma {output_sigma:g} frames (rotations), {root_sigma:g} (root)'
                             if max(output_sigma, root_sigma) > 0 else 'off')
         # the main person's size; with their stature once a skeleton is published
-        self._size_source = 'given' if p['subject_height'] > 0 else \
-            'estimated from the keypoints'
         self.diag.set_value('body_size', f"given: stature {p['subject_height']:.2f} m"
-                            if p['subject_height'] > 0 else self._size_source)
+                            if p['subject_height'] > 0 else 'estimated from the keypoints')
         # frame by frame through the streaming encoder where exact (default look-ahead, no
         # smoothing, chunk 1), otherwise a network pass over the context window per frame
         self.diag.set_value('inference', 'streaming (one new column per layer and frame)'
@@ -394,8 +392,8 @@ class LifterNode(Node):
             self.pub['urdf'].publish(rc.urdf_to_msg(
                 skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
             self.published_lengths = lengths
-            self.diag.set_value('body_size', f'{self._size_source}: stature '
-                                f'{pose.skeleton.stature():.2f} m')
+            source = 'given' if self.p['subject_height'] > 0 else 'estimated from the keypoints'
+            self.diag.set_value('body_size', f'{source}: stature {pose.skeleton.stature():.2f} m')
         self.pub['motion'].publish(cdr.pose_to_motion(pose, header))
         # the others only while someone listens (mocap_core.publishing)
         publish_if_heard(self.pub['joints3d'],

@@ -98,7 +98,7 @@ class OnlineLifter:
             scaled to this stature (:meth:`~mocap_core.skeleton.Skeleton.stature`) and the
             root position by the same factor along its camera ray, so the image projection
             is unchanged: a person of the same image size who is taller stands further
-            away (docs/lifter.md, "A known stature").
+            away (docs/lifter.md, "What the keypoints cannot tell").
     """
 
     def __init__(self, model: MotioNet, mode: str = 'causal', latency: Optional[int] = None,
