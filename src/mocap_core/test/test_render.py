@@ -205,6 +205,67 @@ def test_stature_from_the_skeleton_matches_the_mesh_of_new_bodies(model):
     assert np.median(plain) < -0.10, plain
 
 
+def test_heads_have_hair_brows_eyes_and_lips_where_a_face_has_them(model):
+    """The rendered head has a face and hair (a detector tells front from back by them):
+    on bodies drawn afresh, the feature regions lie where they belong on the rest mesh
+    (x forward, z up), only on the head, and a render from the front and from behind shows
+    them (the back of the head mostly hair, the face mostly not)."""
+    import torch
+    from mocap_core.render.body import (ANNY_TO_PIPELINE, AnnyBody, region_of_vertices,
+                                        sample_phenotype)
+    rng = np.random.default_rng(4200)
+    features = ('hair', 'brow', 'eye_iris', 'eye_white', 'lips')
+    for _ in range(3):
+        body = AnnyBody.create(model, sample_phenotype(rng, model))
+        plain = np.array(region_of_vertices(body, head_details=False))
+        regions = np.array(region_of_vertices(body))
+        assert not np.isin(plain, features).any()
+        changed = regions != plain
+        assert set(plain[changed]) == {'head'}  # only the head's skin is repainted
+        with torch.no_grad():
+            v = model.get_rest_model(body._coeffs)['rest_vertices'][0].double().numpy()
+        v = v @ ANNY_TO_PIPELINE.T
+        at = {f: v[regions == f] for f in features}
+        for f in features:
+            assert len(at[f]) >= 20, (f, len(at[f]))
+        eyes = np.concatenate([at['eye_iris'], at['eye_white']]).mean(axis=0)
+        # irises at the front of the eyeballs, in both eyes
+        assert at['eye_iris'][:, 0].mean() > at['eye_white'][:, 0].mean()
+        assert (at['eye_iris'][:, 1] > eyes[1]).any() and (at['eye_iris'][:, 1] < eyes[1]).any()
+        # brows 1-2.5 cm above the eyes, at the front; lips 4-9 cm below them
+        assert 0.008 < np.median(at['brow'][:, 2]) - eyes[2] < 0.03
+        assert np.median(at['brow'][:, 0]) > eyes[0] - 0.03
+        assert 0.04 < eyes[2] - np.median(at['lips'][:, 2]) < 0.09
+        assert np.median(at['lips'][:, 0]) > eyes[0] - 0.02
+        # hair covers the top and the back of the head, not the face
+        assert at['hair'][:, 2].max() >= v[plain == 'head', 2].max() - 1e-6
+        assert np.median(at['hair'][:, 0]) < eyes[0] - 0.05
+        assert at['hair'][:, 2].min() > np.median(at['lips'][:, 2]) - 0.01
+    _need_renderer()
+    from mocap_core.render.scene import SceneRenderer, sample_appearance
+    appearance = sample_appearance(np.random.default_rng(7))
+    appearance.colours.update(hair=(0.03, 0.3, 0.3), head=(0.9, 0.7, 0.56))  # black, light
+    centre = v[np.isin(regions, ('head',) + features)].mean(axis=0)
+    K = np.array([[500.0, 0, 100], [0, 500.0, 100], [0, 0, 1]])
+    share = {}
+    for name, d in (('front', np.array([1.0, 0, 0])), ('back', np.array([-1.0, 0, 0]))):
+        zc = -d
+        xc = np.cross(zc, [0.0, 0.0, 1.0])
+        R = np.stack([xc, np.cross(zc, xc), zc])
+        images = []
+        for regs in (regions, plain):
+            r = SceneRenderer(200, 200, K, body.faces, list(regs), appearance,
+                              centre=centre[:2])
+            try:
+                images.append(r.render(v.astype(np.float32), R, centre + 0.8 * d))
+            finally:
+                r.close()
+        crop = (slice(55, 145), slice(70, 130))  # the head's middle
+        diff = np.abs(images[0][crop].astype(float) - images[1][crop]).mean(axis=-1)
+        share[name] = float((diff > 25).mean())
+    assert share['back'] > 0.5 and 0.03 < share['front'] < 0.35, share
+
+
 def test_body_ground_truth_is_its_skeleton_and_the_mesh_follows_it(model, walk):
     from mocap_core.kinematics import forward_kinematics
     from mocap_core.render.body import AnnyBody, CONVENTION_RATIOS

@@ -410,7 +410,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         summary = run(jobs, out, seed=args.seed, workers=args.jobs,
                       max_frames=int(round(args.max_seconds * 30.0)), camera=args.camera,
                       write_bag=not args.no_bag, progress=not args.quiet, hours=args.hours,
-                      speed=args.speed)
+                      speed=args.speed, head_details=not args.plain_heads)
     except RendererUnavailable as exc:
         raise CommandError(str(exc)) from None
     r = summary['this_run']
@@ -644,6 +644,10 @@ def add_data_parser(sub) -> None:
                    'slowed motion). Use another -o: clips are cached by name')
     q.add_argument('--hours', type=float, help='stop starting new clips after this long')
     q.add_argument('--no-bag', action='store_true', help='skip the per-clip MCAP bag')
+    q.add_argument('--plain-heads', action='store_true',
+                   help='heads without hair or a face, one skin colour, as rendered before '
+                   'session 42 (to compare with those renders; docs/rendering.md). Use '
+                   'another -o: clips are cached by name')
     q.add_argument('--quiet', action='store_true', help='no progress bar')
     q.set_defaults(func=_guard(cmd_render))
 

@@ -88,14 +88,14 @@ def plan(splits: Sequence[str], seed: int, limit: Optional[int] = None,
 _WORKER: Dict[str, object] = {}
 
 
-def _init_worker(detector: str) -> None:
+def _init_worker(detector: str, head_details: bool = True) -> None:
     os.environ.setdefault('OMP_NUM_THREADS', '1')
     import torch
     torch.set_num_threads(1)
     from ..plugins import detector_class
     from .clip import ClipRenderer
     cls = detector_class(detector)
-    _WORKER['renderer'] = ClipRenderer(lambda: cls(tracking=True))
+    _WORKER['renderer'] = ClipRenderer(lambda: cls(tracking=True), head_details=head_details)
     _WORKER['splits'] = {}
 
 
@@ -157,8 +157,11 @@ def summarize(out: Path) -> dict:
 def run(jobs: Iterable[Job], out: Path, seed: int = 0, workers: int = 2,
         max_frames: Optional[int] = 240, camera: str = '', write_bag: bool = True,
         detector: str = 'blazepose', progress: bool = True, hours: Optional[float] = None,
-        speed: float = 1.0) -> dict:
+        speed: float = 1.0, head_details: bool = True) -> dict:
     """Render ``jobs`` into ``out`` with ``workers`` processes; returns the summary.
+
+    ``head_details``: heads with hair and a face (False: the plain heads of the renders
+    before session 42; see ``docs/rendering.md``).
 
     ``speed`` plays every motion at that pace (:func:`mocap_core.data.motion.retime`; 0.5:
     slow motion, the ground truth written is the slowed motion). Clips already done are
@@ -183,7 +186,7 @@ def run(jobs: Iterable[Job], out: Path, seed: int = 0, workers: int = 2,
     ctx = get_context('spawn')
     pending = list(reversed(todo))
     with ProcessPoolExecutor(max_workers=max(1, workers), mp_context=ctx,
-                             initializer=_init_worker, initargs=(detector,)) as pool:
+                             initializer=_init_worker, initargs=(detector, head_details)) as pool:
         running = set()
 
         def submit() -> None:

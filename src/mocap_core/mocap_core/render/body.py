@@ -463,10 +463,97 @@ def rotations_from_quaternions(q: np.ndarray) -> np.ndarray:
     return np.asarray(quat_to_matrix(np.asarray(q, dtype=np.float64)))
 
 
-def region_of_vertices(body: AnnyBody) -> List[str]:
-    """The clothing region (:data:`BONE_REGIONS`) of each vertex."""
+def region_of_vertices(body: AnnyBody, head_details: bool = True) -> List[str]:
+    """The clothing region (:data:`BONE_REGIONS`) of each vertex; with ``head_details``, the
+    head's hair, eyebrows, eyes and lips as their own regions (:func:`head_detail_regions`)."""
     names = body.bone_names
-    return [BONE_REGIONS.get(names[b], 'trunk') for b in body.vertex_bones]
+    regions = [BONE_REGIONS.get(names[b], 'trunk') for b in body.vertex_bones]
+    return head_detail_regions(body, regions) if head_details else regions
+
+
+#: Head feature regions and what they cover, in metres for a head whose eye centres are
+#: :data:`_REFERENCE_EYE_DISTANCE` apart (scaled with the body's own): the hairline above the
+#: eyes at the forehead, how fast it drops behind the temples (m per m behind the eyes), the
+#: eyebrows' band above the eyes, the iris radius, the lips' half height and half width.
+HEAD_DETAIL_SIZES: Dict[str, float] = {
+    'hairline_above_eyes': 0.062, 'hairline_temple_depth': 0.035, 'hairline_drop': 0.95,
+    'brow_low': 0.011, 'brow_high': 0.021, 'brow_inner': 0.009, 'brow_outer': 0.052,
+    'iris_radius': 0.0065, 'lip_half_height': 0.0045, 'lip_half_width': 0.02,
+    'lip_depth': 0.012,
+}
+_REFERENCE_EYE_DISTANCE = 0.06
+_EYE_LABELS = ('eye_front.L', 'eye_front.R')
+_FACE_PART_VERTICES: Dict[str, np.ndarray] = {}
+
+
+def _face_part_vertices(model) -> Dict[str, np.ndarray]:
+    """Vertex indices of each eyeball's front and of the mouth cavity (Anny's body-part
+    segmentation; cached, the topology is the same for every phenotype)."""
+    if not _FACE_PART_VERTICES:
+        from anny.face_segmentation import get_face_segmentation_mask
+        faces = model.faces.numpy()
+        for label in _EYE_LABELS + ('mouth_cavity',):
+            mask = get_face_segmentation_mask(model, [label]).numpy()
+            _FACE_PART_VERTICES[label] = np.unique(faces[mask])
+    return _FACE_PART_VERTICES
+
+
+def head_detail_regions(body: AnnyBody, regions: Sequence[str]) -> List[str]:
+    """``regions`` with the head's features marked, so that a rendered head has a face and
+    hair as a real one does (a detector may tell front from back by them; measured in
+    ``docs/rendering.md``):
+
+    - ``eye_iris`` / ``eye_white``: the eyeballs' fronts, inside / outside
+      ``iris_radius`` of the eye's axis;
+    - ``brow``: a band above each eye;
+    - ``lips``: a band at the mouth's height at the front of the face;
+    - ``hair``: the scalp, above a hairline that runs ``hairline_above_eyes`` above the eyes
+      at the forehead and drops behind the temples to the height of the mouth at the back.
+
+    Measured on the rest mesh (pipeline axes: x forward, y left, z up), sizes
+    (:data:`HEAD_DETAIL_SIZES`) scaled by the body's eye distance. Vertices not of the head
+    keep their region.
+    """
+    import torch
+    with torch.no_grad():
+        v = body._model.get_rest_model(body._coeffs)['rest_vertices'][0].double().numpy()
+    v = v @ ANNY_TO_PIPELINE.T
+    parts = _face_part_vertices(body._model)
+    out = list(regions)
+    centres = [v[parts[lab]].mean(axis=0) for lab in _EYE_LABELS]
+    eye = 0.5 * (centres[0] + centres[1])
+    s = float(np.linalg.norm(centres[0] - centres[1])) / _REFERENCE_EYE_DISTANCE
+    z = {k: val * s for k, val in HEAD_DETAIL_SIZES.items()}
+    mouth_z = float(v[parts['mouth_cavity'], 2].mean())
+    head = np.array([r == 'head' for r in regions])
+    eyeballs = np.zeros(len(v), dtype=bool)
+    for lab in _EYE_LABELS:
+        eyeballs[parts[lab]] = True
+    behind = eye[0] - v[:, 0]  # m behind the eyes (x forward)
+    rel_z = v[:, 2] - eye[2]
+    hairline = z['hairline_above_eyes'] - z['hairline_drop'] * np.maximum(
+        0.0, behind - z['hairline_temple_depth'])
+    hair = head & ~eyeballs & (rel_z > hairline) & (v[:, 2] > mouth_z)
+    lateral = np.abs(v[:, 1] - eye[1])
+    brow = (head & ~eyeballs & ~hair & (behind < 0.03 * s) & (rel_z > z['brow_low'])
+            & (rel_z < z['brow_high']) & (lateral > z['brow_inner']) & (lateral < z['brow_outer']))
+    lips = (head & ~eyeballs & (behind < z['lip_depth'])
+            & (np.abs(v[:, 2] - mouth_z) < z['lip_half_height'])
+            & (np.abs(v[:, 1] - eye[1]) < z['lip_half_width']))
+    for i in np.flatnonzero(hair):
+        out[i] = 'hair'
+    for i in np.flatnonzero(brow):
+        out[i] = 'brow'
+    for i in np.flatnonzero(lips):
+        out[i] = 'lips'
+    for lab, c in zip(_EYE_LABELS, centres):
+        idx = parts[lab]
+        off = v[idx] - c
+        radial = np.linalg.norm(off[:, 1:], axis=1)  # distance from the eye's forward axis
+        front = off[:, 0] > 0
+        for i, r, f in zip(idx, radial, front):
+            out[i] = 'eye_iris' if (f and r < z['iris_radius']) else 'eye_white'
+    return out
 
 
 __all__: Sequence[str] = ('ANNY_TO_PIPELINE', 'AnnyBody', 'BONE_DRIVERS', 'JOINT_POINTS',

@@ -107,13 +107,16 @@ class PlacedBody:
 
 
 def place_body(model, coco, skeleton, global_rotations: np.ndarray, root: np.ndarray,
-               contacts: np.ndarray, phenotype, about: Optional[np.ndarray] = None
-               ) -> PlacedBody:
+               contacts: np.ndarray, phenotype, about: Optional[np.ndarray] = None,
+               head_details: bool = True) -> PlacedBody:
     """Pose the body of ``phenotype`` along a motion: (F, 18, 3, 3) global rotations and the
     (F, 3) root path of the motion's ``skeleton``. The path is scaled about ``about`` (xy;
     default the origin) by the ratio of the leg lengths, so the body's steps match its legs,
     and the body is lifted so that its soles touch z = 0 in the frames whose (F, 4)
-    ``contacts`` has a contact. ``coco``: Anny's COCO keypoint regressor of ``model``."""
+    ``contacts`` has a contact. ``coco``: Anny's COCO keypoint regressor of ``model``.
+    ``head_details``: hair, eyebrows, eyes and lips coloured as regions of their own
+    (:func:`~mocap_core.render.body.head_detail_regions`); False gives the plain skin-coloured
+    head of the renders before session 42."""
     import torch
 
     from .body import AnnyBody, region_of_vertices
@@ -129,7 +132,7 @@ def place_body(model, coco, skeleton, global_rotations: np.ndarray, root: np.nda
         pelvis = centre + (np.asarray(root, dtype=np.float64) - centre) * scale
     posed = body.pose(global_rotations, pelvis)
     # Level the floor: the soles touch z = 0 in the frames labelled as contacts.
-    regions = region_of_vertices(body)
+    regions = region_of_vertices(body, head_details)
     foot = np.array([r == 'foot' for r in regions])
     sole = posed.vertices[:, foot, 2].min(axis=1).astype(np.float64)
     stance = np.asarray(contacts, dtype=bool).any(axis=1)
@@ -166,11 +169,14 @@ class ClipRenderer:
         detector_factory: ``() -> detector`` with ``detect(bgr) -> (P, 23, 3)``, ``reset()``,
             ``close()`` (the keypoint node's; ``plugins.detector_factory``).
         model: the Anny model (``body.load_anny``); loaded on first use when None.
+        head_details: render the head with hair and a face (:func:`place_body`).
     """
 
-    def __init__(self, detector_factory: Callable[[], object], model=None) -> None:
+    def __init__(self, detector_factory: Callable[[], object], model=None,
+                 head_details: bool = True) -> None:
         self._factory = detector_factory
         self._model = model
+        self.head_details = head_details
         self._detector = None
         self._coco = None
 
@@ -217,7 +223,7 @@ class ClipRenderer:
         pheno = sample_phenotype(rng, self._model)
         contacts = np.asarray(motion.contacts[start:start + F], dtype=bool)
         placed = place_body(self._model, self._coco, motion.skeleton, G, P[:, 0], contacts,
-                            pheno)
+                            pheno, head_details=self.head_details)
         body, regions, scale = placed.body, placed.regions, placed.scale
         pelvis, verts, joints, joints_rig = (placed.pelvis, placed.vertices, placed.joints,
                                              placed.joints_rig)
@@ -289,7 +295,8 @@ class ClipRenderer:
             'format': RENDER_FORMAT, 'clip': clip_id, 'split': split, 'seed': seed,
             'start_frame': start, 'frames': F, 'fps': float(motion.fps),
             'phenotype': pheno, 'body_height_m': body.height(), 'scale': scale,
-            'appearance': appearance.to_dict(), 'camera': cam.describe(),
+            'appearance': appearance.to_dict(), 'head_details': self.head_details,
+            'camera': cam.describe(),
             'detected_fraction': float(detected.mean()),
             'median_2d_error_rel_height': float(np.median(rel[both])) if both.any() else None,
             'views': {v: int((views == v).sum()) for v in ('front', 'side', 'back')},

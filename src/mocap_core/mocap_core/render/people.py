@@ -45,10 +45,12 @@ MATCH_FRACTION = 0.15
 
 def render_people(actors: Sequence, frames: int, camera, out_dir: Path, seed: int,
                   model=None, progress: Optional[Callable[[int], None]] = None,
-                  scene: str = '') -> Dict:
+                  scene: str = '', head_details: bool = True) -> Dict:
     """Render the actors (:class:`~mocap_core.data.multi_person.Actor`) for ``frames`` frames
     seen by ``camera`` (:class:`~mocap_core.data.synth2d.VirtualCamera`, static) into
-    ``out_dir`` (module docstring); deterministic from ``seed``. Returns the meta dict."""
+    ``out_dir`` (module docstring); deterministic from ``seed``. ``head_details``: heads with
+    hair and a face (:func:`~mocap_core.render.clip.place_body`; the renders cached before
+    session 42 have plain heads). Returns the meta dict."""
     import cv2
     from anny import KeypointsRegressor
 
@@ -79,7 +81,8 @@ def render_people(actors: Sequence, frames: int, camera, out_dir: Path, seed: in
         pheno = sample_phenotype(rng, model)
         placed = place_body(model, coco, sk, fk.global_rotations, fk.positions[:, 0],
                             np.asarray(actor.motion.contacts, dtype=bool), pheno,
-                            about=np.asarray(actor.anchor, dtype=np.float64))
+                            about=np.asarray(actor.anchor, dtype=np.float64),
+                            head_details=head_details)
         phenotypes.append(pheno)
         heights.append(float(placed.body.height()))
         if regions0 is None:
@@ -125,7 +128,7 @@ def render_people(actors: Sequence, frames: int, camera, out_dir: Path, seed: in
                         image_size=np.array([W, H]), fps=np.array(fps))
     meta = {'format': PEOPLE_FORMAT, 'scene': scene, 'seed': seed, 'frames': frames,
             'fps': fps, 'actors': A, 'phenotypes': phenotypes, 'heights_m': heights,
-            'appearances': [ap.to_dict() for ap in appearances],
+            'appearances': [ap.to_dict() for ap in appearances], 'head_details': head_details,
             'seconds': time.perf_counter() - t0}
     (tmp / 'meta.json').write_text(json.dumps(meta, indent=1))
     (tmp / 'done').write_text(str(PEOPLE_FORMAT))

@@ -151,10 +151,40 @@ def check_renderer() -> Optional[str]:
     return None
 
 
+#: Colours of the head's features (``body.head_detail_regions``) that are not drawn per clip.
+EYE_IRIS, EYE_WHITE = (0.12, 0.08, 0.05), (0.88, 0.87, 0.84)
+
+
+#: Natural hair colours (black, dark brown, brown, auburn, dark blond, blond, grey).
+HAIR_TONES = ((0.05, 0.04, 0.035), (0.14, 0.09, 0.06), (0.28, 0.18, 0.11), (0.40, 0.17, 0.08),
+              (0.52, 0.40, 0.24), (0.78, 0.66, 0.44), (0.62, 0.61, 0.60))
+
+
+def hair_tone(drawn: Sequence[float]) -> Tuple[float, float, float]:
+    """A natural hair colour picked from :data:`HAIR_TONES` by the clip's drawn ``hair``
+    colour (three numbers in [0.02, 0.5]: the first picks the tone, the second its shade), so
+    that renders of the same seed differ only in the head."""
+    t = HAIR_TONES[min(len(HAIR_TONES) - 1, int((drawn[0] - 0.02) / 0.48 * len(HAIR_TONES)))]
+    shade = 0.85 + 0.3 * (drawn[1] - 0.02) / 0.48
+    return tuple(float(min(1.0, c * shade)) for c in t)
+
+
+def head_detail_colours(appearance: Appearance) -> Dict[str, Tuple[float, float, float]]:
+    """Region -> colour of the head's features: hair and eyebrows in the clip's hair colour
+    (the brows darker), the lips a darker, redder skin, the eyes fixed."""
+    hair = hair_tone(appearance.colours.get('hair', (0.1, 0.08, 0.06)))
+    skin = tuple(appearance.colours.get('head', (0.8, 0.6, 0.5)))
+    return {'hair': hair, 'brow': tuple(0.7 * c for c in hair),
+            'lips': (0.85 * skin[0], 0.6 * skin[1], 0.6 * skin[2]),
+            'eye_iris': EYE_IRIS, 'eye_white': EYE_WHITE}
+
+
 def vertex_colours(appearance: Appearance, regions: Sequence[str]) -> np.ndarray:
-    """(V, 4) float32 RGBA of each vertex from its body region's colour (clothing, skin)."""
+    """(V, 4) float32 RGBA of each vertex from its body region's colour (clothing, skin, and
+    the head's features of :func:`head_detail_colours`)."""
     ap = appearance
-    return np.array([list(ap.colours.get(r, ap.colours['trunk'])) + [1.0] for r in regions],
+    colours = {**ap.colours, **head_detail_colours(ap)}
+    return np.array([list(colours.get(r, ap.colours['trunk'])) + [1.0] for r in regions],
                     dtype=np.float32)
 
 
