@@ -133,6 +133,37 @@ def test_graph_delivers_in_order_records_and_survives_a_failing_callback():
         context.try_shutdown()
 
 
+def test_graph_does_not_deserialise_what_a_node_skips():
+    """A guarded callback with ``skip`` (a node's single-person input while the combined
+    input delivers) is neither called nor handed a deserialised message; once ``skip``
+    turns False it receives the message again."""
+    import rclpy
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from mocap_core.guard import guarded
+    from mocap_core.inprocess import InProcessGraph, SerializedMessage
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        node = rclpy.create_node('n', context=context)
+        seen = []
+        ignoring = [True]
+        node.create_subscription(String, '/x', guarded(node, lambda m: seen.append(m.data),
+                                                       skip=lambda: ignoring[0]), 10)
+        graph = InProcessGraph()
+        graph.add(node)
+        raw = SerializedMessage(serialize_message(String(data='a')), String)
+        graph.publish('/x', raw)
+        assert seen == [] and raw._message is None       # never deserialised
+        ignoring[0] = False
+        graph.publish('/x', raw)
+        assert seen == ['a']
+    finally:
+        context.try_shutdown()
+
+
 # --- whole runs ----------------------------------------------------------------------------
 
 @pytest.fixture(scope='module')

@@ -49,6 +49,20 @@ _TIME = struct.Struct('<iI')
 _FLOAT32 = 7                              # sensor_msgs/PointField.FLOAT32
 
 
+#: Encoded strings and string sequences (:meth:`CdrWriter.string`, :meth:`CdrWriter.strings`),
+#: at most :data:`_CACHE_SIZE` of each (cleared when full: names of people who left).
+_STRING_BYTES: Dict[str, bytes] = {}
+_STRINGS_BYTES: Dict[Tuple[str, ...], bytes] = {}
+_CACHE_SIZE = 4096
+
+
+def _remember(cache: Dict, key, raw: bytes) -> bytes:
+    if len(cache) >= _CACHE_SIZE:
+        cache.clear()
+    cache[key] = raw
+    return raw
+
+
 class CdrWriter:
     """Appends CDR fields to a buffer (module doc); :meth:`data` returns the message bytes."""
 
@@ -83,16 +97,27 @@ class CdrWriter:
         self.buf += _TIME.pack(sec, nanosec)
 
     def string(self, text: str) -> None:
-        raw = text.encode()
-        self.u32(len(raw) + 1)
+        self.align(4)
+        raw = _STRING_BYTES.get(text)
+        if raw is None:
+            encoded = text.encode()
+            raw = _remember(_STRING_BYTES, text, _U32.pack(len(encoded) + 1) + encoded + b'\0')
         self.buf += raw
-        self.buf.append(0)
 
     def strings(self, texts: Sequence[str]) -> None:
-        """sequence<string>."""
-        self.u32(len(texts))
-        for t in texts:
-            self.string(t)
+        """sequence<string>. The encoding of a name list (joint and frame names: the same
+        every frame) is kept: after the first uint32's alignment it does not depend on where
+        the sequence starts."""
+        self.align(4)
+        key = tuple(texts)
+        raw = _STRINGS_BYTES.get(key)
+        if raw is None:
+            w = CdrWriter()
+            w.u32(len(key))
+            for t in key:
+                w.string(t)
+            raw = _remember(_STRINGS_BYTES, key, bytes(w.buf[len(_ENCAPSULATION):]))
+        self.buf += raw
 
     def header(self, header) -> None:
         """std_msgs/Header from a Header message (its stamp and frame id)."""

@@ -195,6 +195,9 @@ class InProcessGraph:
             while self._queue:
                 t, m = self._queue.popleft()
                 for name, callback in self._subscribers.get(t, ()):
+                    skip = getattr(callback, 'skip', None)
+                    if skip is not None and skip():
+                        continue      # ignored by the node: not even deserialised
                     try:
                         callback(_message(m))
                     except Exception as exc:  # noqa: BLE001 - reported with its context

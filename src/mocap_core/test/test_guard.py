@@ -96,3 +96,14 @@ def test_keyed_rate_limit():
     now[0] = 5.0
     assert limit.ready('a', 5.0)
     assert not limit.ready('a', 5.0)
+
+
+def test_skip_ignores_the_message_without_calling_the_callback():
+    node = _Node()
+    calls = []
+    ignoring = [True]
+    cb = guarded(node, lambda m: calls.append(m), 'input', skip=lambda: ignoring[0])
+    assert cb('a') is None and calls == [] and cb.skip() is True
+    ignoring[0] = False
+    cb('b')
+    assert calls == ['b'] and node.diag.dropped == 0

@@ -333,7 +333,8 @@ class GMRNode(Node):
         self.diag.set_value('camera_mode', self.camera_mode)
         self.diag.set_value('nonfinite_outputs', 0)
         self.diag.watch('input', self.create_subscription(
-            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
+            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion',
+                                                  skip=self._single_input_ignored),
             input_qos(STREAM_QOS, p['queue_depth'])))
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
@@ -576,6 +577,11 @@ class GMRNode(Node):
             else:
                 self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
             return None
+
+    def _single_input_ignored(self) -> bool:
+        """Whether the single-person input is ignored now: the combined input of several
+        people delivers (the main person comes with it)."""
+        return self.bodies_mode
 
     def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
         """One input frame of the single-person input (ignored once the combined input of

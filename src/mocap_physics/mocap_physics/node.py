@@ -365,12 +365,14 @@ class PhysicsNode(Node):
         self.diag.set_value('model', 'none yet (waiting for the first motion)')
         qos = input_qos(STREAM_QOS, p['queue_depth'])
         self.diag.watch('input', self.create_subscription(
-            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion'),
+            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion',
+                                                  skip=self._single_input_ignored),
             qos))
         self.contacts_sub = None
         if contacts_topic:
             self.contacts_sub = self.create_subscription(
-                JointState, contacts_topic, guarded(self, self.on_contacts, 'contacts'), qos)
+                JointState, contacts_topic, guarded(self, self.on_contacts, 'contacts',
+                                                   skip=self._single_input_ignored), qos)
             self.diag.watch('contacts', self.contacts_sub)
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
@@ -456,6 +458,11 @@ class PhysicsNode(Node):
             self._warn_limited(notice.key, notice.text, notice.period_s)
 
     # -- input ---------------------------------------------------------------------------------
+    def _single_input_ignored(self) -> bool:
+        """Whether the single-person input is ignored now: the combined input of several
+        people delivers (the main person comes with it)."""
+        return self.bodies_mode
+
     def on_contacts(self, msg: JointState) -> None:
         if self.bodies_mode:
             return                       # the main person's come with the combined input
