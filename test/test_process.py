@@ -133,33 +133,38 @@ def test_graph_delivers_in_order_records_and_survives_a_failing_callback():
         context.try_shutdown()
 
 
-def test_graph_does_not_deserialise_what_a_node_skips():
-    """A guarded callback with ``skip`` (a node's single-person input while the combined
-    input delivers) is neither called nor handed a deserialised message; once ``skip``
-    turns False it receives the message again."""
+def test_graph_hands_raw_subscriptions_the_bytes():
+    """A raw subscription (``raw=True``) receives the CDR bytes, of a message published
+    serialised (not deserialised on the way) or as an object; the others the message."""
     import rclpy
-    from rclpy.serialization import serialize_message
+    from rclpy.serialization import deserialize_message, serialize_message
     from std_msgs.msg import String
 
-    from mocap_core.guard import guarded
     from mocap_core.inprocess import InProcessGraph, SerializedMessage
 
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
     try:
         node = rclpy.create_node('n', context=context)
-        seen = []
-        ignoring = [True]
-        node.create_subscription(String, '/x', guarded(node, lambda m: seen.append(m.data),
-                                                       skip=lambda: ignoring[0]), 10)
+        raw_seen, seen = [], []
+        node.create_subscription(String, '/x', raw_seen.append, 10, raw=True)
+        node.create_subscription(String, '/x', lambda m: seen.append(m.data), 10)
         graph = InProcessGraph()
         graph.add(node)
-        raw = SerializedMessage(serialize_message(String(data='a')), String)
-        graph.publish('/x', raw)
-        assert seen == [] and raw._message is None       # never deserialised
-        ignoring[0] = False
-        graph.publish('/x', raw)
-        assert seen == ['a']
+        ser = SerializedMessage(serialize_message(String(data='a')), String)
+        graph.publish('/x', ser)
+        assert raw_seen == [ser.data] and seen == ['a']
+        graph2 = InProcessGraph()
+        node2 = rclpy.create_node('m', context=context)
+        node2.create_subscription(String, '/y', raw_seen.append, 10, raw=True)
+        graph2.add(node2)
+        graph2.publish('/y', String(data='b'))
+        assert deserialize_message(raw_seen[-1], String).data == 'b'
+        only_raw = InProcessGraph()
+        only_raw.add(node2)
+        ser2 = SerializedMessage(serialize_message(String(data='c')), String)
+        only_raw.publish('/y', ser2)
+        assert ser2._message is None               # nobody needed it decoded
     finally:
         context.try_shutdown()
 

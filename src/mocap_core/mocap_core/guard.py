@@ -44,8 +44,8 @@ def record_failure(node: Any, what: str, exc: BaseException) -> str:
     return text
 
 
-def guarded(node: Any, callback: Callable[..., Any], what: Optional[str] = None,
-            skip: Optional[Callable[[], bool]] = None) -> Callable[..., Any]:
+def guarded(node: Any, callback: Callable[..., Any], what: Optional[str] = None
+            ) -> Callable[..., Any]:
     """``callback`` wrapped so that an exception drops the message, is counted and logged
     (:func:`record_failure`) instead of leaving the executor.
 
@@ -53,27 +53,37 @@ def guarded(node: Any, callback: Callable[..., Any], what: Optional[str] = None,
         node: the rclpy node the callback belongs to (for its logger and ``diag``).
         callback: a subscription or timer callback.
         what: a short name for the log (default: the callback's name).
-        skip: ``() -> bool``; while it returns True the message is ignored without calling
-            ``callback`` (e.g. a single-person input while the combined input of several
-            people delivers). The wrapper carries it as ``skip``, so that
-            :class:`~mocap_core.inprocess.InProcessGraph` does not even deserialise such a
-            message.
     """
     name = what or getattr(callback, '__name__', 'callback')
 
     @functools.wraps(callback)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            if skip is not None and skip():
-                return None
             return callback(*args, **kwargs)
         except Exception as exc:  # noqa: BLE001 - the policy: drop, count, log, keep running
             record_failure(node, name, exc)
             return None
 
     wrapper.guarded = True  # type: ignore[attr-defined]
-    wrapper.skip = skip  # type: ignore[attr-defined]
     return wrapper
+
+
+def deserialised_unless(ignored: Callable[[], bool], msg_type: type,
+                        callback: Callable[[Any], Any]) -> Callable[[bytes], Any]:
+    """The callback of a raw subscription (``create_subscription(..., raw=True)``): the
+    serialised message is deserialised into ``msg_type`` and handed to ``callback`` only
+    while ``ignored()`` is False. For an input a node ignores most of the time (the
+    single-person topic while the combined input of several people delivers): such messages
+    cost no deserialisation, live or in :class:`~mocap_core.inprocess.InProcessGraph`."""
+    from rclpy.serialization import deserialize_message
+
+    def on_raw(data: bytes) -> Any:
+        if ignored():
+            return None
+        return callback(deserialize_message(data, msg_type))
+
+    on_raw.__name__ = getattr(callback, '__name__', 'on_raw')
+    return on_raw
 
 
 class KeyedRateLimit:

@@ -62,6 +62,14 @@ def _message(msg: Any) -> Any:
     return msg.message() if isinstance(msg, SerializedMessage) else msg
 
 
+def _raw(msg: Any) -> bytes:
+    """What a raw subscription (``raw=True``) receives: the CDR bytes."""
+    if isinstance(msg, SerializedMessage):
+        return msg.data
+    from rclpy.serialization import serialize_message
+    return serialize_message(msg)
+
+
 class DeliveryError(RuntimeError):
     """A subscription callback raised: which node and topic, and the original error."""
 
@@ -119,7 +127,8 @@ class InProcessGraph:
         node.create_publisher = create_publisher
         for sub in node.subscriptions:
             if sub.topic_name not in SYSTEM_TOPICS:
-                self._subscribers[sub.topic_name].append((name, sub.callback))
+                self._subscribers[sub.topic_name].append(
+                    (name, sub.callback, bool(getattr(sub, 'raw', False))))
                 self._dds_callbacks.append((sub, sub.callback))
         self.nodes.append(node)
         return node
@@ -136,7 +145,7 @@ class InProcessGraph:
 
     def subscribers(self, topic: str) -> List[str]:
         """Names of the wired nodes subscribed to ``topic``."""
-        return [name for name, _ in self._subscribers.get(topic, [])]
+        return [name for name, *_ in self._subscribers.get(topic, [])]
 
     def _wire(self, pub: Any) -> None:
         """Publish into the graph; the subscription count is that of the graph (the wired
@@ -194,12 +203,9 @@ class InProcessGraph:
         try:
             while self._queue:
                 t, m = self._queue.popleft()
-                for name, callback in self._subscribers.get(t, ()):
-                    skip = getattr(callback, 'skip', None)
-                    if skip is not None and skip():
-                        continue      # ignored by the node: not even deserialised
+                for name, callback, raw in self._subscribers.get(t, ()):
                     try:
-                        callback(_message(m))
+                        callback(_raw(m) if raw else _message(m))
                     except Exception as exc:  # noqa: BLE001 - reported with its context
                         if self.on_error is None:
                             raise DeliveryError(f'{name} failed on {t}: '

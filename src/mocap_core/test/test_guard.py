@@ -98,12 +98,17 @@ def test_keyed_rate_limit():
     assert not limit.ready('a', 5.0)
 
 
-def test_skip_ignores_the_message_without_calling_the_callback():
-    node = _Node()
-    calls = []
+
+def test_deserialised_unless_decodes_only_what_is_used():
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from mocap_core.guard import deserialised_unless
+    seen = []
     ignoring = [True]
-    cb = guarded(node, lambda m: calls.append(m), 'input', skip=lambda: ignoring[0])
-    assert cb('a') is None and calls == [] and cb.skip() is True
+    cb = deserialised_unless(lambda: ignoring[0], String, lambda m: seen.append(m.data))
+    data = serialize_message(String(data='a'))
+    assert cb(b'not CDR at all') is None and seen == []    # ignored: never decoded
     ignoring[0] = False
-    cb('b')
-    assert calls == ['b'] and node.diag.dropped == 0
+    cb(data)
+    assert seen == ['a']

@@ -82,7 +82,7 @@ from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.tf import TfBroadcaster
 from mocap_core.diagnostics import NodeDiagnostics
-from mocap_core.guard import guarded
+from mocap_core.guard import deserialised_unless, guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
@@ -333,9 +333,9 @@ class GMRNode(Node):
         self.diag.set_value('camera_mode', self.camera_mode)
         self.diag.set_value('nonfinite_outputs', 0)
         self.diag.watch('input', self.create_subscription(
-            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion',
-                                                  skip=self._single_input_ignored),
-            input_qos(STREAM_QOS, p['queue_depth'])))
+            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, deserialised_unless(
+                self._single_input_ignored, MultiDOFJointTrajectory, self.on_motion), 'motion'),
+            input_qos(STREAM_QOS, p['queue_depth']), raw=True))
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
                 MultiDOFJointTrajectory, p['bodies_motion_topic'],

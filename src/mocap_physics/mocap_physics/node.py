@@ -99,7 +99,7 @@ from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
-from mocap_core.guard import KeyedRateLimit, guarded
+from mocap_core.guard import KeyedRateLimit, deserialised_unless, guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bodies,
@@ -365,14 +365,15 @@ class PhysicsNode(Node):
         self.diag.set_value('model', 'none yet (waiting for the first motion)')
         qos = input_qos(STREAM_QOS, p['queue_depth'])
         self.diag.watch('input', self.create_subscription(
-            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, self.on_motion, 'motion',
-                                                  skip=self._single_input_ignored),
-            qos))
+            MultiDOFJointTrajectory, p['motion_topic'], guarded(self, deserialised_unless(
+                self._single_input_ignored, MultiDOFJointTrajectory, self.on_motion), 'motion'),
+            qos, raw=True))
         self.contacts_sub = None
         if contacts_topic:
             self.contacts_sub = self.create_subscription(
-                JointState, contacts_topic, guarded(self, self.on_contacts, 'contacts',
-                                                   skip=self._single_input_ignored), qos)
+                JointState, contacts_topic, guarded(self, deserialised_unless(
+                    self._single_input_ignored, JointState, self.on_contacts), 'contacts'),
+                qos, raw=True)
             self.diag.watch('contacts', self.contacts_sub)
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
