@@ -159,6 +159,27 @@ def test_travel_per_stretch_scales_the_clip_path_to_the_rendered_stretch():
     assert travel_per_stretch(walk[:1], 30.0, 8.0) == 0.0
 
 
+def test_a_render_folder_says_when_it_mixes_plain_and_detailed_heads(tmp_path):
+    """Clips are cached by name: a folder holding plain heads (session 41 and before, or
+    --plain-heads) is counted when rendering with faces (and the other way round), and the
+    summary counts both kinds."""
+    from mocap_core.render.batch import Job, _other_heads, summarize
+    from mocap_core.render.clip import RENDER_FORMAT
+    jobs = [Job('validation', f'clip_{i}') for i in range(3)]
+    for i, heads in enumerate((None, False, True)):
+        d = tmp_path / 'validation' / clip_key(f'clip_{i}')
+        d.mkdir(parents=True)
+        meta = {'split': 'validation', 'frames': 10, 'detected_fraction': 1.0,
+                'camera': {'kind': 'static'}, 'views': {'front': 10}}
+        if heads is not None:
+            meta['head_details'] = heads
+        (d / 'meta.json').write_text(json.dumps(meta))
+        (d / 'done').write_text(str(RENDER_FORMAT))
+    assert _other_heads(tmp_path, jobs, head_details=True) == 2
+    assert _other_heads(tmp_path, jobs, head_details=False) == 1
+    assert summarize(tmp_path)['validation']['heads'] == {'face_and_hair': 1, 'plain': 2}
+
+
 def test_render_command_rejects_bad_arguments_in_one_line(capsys):
     from mocap_core.cli.mocap import main
     assert main(['data', 'render', '--camera', 'drone']) == 1

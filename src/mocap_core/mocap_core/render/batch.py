@@ -131,6 +131,21 @@ def _run_job(job: Job, out: str, seed: int, max_frames: Optional[int], camera: s
 # ------------------------------------------------------------------------------------------
 # driver
 # ------------------------------------------------------------------------------------------
+def _other_heads(out: Path, jobs: Sequence[Job], head_details: bool) -> int:
+    """How many finished clips of ``jobs`` under ``out`` were rendered with the other kind of
+    head (``meta.json`` ``head_details``; missing: the plain heads of before session 42)."""
+    n = 0
+    for j in jobs:
+        d = out / j.split / clip_key(j.clip)
+        if is_done(d):
+            try:
+                meta = json.loads((d / 'meta.json').read_text())
+            except (OSError, ValueError):
+                continue
+            n += bool(meta.get('head_details', False)) != bool(head_details)
+    return n
+
+
 def summarize(out: Path) -> dict:
     """Counts over the finished clips under ``out`` (written to ``summary.json``)."""
     out = Path(out)
@@ -141,8 +156,10 @@ def summarize(out: Path) -> dict:
         except (OSError, ValueError):
             continue
         s = by.setdefault(meta['split'], {'clips': 0, 'frames': 0, 'detected_frames': 0.0,
-                                          'cameras': {}, 'views': {}})
+                                          'cameras': {}, 'views': {},
+                                          'heads': {'face_and_hair': 0, 'plain': 0}})
         s['clips'] += 1
+        s['heads']['face_and_hair' if meta.get('head_details') else 'plain'] += 1
         s['frames'] += meta['frames']
         s['detected_frames'] += meta['detected_fraction'] * meta['frames']
         kind = meta['camera']['kind']
@@ -170,7 +187,14 @@ def run(jobs: Iterable[Job], out: Path, seed: int = 0, workers: int = 2,
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    jobs = list(jobs)
     todo = [j for j in jobs if not is_done(out / j.split / clip_key(j.clip))]
+    other = _other_heads(out, jobs, head_details)
+    if other:
+        log.warning('%d finished clip(s) of these splits in %s have %s heads; they are kept '
+                    '(clips are cached by name), so the set mixes both kinds. Use another -o '
+                    'for a set of one kind (docs/rendering.md).', other, out,
+                    'plain' if head_details else 'detailed')
     skipped = 0
     from .body import load_anny
     load_anny()  # builds Anny's cache once (about a minute), before the workers read it

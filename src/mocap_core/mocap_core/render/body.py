@@ -474,10 +474,12 @@ def region_of_vertices(body: AnnyBody, head_details: bool = True) -> List[str]:
 #: Head feature regions and what they cover, in metres for a head whose eye centres are
 #: :data:`_REFERENCE_EYE_DISTANCE` apart (scaled with the body's own): the hairline above the
 #: eyes at the forehead, how fast it drops behind the temples (m per m behind the eyes), the
-#: eyebrows' band above the eyes, the iris radius, the lips' half height and half width.
+#: eyebrows' band above the eyes (and how far behind the eyes' front it reaches), the iris
+#: radius, the lips' half height, half width and depth.
 HEAD_DETAIL_SIZES: Dict[str, float] = {
     'hairline_above_eyes': 0.062, 'hairline_temple_depth': 0.035, 'hairline_drop': 0.95,
     'brow_low': 0.011, 'brow_high': 0.021, 'brow_inner': 0.009, 'brow_outer': 0.052,
+    'brow_depth': 0.03,
     'iris_radius': 0.0065, 'lip_half_height': 0.0045, 'lip_half_width': 0.02,
     'lip_depth': 0.012,
 }
@@ -492,9 +494,9 @@ def _face_part_vertices(model) -> Dict[str, np.ndarray]:
     if not _FACE_PART_VERTICES:
         from anny.face_segmentation import get_face_segmentation_mask
         faces = model.faces.numpy()
-        for label in _EYE_LABELS + ('mouth_cavity',):
-            mask = get_face_segmentation_mask(model, [label]).numpy()
-            _FACE_PART_VERTICES[label] = np.unique(faces[mask])
+        parts = {label: np.unique(faces[get_face_segmentation_mask(model, [label]).numpy()])
+                 for label in _EYE_LABELS + ('mouth_cavity',)}
+        _FACE_PART_VERTICES.update(parts)        # all at once: never half filled
     return _FACE_PART_VERTICES
 
 
@@ -535,7 +537,7 @@ def head_detail_regions(body: AnnyBody, regions: Sequence[str]) -> List[str]:
         0.0, behind - z['hairline_temple_depth'])
     hair = head & ~eyeballs & (rel_z > hairline) & (v[:, 2] > mouth_z)
     lateral = np.abs(v[:, 1] - eye[1])
-    brow = (head & ~eyeballs & ~hair & (behind < 0.03 * s) & (rel_z > z['brow_low'])
+    brow = (head & ~eyeballs & ~hair & (behind < z['brow_depth']) & (rel_z > z['brow_low'])
             & (rel_z < z['brow_high']) & (lateral > z['brow_inner']) & (lateral < z['brow_outer']))
     lips = (head & ~eyeballs & (behind < z['lip_depth'])
             & (np.abs(v[:, 2] - mouth_z) < z['lip_half_height'])
