@@ -334,7 +334,7 @@ class GMRNode(Node):
         self.diag.set_value('nonfinite_outputs', 0)
         self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, deserialised_unless(
-                self._single_input_ignored, MultiDOFJointTrajectory, self.on_motion), 'motion'),
+                lambda: self.bodies_mode, MultiDOFJointTrajectory, self.on_motion), 'motion'),
             input_qos(STREAM_QOS, p['queue_depth']), raw=True))
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
@@ -577,11 +577,6 @@ class GMRNode(Node):
             else:
                 self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
             return None
-
-    def _single_input_ignored(self) -> bool:
-        """Whether the single-person input is ignored now: the combined input of several
-        people delivers (the main person comes with it)."""
-        return self.bodies_mode
 
     def on_motion(self, msg: MultiDOFJointTrajectory) -> None:
         """One input frame of the single-person input (ignored once the combined input of

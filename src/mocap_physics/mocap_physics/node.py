@@ -366,13 +366,13 @@ class PhysicsNode(Node):
         qos = input_qos(STREAM_QOS, p['queue_depth'])
         self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, deserialised_unless(
-                self._single_input_ignored, MultiDOFJointTrajectory, self.on_motion), 'motion'),
+                lambda: self.bodies_mode, MultiDOFJointTrajectory, self.on_motion), 'motion'),
             qos, raw=True))
         self.contacts_sub = None
         if contacts_topic:
             self.contacts_sub = self.create_subscription(
                 JointState, contacts_topic, guarded(self, deserialised_unless(
-                    self._single_input_ignored, JointState, self.on_contacts), 'contacts'),
+                    lambda: self.bodies_mode, JointState, self.on_contacts), 'contacts'),
                 qos, raw=True)
             self.diag.watch('contacts', self.contacts_sub)
         if p['bodies_motion_topic']:
@@ -459,11 +459,6 @@ class PhysicsNode(Node):
             self._warn_limited(notice.key, notice.text, notice.period_s)
 
     # -- input ---------------------------------------------------------------------------------
-    def _single_input_ignored(self) -> bool:
-        """Whether the single-person input is ignored now: the combined input of several
-        people delivers (the main person comes with it)."""
-        return self.bodies_mode
-
     def on_contacts(self, msg: JointState) -> None:
         if self.bodies_mode:
             return                       # the main person's come with the combined input

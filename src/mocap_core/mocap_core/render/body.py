@@ -521,13 +521,13 @@ def head_detail_regions(body: AnnyBody, regions: Sequence[str]) -> List[str]:
         v = body._model.get_rest_model(body._coeffs)['rest_vertices'][0].double().numpy()
     v = v @ ANNY_TO_PIPELINE.T
     parts = _face_part_vertices(body._model)
-    out = list(regions)
+    out = np.array(regions, dtype=object)
     centres = [v[parts[lab]].mean(axis=0) for lab in _EYE_LABELS]
     eye = 0.5 * (centres[0] + centres[1])
     s = float(np.linalg.norm(centres[0] - centres[1])) / _REFERENCE_EYE_DISTANCE
     z = {k: val * s for k, val in HEAD_DETAIL_SIZES.items()}
     mouth_z = float(v[parts['mouth_cavity'], 2].mean())
-    head = np.array([r == 'head' for r in regions])
+    head = out == 'head'
     eyeballs = np.zeros(len(v), dtype=bool)
     for lab in _EYE_LABELS:
         eyeballs[parts[lab]] = True
@@ -542,20 +542,13 @@ def head_detail_regions(body: AnnyBody, regions: Sequence[str]) -> List[str]:
     lips = (head & ~eyeballs & (behind < z['lip_depth'])
             & (np.abs(v[:, 2] - mouth_z) < z['lip_half_height'])
             & (np.abs(v[:, 1] - eye[1]) < z['lip_half_width']))
-    for i in np.flatnonzero(hair):
-        out[i] = 'hair'
-    for i in np.flatnonzero(brow):
-        out[i] = 'brow'
-    for i in np.flatnonzero(lips):
-        out[i] = 'lips'
+    out[hair], out[brow], out[lips] = 'hair', 'brow', 'lips'
     for lab, c in zip(_EYE_LABELS, centres):
-        idx = parts[lab]
-        off = v[idx] - c
+        off = v[parts[lab]] - c
         radial = np.linalg.norm(off[:, 1:], axis=1)  # distance from the eye's forward axis
-        front = off[:, 0] > 0
-        for i, r, f in zip(idx, radial, front):
-            out[i] = 'eye_iris' if (f and r < z['iris_radius']) else 'eye_white'
-    return out
+        out[parts[lab]] = np.where((off[:, 0] > 0) & (radial < z['iris_radius']),
+                                   'eye_iris', 'eye_white')
+    return out.tolist()
 
 
 __all__: Sequence[str] = ('ANNY_TO_PIPELINE', 'AnnyBody', 'BONE_DRIVERS', 'JOINT_POINTS',
