@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import time
@@ -163,7 +164,8 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
     proc, log = _keypoints_node(
         processes, ros2_cmd, 'keypoints_video', 'source:=video', f'path:={CLIP}',
         'realtime:=false', 'publish_annotated:=true', f'calibration_file:={calib}',
-        'wait_for_subscribers:=1', 'wait_timeout_s:=30.0', 'frame_id:=taiji_camera')
+        'wait_for_subscribers:=1', 'wait_timeout_s:=30.0', 'frame_id:=taiji_camera',
+        'facing_check:=true')
     # The node starts when it sees the keypoint subscriber; subscribe to the keypoints only
     # once the debug-image publisher (its own participant) has been discovered too.
     assert peer.spin(60, until=lambda: peer.node.count_publishers(
@@ -204,6 +206,31 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
     assert values['camera_motion_rotation'] == 'plane'
     assert values['person_ids'] == '1' and values['ids_given'] == '1'
     assert 'calibration file' in values['intrinsics']
+    # the facing check ran on every frame with a person and, the performer facing the camera
+    # with the detector's labels right, exchanged nobody's left and right
+    assert values['facing_check'] == 'on (facing.pt)', values
+    assert re.fullmatch(r'0 of (\d+) persons scored.*', values['facing_exchanged']), values
+    assert int(values['facing_exchanged'].split()[2]) >= 0.8 * n
+    assert values['facing_failures'] == '0'
+
+
+def test_facing_check_with_unusable_weights_is_off_and_the_node_runs(processes, ros2_cmd, peer,
+                                                                     tmp_path):
+    from sensor_msgs.msg import PointCloud2
+
+    bad = tmp_path / 'facing.pt'
+    bad.write_bytes(b'no weights here')
+    kp_msgs = _collect(peer, PointCloud2, '/mocap/keypoints2d')
+    proc, log = _keypoints_node(
+        processes, ros2_cmd, 'keypoints_facing', 'source:=video', f'path:={CLIP}',
+        'realtime:=false', 'max_persons:=1', 'camera_motion:=false', 'facing_check:=true',
+        f'facing_weights:={bad}', 'wait_for_subscribers:=1', 'wait_timeout_s:=30.0')
+    peer.spin_until_exit(proc, timeout=90)
+    text = log.read_text()
+    assert proc.returncode == 0, text
+    peer.spin(10.0, until=lambda: len(kp_msgs) >= CLIP_INFO['frames'])
+    assert len(kp_msgs) == CLIP_INFO['frames'], text
+    assert 'facing_check is off' in text and str(bad) in text and 'Traceback' not in text
 
 
 def _image_msg(img, stamp_ns, encoding='bgr8', frame_id='cam_optical'):

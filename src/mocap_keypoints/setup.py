@@ -1,3 +1,5 @@
+from glob import glob
+
 from setuptools import find_packages, setup
 
 package_name = 'mocap_keypoints'
@@ -9,6 +11,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/weights', glob('weights/*.pt') + glob('weights/*.md')),
     ],
     install_requires=['setuptools'],
     zip_safe=False,
@@ -24,6 +27,7 @@ setup(
         ],
         # the core finds the pipeline's parts through these groups (mocap_core.plugins)
         'mocap.nodes': ['keypoints = mocap_keypoints.node:KeypointsNode'],
+        'mocap.commands': ['keypoints = mocap_keypoints.training.cli'],
         'mocap.benches': ['keypoints = mocap_keypoints.bench:main',
                           'multipose = mocap_keypoints.people_bench:main'],
         # the node's detectors, for data generation (mocap data render)

@@ -68,3 +68,17 @@ def load_checkpoint(path: Union[str, Path], map_location: Any = 'cpu',
     if missing:
         raise WeightsError(f"{path}: not the expected weights (missing {', '.join(missing)})")
     return state
+
+
+def shipped_weights(package: str, name: str, source_dir: Union[str, Path]) -> Path:
+    """A weights file shipped with a package: ``share/<package>/weights/<name>`` when the
+    package is installed through ament and has it, else ``<source_dir>/<name>`` (the source
+    tree's ``weights`` folder)."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        path = Path(get_package_share_directory(package)) / 'weights' / name
+        if path.exists():
+            return path
+    except Exception:  # noqa: BLE001 - not installed through ament: use the source tree
+        pass
+    return Path(source_dir) / name

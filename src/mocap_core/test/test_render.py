@@ -398,6 +398,23 @@ def test_render_and_detect_a_clip(model, walk, rendered, tmp_path):
     np.testing.assert_array_equal(again['camera_R'], arrays['camera_R'])
 
 
+def test_shipped_facing_network_tells_which_way_a_rendered_person_faces(rendered):
+    """The keypoint node's facing network (``mocap train facing``, trained on other rendered
+    people, motions and scenes) on the freshly rendered clip, cut out with the detector's
+    keypoints as the node does: right in most frames where the body clearly faces toward or
+    away from the camera."""
+    from mocap_keypoints.facing import FacingClassifier
+    from mocap_keypoints.training.facing import clip_crops
+
+    _, out, _, _ = rendered
+    crops = clip_crops(out)
+    clear = np.abs(crops.toward) > 0.5
+    assert clear.sum() >= 12, crops.toward
+    prob = FacingClassifier().probabilities(crops.crops[clear])
+    right = (prob > 0.5) == (crops.toward[clear] > 0)
+    assert right.mean() >= 0.8, (prob, crops.toward[clear])
+
+
 def test_eval_video_scores_the_pipeline_on_a_rendered_clip(rendered, tmp_path, capsys):
     """mocap eval video from the recorded detections and from the video itself: every stage
     is scored, and the keypoint node finds the same keypoints the render recorded."""

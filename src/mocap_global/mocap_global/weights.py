@@ -17,7 +17,7 @@ from typing import Any, Dict, Optional, Union
 
 import torch
 
-from mocap_core.checkpoint import WeightsError, load_checkpoint
+from mocap_core.checkpoint import WeightsError, load_checkpoint, shipped_weights
 
 from .model import GMR, GMRConfig
 
@@ -32,14 +32,7 @@ def weights_name(fps: float) -> str:
 
 def default_weights() -> Path:
     """The shipped 30 fps weights, from the package share directory (or the source tree)."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        path = Path(get_package_share_directory('mocap_global')) / 'weights' / 'gmr.pt'
-        if path.exists():
-            return path
-    except Exception:  # noqa: BLE001 - not installed through ament: use the source tree
-        pass
-    return WEIGHTS_DIR / 'gmr.pt'
+    return shipped_weights('mocap_global', 'gmr.pt', WEIGHTS_DIR)
 
 
 def save_weights(model: GMR, path: Union[str, Path], info: Optional[Dict[str, Any]] = None

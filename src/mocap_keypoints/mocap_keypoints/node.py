@@ -69,6 +69,7 @@ from std_msgs.msg import UInt32MultiArray
 from mocap_core import topics
 from mocap_core.camera import CameraCalibration, read_camera_info_yaml
 from mocap_core.camera_motion import MOVING_ROTATIONS, CameraMotionParams
+from mocap_core.checkpoint import WeightsError
 from mocap_core.tracking import PersonTracker, TrackerParams
 from mocap_core.data.openpose import infer_image_size
 from mocap_core.diagnostics import NodeDiagnostics
@@ -86,6 +87,7 @@ from mocap_core.rotations import quat_to_matrix
 from mocap_core.streams import StampOrder
 
 from .detector import create_detector
+from .facing import FacingCheck, FacingCheckParams, FacingClassifier
 from .intrinsics import IntrinsicsProvider
 from .pipeline import FrameProcessor, FrameResult, select_persons  # noqa: F401 (re-exported)
 from .sources import SOURCE_KINDS, Frame, SourceError, open_source, resolve_kind
@@ -182,6 +184,22 @@ PARAMETERS = (
               'difference of the bone lengths (median over the bone groups) for a person to '
               'be named as one who left; exactly one remembered person may qualify',
               min_value=0.0, max_value=0.5, read_only=True),
+    ParamSpec('facing_check', False, 'Check each person\'s left and right labels against '
+              'which way they face in the image (a small network on the person\'s crop, '
+              'mocap_keypoints.facing): a person the detector labels as facing the camera '
+              'but the network, over the last facing_window frames, sees from behind gets left '
+              'and right exchanged. Image sources only (docs/keypoints.md)', read_only=True),
+    ParamSpec('facing_weights', '', 'Weights of the facing network (empty: the shipped '
+              'weights/facing.pt; mocap train facing makes them)', read_only=True),
+    ParamSpec('facing_window', 9, 'With facing_check: frames in the median of the network\'s '
+              'probability, per person (the last ones; a longer window reacts later to a '
+              'turn)', min_value=1, max_value=100, read_only=True),
+    ParamSpec('facing_min_width', 0.25, 'With facing_check: the detector\'s labels must face '
+              'the camera by more than this (left minus right shoulder and hip in the image, '
+              'over the torso length)', min_value=0.0, read_only=True),
+    ParamSpec('facing_max_probability', 0.02, 'With facing_check: exchange when the network\'s '
+              'median probability of the person facing the camera is below this',
+              min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('calibration_file', '', 'Camera calibration (standard camera_info YAML); takes '
               'precedence over the CameraInfo topic', read_only=True),
     ParamSpec('horizontal_fov_deg', 60.0, 'Horizontal field of view for approximate '
@@ -414,7 +432,8 @@ class KeypointsNode(Node):
                                         fixed_size=fixed_size,
                                         restart_after_s=p['restart_after_s'],
                                         camera_motion=motion, tracker=self.tracker,
-                                        appearance=p['id_by_appearance'])
+                                        appearance=p['id_by_appearance'],
+                                        facing=self._facing_check(p))
         self.pub_kp = self.create_publisher(PointCloud2, topics.KEYPOINTS, SENSOR_QOS)
         self.pub_tracked = self.create_publisher(UInt32MultiArray, topics.BODIES_TRACKED,
                                                  STREAM_QOS)
@@ -810,6 +829,28 @@ class KeypointsNode(Node):
         self.floors_received += 1
         self.processor.set_floor(n, float(-n @ b), stamp_to_ns(msg.header.stamp) * 1e-9)
 
+    def _facing_check(self, p) -> Optional[FacingCheck]:
+        """The facing check when ``facing_check`` is on and the weights load; otherwise
+        None (an unreadable weights file is logged and the node runs without the check)."""
+        self.facing_status = 'off (facing_check false)'
+        if not p['facing_check']:
+            return None
+        if self.kind == 'openpose_json':
+            self.facing_status = 'off (no images: OpenPose source)'
+            self.get_logger().warn('facing_check needs images; the OpenPose source has none')
+            return None
+        try:
+            clf = FacingClassifier(p['facing_weights'] or None)
+        except (WeightsError, ImportError) as exc:
+            self.facing_status = f'off (weights not usable: {exc})'
+            self.get_logger().error(f'facing_check is off: {exc}')
+            return None
+        self.facing_status = f'on ({clf.path.name})'
+        self.get_logger().info(f'facing check on: {clf.path}')
+        return FacingCheck(clf, FacingCheckParams(
+            min_width=p['facing_min_width'], max_probability=p['facing_max_probability'],
+            window=p['facing_window']))
+
     def _refresh_diagnostics(self) -> None:
         s = self.detector_stats.summary()
         for key, v in (('detector_ms_median', s['median']), ('detector_ms_p95', s['p95'])):
@@ -823,6 +864,15 @@ class KeypointsNode(Node):
         self.diag.set_value('renamed_by_bone_lengths', ts.renamed)
         self.diag.set_value('false_detections_ignored', ts.blips)
         self.diag.set_value('persons_ignored', ts.ignored)
+        self.diag.set_value('facing_check', self.facing_status)
+        fc = self.processor.facing
+        if fc is not None:
+            fs = fc.stats
+            self.diag.set_value('facing_exchanged', f'{fs.exchanged} of {fs.scored} persons '
+                                'scored' + (f' ({fs.persons - fs.scored} too small or hidden)'
+                                            if fs.persons > fs.scored else ''))
+            self.diag.set_value('facing_ms_mean', f'{fs.network_s / max(fs.scored, 1) * 1e3:.2f}')
+            self.diag.set_value('facing_failures', self.processor.facing_failures)
         if self.pub_motion is not None:
             m = self.motion_stats.summary()['median']
             self.diag.set_value('camera_motion_ms_median', 'nan' if np.isnan(m) else

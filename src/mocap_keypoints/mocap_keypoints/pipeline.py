@@ -29,6 +29,7 @@ from mocap_core.streams import StampOrder
 from mocap_core.tracking import PersonTracker
 
 from .detector import Detector
+from .facing import FacingCheck
 from .intrinsics import FrameIntrinsics, IntrinsicsProvider, distortion_supported, \
     undistort_keypoints
 from .sources import Frame, check_image
@@ -113,6 +114,8 @@ class FrameResult:
     notes: List[str] = field(default_factory=list)  # to log (intrinsics changes, ...)
     #: (new id, old id): persons who took an old id back by their bone lengths this frame
     renamed: List[Tuple[int, int]] = field(default_factory=list)
+    #: (P,) rows whose left and right the facing check exchanged (None: not checked)
+    exchanged: Optional[np.ndarray] = None
 
     @property
     def person_found(self) -> bool:
@@ -128,8 +131,13 @@ class FrameProcessor:
                  fixed_size: Optional[Tuple[int, int]] = None,
                  restart_after_s: float = 1.0,
                  camera_motion: Optional[CameraMotionParams] = None,
-                 tracker: Optional[PersonTracker] = None, appearance: bool = True) -> None:
+                 tracker: Optional[PersonTracker] = None, appearance: bool = True,
+                 facing: Optional[FacingCheck] = None) -> None:
         self.detector = detector
+        #: the left/right label check by the person's facing (mocap_keypoints.facing)
+        self.facing = facing
+        #: frames whose facing check failed (an exception; the frame goes on unchecked)
+        self.facing_failures = 0
         self.tracker = tracker
         #: the tracker also sees the image (people's clothes; mocap_core.tracking)
         self.appearance = appearance
@@ -254,6 +262,16 @@ class FrameProcessor:
                 res.ids = np.zeros(1, dtype=np.int64)
         else:
             raw = select_persons(people, self.max_persons)
+        if self.facing is not None and image is not None:
+            if restart:
+                self.facing.reset()
+            try:
+                raw, res.exchanged = self.facing.apply(image, raw, res.ids,
+                                                       frame.stamp_ns * 1e-9)
+            except Exception as exc:  # noqa: BLE001 - the check is optional; the frame is not
+                self.facing_failures += 1
+                res.notes.append(f'facing check failed ({type(exc).__name__}: {exc}); the '
+                                 'frame goes on unchecked')
         kp = raw
         if self.undistort and fi.distortion and any(d != 0 for d in fi.distortion):
             if distortion_supported(fi.distortion_model):

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from mocap_core.checkpoint import WeightsError, load_checkpoint
+from mocap_core.checkpoint import WeightsError, load_checkpoint, shipped_weights
 
 from .model import LifterConfig, MotioNet
 from .vtm import VTM, VTMConfig
@@ -49,14 +49,7 @@ def default_weights(mode: str, model: str = 'motionet') -> Path:
     ``<model>_<mode>.pt``) from the package share directory (or the source tree when the
     package is not installed through ament)."""
     name = DEFAULT_FILES.get((model, mode), f'{model}_{mode}.pt')
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        path = Path(get_package_share_directory('mocap_lifter')) / 'weights' / name
-        if path.exists():
-            return path
-    except Exception:  # noqa: BLE001 - not installed through ament: use the source tree
-        pass
-    return Path(__file__).resolve().parents[1] / 'weights' / name
+    return shipped_weights('mocap_lifter', name, Path(__file__).resolve().parents[1] / 'weights')
 
 
 def plain_data(value: Any) -> Any:

@@ -1,0 +1,1 @@
+"""Training and evaluation of the keypoint node's own models (no ROS imports)."""
