@@ -24,7 +24,7 @@ them (the network is trained with colour channels permuted, so RGB works as well
 from __future__ import annotations
 
 import collections
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Deque, Dict, Optional, Sequence, Tuple, Union
 
@@ -53,8 +53,10 @@ def person_crop(image: np.ndarray, keypoints: np.ndarray) -> Optional[np.ndarray
 
     The box is centred on the keypoints with confidence >= :data:`CROP_MIN_CONFIDENCE`; its
     height is :data:`CROP_MARGIN` times the larger of their vertical extent and twice their
-    horizontal extent, its width half of that (so the crop keeps the image's proportions);
-    outside the image it is black.
+    horizontal extent, its width half of that (the crop is scaled uniformly); outside the
+    image it is black. The box is cut out at whole pixels and resized with pixel-area
+    averaging when it shrinks (no aliasing, whatever the person's size in pixels), bilinear
+    when it grows.
     """
     import cv2
 
@@ -67,13 +69,19 @@ def person_crop(image: np.ndarray, keypoints: np.ndarray) -> Optional[np.ndarray
     h = max(y1 - y0, 2.0 * (x1 - x0)) * CROP_MARGIN
     if h < CROP_MIN_HEIGHT:
         return None
-    w = h / 2.0
     cw, ch = CROP_SIZE
-    cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
-    m = np.array([[cw / w, 0.0, cw / 2.0 - cx * cw / w],
-                  [0.0, ch / h, ch / 2.0 - cy * ch / h]], dtype=np.float32)
-    return cv2.warpAffine(image, m, (cw, ch), flags=cv2.INTER_AREA,
-                          borderMode=cv2.BORDER_CONSTANT)
+    bh = max(2, int(round(h / 2.0)) * 2)          # even, so that the width is exactly half
+    bw = bh // 2
+    left = int(round((x0 + x1) / 2.0 - bw / 2.0))
+    top = int(round((y0 + y1) / 2.0 - bh / 2.0))
+    ih, iw = image.shape[:2]
+    box = np.zeros((bh, bw) + image.shape[2:], dtype=image.dtype)
+    sx0, sy0 = max(left, 0), max(top, 0)
+    sx1, sy1 = min(left + bw, iw), min(top + bh, ih)
+    if sx1 > sx0 and sy1 > sy0:
+        box[sy0 - top:sy1 - top, sx0 - left:sx1 - left] = image[sy0:sy1, sx0:sx1]
+    return cv2.resize(box, (cw, ch), interpolation=cv2.INTER_AREA if bh > ch
+                      else cv2.INTER_LINEAR)
 
 
 def signed_width(keypoints: np.ndarray) -> float:
@@ -140,7 +148,8 @@ def default_weights() -> Path:
 
 
 class FacingClassifier:
-    """The trained network, ready to score crops (one thread; float32 on the CPU).
+    """The trained network, ready to score crops (float32 on the CPU, with torch's thread
+    settings of the process).
 
     Args:
         weights: a file written by :func:`save_weights` (default :func:`default_weights`).
@@ -157,7 +166,10 @@ class FacingClassifier:
         if state['arch'] != 'facing':
             raise WeightsError(f"{self.path}: weights of {state['arch']!r}, not of the facing "
                                'classifier')
-        self.info: Dict = dict(state.get('info', {}))
+        info = state.get('info', {})
+        if not isinstance(info, dict):
+            raise WeightsError(f'{self.path}: its info is not a mapping')
+        self.info: Dict = dict(info)
         self.net = FacingNet()
         try:
             self.net.load_state_dict({k: v.float() if v.is_floating_point() else v
@@ -204,12 +216,17 @@ class FacingCheckParams:
 
 @dataclass
 class FacingStats:
-    """Counts since the check started (for diagnostics)."""
+    """Counts since the check started, and the time of its recent frames (diagnostics)."""
 
-    persons: int = 0        # persons looked at
+    persons: int = 0        # persons checked (frames where the check ran to the end)
     scored: int = 0         # ... with a crop the network scored
     exchanged: int = 0      # ... whose left and right were exchanged
-    network_s: float = 0.0  # time in the network, s
+    #: the check's time per frame with someone to score (crops and network), s: the last 100
+    recent_s: Deque[float] = field(default_factory=lambda: collections.deque(maxlen=100))
+
+    def median_ms(self) -> float:
+        """Median time of the recent frames, ms (NaN before the first)."""
+        return float(np.median(self.recent_s) * 1e3) if self.recent_s else float('nan')
 
 
 class FacingCheck:
@@ -257,22 +274,22 @@ class FacingCheck:
         exchanged = np.zeros(n, dtype=bool)
         keys = [int(ids[r]) if ids is not None and int(ids[r]) > 0 else -1 - r
                 for r in range(n)]
+        t0 = time.perf_counter()
         crops, rows = [], []
+        present = 0
         for r in range(n):
             if not np.any(people[r, :, 2] > 0):
                 continue
-            self.stats.persons += 1
+            present += 1
             crop = person_crop(image, people[r])
             if crop is not None:
                 crops.append(crop)
                 rows.append(r)
+        probs = self.classifier.probabilities(np.stack(crops)) if crops else np.zeros(0)
         if crops:
-            t0 = time.perf_counter()
-            probs = self.classifier.probabilities(np.stack(crops))
-            self.stats.network_s += time.perf_counter() - t0
-            self.stats.scored += len(rows)
-        else:
-            probs = np.zeros(0)
+            self.stats.recent_s.append(time.perf_counter() - t0)
+        self.stats.persons += present
+        self.stats.scored += len(rows)
         p = self.params
         for key in [k for k, t in self._last_seen.items()
                     if not 0.0 <= stamp_s - t <= p.forget_after_s]:

@@ -871,7 +871,8 @@ class KeypointsNode(Node):
             self.diag.set_value('facing_exchanged', f'{fs.exchanged} of {fs.scored} persons '
                                 'scored' + (f' ({fs.persons - fs.scored} too small or hidden)'
                                             if fs.persons > fs.scored else ''))
-            self.diag.set_value('facing_ms_mean', f'{fs.network_s / max(fs.scored, 1) * 1e3:.2f}')
+            m = fs.median_ms()
+            self.diag.set_value('facing_ms_median', 'nan' if np.isnan(m) else f'{m:.2f}')
             self.diag.set_value('facing_failures', self.processor.facing_failures)
         if self.pub_motion is not None:
             m = self.motion_stats.summary()['median']

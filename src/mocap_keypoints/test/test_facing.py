@@ -65,6 +65,12 @@ def test_crop_keeps_the_persons_box_and_proportions():
     rows = np.flatnonzero(col > 128)
     assert abs(rows.min() - h / 12) <= 2 and abs(rows.max() - (h - 1 - h / 12)) <= 2
     assert crop[h // 2, 0, 0] == 0 and crop[h // 2, w - 1, 0] == 0
+    # a large person is averaged down, not sampled: fine stripes come out grey, not
+    # black or white (aliased), and the same person smaller gives about the same crop
+    stripes = np.zeros((1200, 900, 3), np.uint8)
+    stripes[:, ::2] = 255
+    big = person_crop(stripes, _standing(cx=450.0, top=200.0, height=800.0))
+    assert np.abs(big[10:-10, 5:-5].astype(float) - 127.5).max() < 20
     # too few points, too small, or non-finite points: no crop
     few = kp.copy()
     few[CROP_MIN_POINTS - 1:, 2] = CROP_MIN_CONFIDENCE - 0.01
@@ -133,12 +139,19 @@ def test_check_takes_the_median_of_each_persons_last_frames():
     out, ex = check.apply(image, two[::-1], ids[::-1], 0.6)
     assert ex.tolist() == [False, True]
     # a person gone for longer than forget_after_s starts afresh
-    check = FacingCheck(FixedProbability(0.001, 0.001, 0.9, 0.9, 0.001),
+    check = FacingCheck(FixedProbability(0.9, 0.9, 0.9, 0.001),
                         FacingCheckParams(window=5, forget_after_s=1.0))
     one = two[:1]
-    got = [bool(check.apply(image, one, ids[:1], t)[1][0]) for t in (0.0, 0.1, 0.2, 0.3)]
-    assert got == [True, True, True, False]   # median of (low, low, high, high) is not low
-    assert check.apply(image, one, ids[:1], 5.0)[1][0]  # history forgotten: low alone
+    got = [bool(check.apply(image, one, ids[:1], t)[1][0]) for t in (0.0, 0.1, 0.2)]
+    assert got == [False, False, False]
+    # 3.2 s later the three high frames are forgotten: the low one alone decides (kept, the
+    # median of (high, high, high, low) would not be low)
+    assert check.apply(image, one, ids[:1], 3.2)[1][0]
+    # a stamp back in time forgets too
+    check = FacingCheck(FixedProbability(0.9, 0.9, 0.001), FacingCheckParams(window=5))
+    assert not check.apply(image, one, ids[:1], 5.0)[1][0]
+    assert not check.apply(image, one, ids[:1], 5.1)[1][0]
+    assert check.apply(image, one, ids[:1], 1.0)[1][0]
 
 
 def test_check_skips_nobody_and_people_too_small_to_crop():
@@ -150,6 +163,7 @@ def test_check_skips_nobody_and_people_too_small_to_crop():
     out, ex = check.apply(image, people, None, 0.0)
     assert ex.tolist() == [False, False, True]
     assert (check.stats.persons, check.stats.scored, check.stats.exchanged) == (2, 1, 1)
+    assert len(check.stats.recent_s) == 1 and check.stats.median_ms() > 0
     np.testing.assert_array_equal(out[:2], people[:2])
 
 
@@ -209,6 +223,7 @@ def test_frame_processor_applies_the_check_and_survives_its_failure():
     proc.facing = FacingCheck(Broken())
     res = proc.process(Frame(2, image, 1))
     assert res.error is None and res.exchanged is None and proc.facing_failures == 1
+    assert proc.facing.stats.persons == 0       # a failed check counts nobody as checked
     assert signed_width(res.keypoints[0]) > 0 and 'facing check failed' in res.notes[-1]
 
 

@@ -79,12 +79,12 @@ def _clips(root: Path, split: str, limit: Optional[int] = None) -> List[Path]:
     from mocap_core.render.clip import iter_done
 
     clips = sorted(iter_done(root, split))
-    return clips[:limit] if limit else clips
+    return clips[:limit] if limit is not None else clips
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     from ..facing import CROP_SIZE
-    from .facing import TrainConfig, build_dataset, clip_crops, save, train
+    from .facing import TrainConfig, build_dataset, clip_crops, dataset_matches, save, train
 
     renders = Path(args.renders).expanduser()
     run_dir = Path(args.run_dir).expanduser()
@@ -95,7 +95,7 @@ def cmd_train(args: argparse.Namespace) -> int:
               '(make them with: mocap data render --split train)', file=sys.stderr)
         return 1
     data = run_dir / 'crops_train.npz'
-    if args.rebuild or not data.exists():
+    if args.rebuild or not dataset_matches(data, train_clips, args.step):
         counts = build_dataset(train_clips, data, step=args.step, progress=not args.quiet)
         print(f"facing: {counts['crops']} crops from {counts['clips']} training clips -> {data}")
     val = None
@@ -104,12 +104,16 @@ def cmd_train(args: argparse.Namespace) -> int:
 
         cut = [clip_crops(d, step=3) for d in val_clips]
         val = (np.concatenate([c.crops for c in cut]), np.concatenate([c.toward for c in cut]))
-    config = TrainConfig(**({'steps': args.steps} if args.steps else {}))
+    if args.steps is not None and args.steps < 1:
+        print('mocap train facing: --steps must be at least 1', file=sys.stderr)
+        return 2
+    config = TrainConfig(**({'steps': args.steps} if args.steps is not None else {}))
     t0 = time.time()
     net = train(data, run_dir, config, val=val, progress=not args.quiet)
     info = {'train_clips': len(train_clips), 'renders': str(renders),
             'crop_size': list(CROP_SIZE), 'seconds': round(time.time() - t0, 1),
-            'command': 'mocap train facing ' + ' '.join(sys.argv[3:])}
+            'command': f'mocap train facing --renders {renders} --step {args.step} '
+                       f'--steps {config.steps}'}
     import csv
     with open(run_dir / 'log.csv') as fh:
         rows = list(csv.DictReader(fh))
@@ -176,9 +180,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         root = Path(root).expanduser()
         clips = _clips(root, args.split, args.limit)
         if not clips:
-            print(f'mocap eval facing: no rendered clips in {root}/{args.split}',
-                  file=sys.stderr)
-            return 1
+            print(f'mocap eval facing: no rendered clips in {root}/{args.split}: skipped '
+                  '(mocap data render makes them)', file=sys.stderr)
+            continue
         r = evaluate_clips(clips, clf, params, progress=not args.quiet)
         reports[f'{root.name}/{args.split}'] = r
         print(f"{root.name}: {r['clips']} clips, network right front "
@@ -186,6 +190,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"leg swaps {r['swaps_before']['all']:.2f} -> {r['swaps_after']['all']:.2f} % "
               f"(back views {r['swaps_before']['back']:.2f} -> "
               f"{r['swaps_after']['back']:.2f} %)")
+    if not reports:
+        print('mocap eval facing: no rendered clips in any of the folders', file=sys.stderr)
+        return 1
     videos = {}
     wanted = ([(Path(v), k) for v, k in DEFAULT_VIDEOS if Path(v).exists()]
               if args.videos is None else

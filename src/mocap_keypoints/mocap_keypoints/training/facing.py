@@ -96,10 +96,20 @@ def clip_crops(clip_dir: Path, step: int = 1) -> ClipCrops:
                      np.array(width, dtype=np.float32))
 
 
+def dataset_matches(path: Path, clip_dirs: Sequence[Path], step: int) -> bool:
+    """Whether the crops file ``path`` was cut from exactly ``clip_dirs`` with ``step``."""
+    try:
+        with np.load(path) as z:
+            return (int(z['step']) == int(step)
+                    and z['clip_names'].tolist() == [Path(d).name for d in clip_dirs])
+    except (OSError, KeyError, ValueError):
+        return False
+
+
 def build_dataset(clip_dirs: Sequence[Path], out: Path, step: int = 3,
                   progress: bool = True) -> Dict[str, int]:
-    """Crops of all ``clip_dirs`` into one ``.npz`` (``crops``, ``toward``, ``clip``); returns
-    counts. Remade from the renders when missing (the caller decides)."""
+    """Crops of all ``clip_dirs`` into one ``.npz`` (``crops``, ``toward``, ``clip`` (index
+    into ``clip_names``), ``step``); returns counts."""
     from tqdm import tqdm
 
     crops, toward, clip = [], [], []
@@ -113,7 +123,8 @@ def build_dataset(clip_dirs: Sequence[Path], out: Path, step: int = 3,
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix('.tmp.npz')
     np.savez(tmp, crops=np.concatenate(crops), toward=np.concatenate(toward),
-             clip=np.concatenate(clip))
+             clip=np.concatenate(clip), step=np.int64(step),
+             clip_names=np.array([Path(d).name for d in clip_dirs]))
     tmp.replace(out)
     return {'clips': len(clip_dirs), 'crops': int(sum(len(c) for c in crops))}
 
@@ -133,8 +144,8 @@ class TrainConfig:
 
 def augment(x, generator):
     """A batch (B, 3, H, W) in [0, 1], randomly flipped left-right, colour channels permuted,
-    brightness scaled by 0.6-1.4, each channel shifted by up to +-0.1, and shifted by up to
-    4 x 6 pixels (the same shift for the batch)."""
+    brightness scaled by 0.6-1.4, each channel shifted by up to +-0.1, and rolled by up to
+    4 x 6 pixels (the same shift for the batch; what leaves one side comes in at the other)."""
     import torch
 
     b = len(x)
@@ -185,9 +196,12 @@ def train(data: Path, run_dir: Path, config: TrainConfig,
     torch.manual_seed(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
     with np.load(data) as z:
-        keep = np.abs(z['toward']) > config.margin
-        crops = z['crops'][keep]
-        labels = (z['toward'][keep] > 0).astype(np.float32)
+        toward = z['toward']
+        keep = np.abs(toward) > config.margin
+        crops = z['crops']
+        if not keep.all():
+            crops = crops[keep]
+        labels = (toward[keep] > 0).astype(np.float32)
     log(f'facing: {len(crops)} training crops ({labels.mean() * 100:.0f} % facing the '
         'camera)')
     x_all = torch.from_numpy(crops)  # uint8, converted per batch (keeps memory 1 byte/px)
@@ -368,4 +382,4 @@ def video_check(path: Path, classifier, params: FacingCheckParams,
 
 __all__ = ['ClipCrops', 'TrainConfig', 'VIEWS', 'augment', 'body_toward_camera',
            'build_dataset', 'check_clip', 'clip_crops', 'evaluate_clips', 'probabilities',
-           'save', 'train', 'video_check', 'view_accuracy']
+           'dataset_matches', 'save', 'train', 'video_check', 'view_accuracy']
