@@ -209,7 +209,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     plain = {name: {k: v for k, v in r.items() if not isinstance(v, np.ndarray)}
              for name, r in videos.items()}
-    (out / 'report.json').write_text(json.dumps({'weights': str(clf.path), 'info': clf.info,
+    weights = (str(clf.path.relative_to(REPO)) if clf.path.is_relative_to(REPO)
+               else str(clf.path))
+    (out / 'report.json').write_text(json.dumps({'weights': weights, 'info': clf.info,
                                                  'reports': reports, 'videos': plain},
                                                 indent=1))
     (out / 'report.md').write_text(_report_md(reports, clf.path.name, plain))
