@@ -165,7 +165,7 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
         processes, ros2_cmd, 'keypoints_video', 'source:=video', f'path:={CLIP}',
         'realtime:=false', 'publish_annotated:=true', f'calibration_file:={calib}',
         'wait_for_subscribers:=1', 'wait_timeout_s:=30.0', 'frame_id:=taiji_camera',
-        'facing_check:=true')
+        'facing_check:=true', 'mirror_check:=true')
     # The node starts when it sees the keypoint subscriber; subscribe to the keypoints only
     # once the debug-image publisher (its own participant) has been discovered too.
     assert peer.spin(60, until=lambda: peer.node.count_publishers(
@@ -212,6 +212,12 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
     assert re.fullmatch(r'\d+ of \d+ persons scored.*', values['facing_exchanged']), values
     assert int(values['facing_exchanged'].split()[2]) >= 0.8 * n
     assert values['facing_failures'] == '0' and float(values['facing_ms_median']) > 0
+    # the mirror check read every frame mirrored and found the performer there
+    assert values['mirror_check'] == 'on' and values['mirror_failures'] == '0', values
+    m = re.fullmatch(r'(\d+) of (\d+) persons labelled as facing the camera \((\d+) found in '
+                     r'the mirrored frame\)', values['mirror_exchanged'])
+    assert m and int(m.group(2)) >= 0.8 * n and int(m.group(3)) >= 0.8 * int(m.group(2)), values
+    assert float(values['mirror_detector_ms_median']) > 0
 
 
 def test_facing_check_with_unusable_weights_is_off_and_the_node_runs(processes, ros2_cmd, peer,

@@ -88,6 +88,7 @@ from mocap_core.streams import StampOrder
 
 from .detector import create_detector
 from .facing import FacingCheck, FacingCheckParams, FacingClassifier
+from .mirror_check import MirrorCheck, MirrorCheckParams
 from .intrinsics import IntrinsicsProvider
 from .pipeline import FrameProcessor, FrameResult, select_persons  # noqa: F401 (re-exported)
 from .sources import SOURCE_KINDS, Frame, SourceError, open_source, resolve_kind
@@ -184,6 +185,15 @@ PARAMETERS = (
               'difference of the bone lengths (median over the bone groups) for a person to '
               'be named as one who left; exactly one remembered person may qualify',
               min_value=0.0, max_value=0.5, read_only=True),
+    ParamSpec('mirror_check', False, 'Check each person\'s left and right labels with a second '
+              'detector on the mirrored frames (mocap_keypoints.mirror_check): a person the '
+              'detector labels as facing the camera whom the mirrored reading sees facing '
+              'away gets left and right exchanged. A second detector run per frame (about '
+              'twice the detector\'s time); image sources only (docs/keypoints.md)',
+              read_only=True),
+    ParamSpec('mirror_min_width', 0.25, 'With mirror_check: both readings must face opposite '
+              'ways by more than this (left minus right shoulder and hip in the image, over '
+              'the torso length)', min_value=0.0, read_only=True),
     ParamSpec('facing_check', False, 'Check each person\'s left and right labels against '
               'which way they face in the image (a small network on the person\'s crop, '
               'mocap_keypoints.facing): a person the detector labels as facing the camera '
@@ -388,24 +398,8 @@ class KeypointsNode(Node):
             name = p['detector']
             if name == 'auto':
                 name = 'blazepose_multi' if p['max_persons'] > 1 else 'blazepose'
-            if name == 'blazepose_multi':
-                detector = create_detector(
-                    name, max_persons=p['max_persons'],
-                    detection_interval=p['detection_interval'] if p['tracking'] else 1,
-                    max_detection_interval=3 * p['detection_interval'] if p['tracking'] else 1,
-                    still_detection_interval=(p['still_detection_interval'] if p['tracking']
-                                              else 0),
-                    min_person_px=p['min_person_height_px'],
-                    min_detection_confidence=p['min_detection_confidence'],
-                    min_tracking_confidence=p['min_tracking_confidence'],
-                    threads=p['landmark_threads'],
-                    whole_frame_min_height=p['whole_frame_min_height'],
-                    whole_frame_leave_height=0.75 * p['whole_frame_min_height'])
-            else:
-                detector = create_detector(
-                    name, tracking=p['tracking'],
-                    min_detection_confidence=p['min_detection_confidence'],
-                    min_tracking_confidence=p['min_tracking_confidence'])
+            self._make_detector = lambda: self._new_detector(name, p)
+            detector = self._make_detector()
             self.detector_name = detector.name
         self.detector = detector
         motion = None
@@ -433,7 +427,8 @@ class KeypointsNode(Node):
                                         restart_after_s=p['restart_after_s'],
                                         camera_motion=motion, tracker=self.tracker,
                                         appearance=p['id_by_appearance'],
-                                        facing=self._facing_check(p))
+                                        facing=self._facing_check(p),
+                                        mirror=self._mirror_check(p))
         self.pub_kp = self.create_publisher(PointCloud2, topics.KEYPOINTS, SENSOR_QOS)
         self.pub_tracked = self.create_publisher(UInt32MultiArray, topics.BODIES_TRACKED,
                                                  STREAM_QOS)
@@ -829,6 +824,41 @@ class KeypointsNode(Node):
         self.floors_received += 1
         self.processor.set_floor(n, float(-n @ b), stamp_to_ns(msg.header.stamp) * 1e-9)
 
+    @staticmethod
+    def _new_detector(name: str, p):
+        """A detector ``name`` with the node's settings (the main one, and the mirror
+        check's second one)."""
+        if name == 'blazepose_multi':
+            return create_detector(
+                name, max_persons=p['max_persons'],
+                detection_interval=p['detection_interval'] if p['tracking'] else 1,
+                max_detection_interval=3 * p['detection_interval'] if p['tracking'] else 1,
+                still_detection_interval=(p['still_detection_interval'] if p['tracking']
+                                          else 0),
+                min_person_px=p['min_person_height_px'],
+                min_detection_confidence=p['min_detection_confidence'],
+                min_tracking_confidence=p['min_tracking_confidence'],
+                threads=p['landmark_threads'],
+                whole_frame_min_height=p['whole_frame_min_height'],
+                whole_frame_leave_height=0.75 * p['whole_frame_min_height'])
+        return create_detector(name, tracking=p['tracking'],
+                               min_detection_confidence=p['min_detection_confidence'],
+                               min_tracking_confidence=p['min_tracking_confidence'])
+
+    def _mirror_check(self, p) -> Optional[MirrorCheck]:
+        """The mirror check when ``mirror_check`` is on and the source has images."""
+        self.mirror_status = 'off (mirror_check false)'
+        if not p['mirror_check']:
+            return None
+        if self.kind == 'openpose_json':
+            self.mirror_status = 'off (no images: OpenPose source)'
+            self.get_logger().warn('mirror_check needs images; the OpenPose source has none')
+            return None
+        self.mirror_status = 'on'
+        self.get_logger().info('mirror check on: a second detector reads the mirrored frames')
+        return MirrorCheck(self._make_detector,
+                           MirrorCheckParams(min_width=p['mirror_min_width']))
+
     def _facing_check(self, p) -> Optional[FacingCheck]:
         """The facing check when ``facing_check`` is on and the weights load; otherwise
         None (an unreadable weights file is logged and the node runs without the check)."""
@@ -865,6 +895,16 @@ class KeypointsNode(Node):
         self.diag.set_value('false_detections_ignored', ts.blips)
         self.diag.set_value('persons_ignored', ts.ignored)
         self.diag.set_value('facing_check', self.facing_status)
+        self.diag.set_value('mirror_check', self.mirror_status)
+        mc = self.processor.mirror
+        if mc is not None:
+            ms = mc.stats
+            self.diag.set_value('mirror_exchanged', f'{ms.exchanged} of {ms.candidates} persons '
+                                f'labelled as facing the camera ({ms.matched} found in the '
+                                'mirrored frame)')
+            m = ms.median_ms()
+            self.diag.set_value('mirror_detector_ms_median', 'nan' if np.isnan(m) else f'{m:.2f}')
+            self.diag.set_value('mirror_failures', self.processor.mirror_failures)
         fc = self.processor.facing
         if fc is not None:
             fs = fc.stats
@@ -919,6 +959,10 @@ class KeypointsNode(Node):
             elif not _within(self.detector.close, 5.0):
                 print('[keypoints] closing the detector took more than 5 s; going on',
                       file=sys.stderr)
+            elif self.processor.mirror is not None and not _within(
+                    self.processor.mirror.close, 5.0):
+                print('[keypoints] closing the mirror check\'s detector took more than 5 s; '
+                      'going on', file=sys.stderr)
         if self._annotated_node is not None:
             context = self._annotated_node.context
             self._annotated_node.destroy_node()

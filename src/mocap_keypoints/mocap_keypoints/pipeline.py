@@ -7,9 +7,11 @@ detections), give the persons their identities with a
 :class:`~mocap_core.tracking.PersonTracker` (rows ordered longest tracked first, at most
 ``max_persons``; a frame without anybody gives one all-zero row with id 0, so its cloud's
 confidences are all 0) or, without a tracker, keep the ``max_persons`` most confident
-persons (padding with all-zero persons), pick the
-intrinsics for the image size, undistort the keypoints when the calibration has lens
-distortion, estimate the camera's motion from the image background (``camera_motion``,
+persons (padding with all-zero persons), check the persons' left and right labels against a
+second detector's reading of the mirrored frame (``mirror``, :mod:`mocap_keypoints.mirror_check`)
+and against which way they face (``facing``, :mod:`mocap_keypoints.facing`; both off unless
+given), pick the intrinsics for the image size, undistort the keypoints when the calibration
+has lens distortion, estimate the camera's motion from the image background (``camera_motion``,
 :mod:`mocap_core.camera_motion`) and draw the annotated debug image if asked.
 """
 
@@ -30,6 +32,7 @@ from mocap_core.tracking import PersonTracker
 
 from .detector import Detector
 from .facing import FacingCheck
+from .mirror_check import MirrorCheck
 from .intrinsics import FrameIntrinsics, IntrinsicsProvider, distortion_supported, \
     undistort_keypoints
 from .sources import Frame, check_image
@@ -132,8 +135,13 @@ class FrameProcessor:
                  restart_after_s: float = 1.0,
                  camera_motion: Optional[CameraMotionParams] = None,
                  tracker: Optional[PersonTracker] = None, appearance: bool = True,
-                 facing: Optional[FacingCheck] = None) -> None:
+                 facing: Optional[FacingCheck] = None,
+                 mirror: Optional[MirrorCheck] = None) -> None:
         self.detector = detector
+        #: the left/right label check by a second detector on the mirrored frames
+        self.mirror = mirror
+        #: frames whose mirror check failed (an exception; the frame goes on unchecked)
+        self.mirror_failures = 0
         #: the left/right label check by the person's facing (mocap_keypoints.facing)
         self.facing = facing
         #: frames whose facing check failed (an exception; the frame goes on unchecked)
@@ -262,12 +270,22 @@ class FrameProcessor:
                 res.ids = np.zeros(1, dtype=np.int64)
         else:
             raw = select_persons(people, self.max_persons)
+        if self.mirror is not None and image is not None:
+            if restart:
+                self.mirror.reset()
+            try:
+                raw, ex = self.mirror.apply(image, raw)
+                res.exchanged = ex if res.exchanged is None else res.exchanged | ex
+            except Exception as exc:  # noqa: BLE001 - the check is optional; the frame is not
+                self.mirror_failures += 1
+                res.notes.append(f'mirror check failed ({type(exc).__name__}: {exc}); the '
+                                 'frame goes on unchecked')
         if self.facing is not None and image is not None:
             if restart:
                 self.facing.reset()
             try:
-                raw, res.exchanged = self.facing.apply(image, raw, res.ids,
-                                                       frame.stamp_ns * 1e-9)
+                raw, ex = self.facing.apply(image, raw, res.ids, frame.stamp_ns * 1e-9)
+                res.exchanged = ex if res.exchanged is None else res.exchanged | ex
             except Exception as exc:  # noqa: BLE001 - the check is optional; the frame is not
                 self.facing_failures += 1
                 res.notes.append(f'facing check failed ({type(exc).__name__}: {exc}); the '
