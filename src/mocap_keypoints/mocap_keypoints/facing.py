@@ -30,6 +30,7 @@ from typing import Deque, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from mocap_core.metrics import LatencyStats
 from mocap_core.skeleton import KEYPOINT_INDEX, KEYPOINT_MIRROR, NUM_KEYPOINTS
 
 #: Crop size the network reads: width, height (pixels).
@@ -221,12 +222,8 @@ class FacingStats:
     persons: int = 0        # persons checked (frames where the check ran to the end)
     scored: int = 0         # ... with a crop the network scored
     exchanged: int = 0      # ... whose left and right were exchanged
-    #: the check's time per frame with someone to score (crops and network), s: the last 100
-    recent_s: Deque[float] = field(default_factory=lambda: collections.deque(maxlen=100))
-
-    def median_ms(self) -> float:
-        """Median time of the recent frames, ms (NaN before the first)."""
-        return float(np.median(self.recent_s) * 1e3) if self.recent_s else float('nan')
+    #: the check's time per frame with someone to score (crops and network), s
+    times: LatencyStats = field(default_factory=lambda: LatencyStats(100))
 
 
 class FacingCheck:
@@ -287,7 +284,7 @@ class FacingCheck:
                 rows.append(r)
         probs = self.classifier.probabilities(np.stack(crops)) if crops else np.zeros(0)
         if crops:
-            self.stats.recent_s.append(time.perf_counter() - t0)
+            self.stats.times.add(time.perf_counter() - t0)
         self.stats.persons += present
         self.stats.scored += len(rows)
         p = self.params

@@ -24,13 +24,13 @@ run on every frame.
 
 from __future__ import annotations
 
-import collections
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Deque, Optional, Tuple
+from typing import Callable, Optional, Tuple
 
 import numpy as np
 
+from mocap_core.metrics import LatencyStats
 from mocap_core.skeleton import KEYPOINT_MIRROR, NUM_KEYPOINTS
 
 from .facing import signed_width
@@ -84,12 +84,8 @@ class MirrorCheckStats:
     candidates: int = 0      # persons whose labels faced the camera
     matched: int = 0         # ... found in the mirrored reading
     exchanged: int = 0       # ... whose left and right were exchanged
-    #: the mirrored detector's time per frame, s: the last 100
-    recent_s: Deque[float] = field(default_factory=lambda: collections.deque(maxlen=100))
-
-    def median_ms(self) -> float:
-        """Median time of the recent frames, ms (NaN before the first)."""
-        return float(np.median(self.recent_s) * 1e3) if self.recent_s else float('nan')
+    #: the mirrored detector's time per frame, s
+    times: LatencyStats = field(default_factory=lambda: LatencyStats(100))
 
 
 class MirrorCheck:
@@ -132,7 +128,7 @@ class MirrorCheck:
         exchanged = np.zeros(len(people), dtype=bool)
         t0 = time.perf_counter()
         found = self.detector.detect(cv2.flip(image, 1))
-        self.stats.recent_s.append(time.perf_counter() - t0)
+        self.stats.times.add(time.perf_counter() - t0)
         self.stats.frames += 1
         other = mirrored_back(found, image.shape[1]) if len(found) else np.zeros(
             (0, NUM_KEYPOINTS, 3))

@@ -902,7 +902,7 @@ class KeypointsNode(Node):
             self.diag.set_value('mirror_exchanged', f'{ms.exchanged} of {ms.candidates} persons '
                                 f'labelled as facing the camera ({ms.matched} found in the '
                                 'mirrored frame)')
-            m = ms.median_ms()
+            m = ms.times.summary()['median'] * 1e3
             self.diag.set_value('mirror_detector_ms_median', 'nan' if np.isnan(m) else f'{m:.2f}')
             self.diag.set_value('mirror_failures', self.processor.mirror_failures)
         fc = self.processor.facing
@@ -911,7 +911,7 @@ class KeypointsNode(Node):
             self.diag.set_value('facing_exchanged', f'{fs.exchanged} of {fs.scored} persons '
                                 'scored' + (f' ({fs.persons - fs.scored} too small or hidden)'
                                             if fs.persons > fs.scored else ''))
-            m = fs.median_ms()
+            m = fs.times.summary()['median'] * 1e3
             self.diag.set_value('facing_ms_median', 'nan' if np.isnan(m) else f'{m:.2f}')
             self.diag.set_value('facing_failures', self.processor.facing_failures)
         if self.pub_motion is not None:

@@ -163,7 +163,7 @@ def test_check_skips_nobody_and_people_too_small_to_crop():
     out, ex = check.apply(image, people, None, 0.0)
     assert ex.tolist() == [False, False, True]
     assert (check.stats.persons, check.stats.scored, check.stats.exchanged) == (2, 1, 1)
-    assert len(check.stats.recent_s) == 1 and check.stats.median_ms() > 0
+    assert len(check.stats.times) == 1 and check.stats.times.summary()['median'] > 0
     np.testing.assert_array_equal(out[:2], people[:2])
 
 
