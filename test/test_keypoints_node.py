@@ -218,6 +218,8 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
                      r'the mirrored frame\)', values['mirror_exchanged'])
     assert m and int(m.group(2)) >= 0.8 * n and int(m.group(3)) >= 0.8 * int(m.group(2)), values
     assert float(values['mirror_detector_ms_median']) > 0
+    read, frames = (int(x) for x in values['mirror_frames_read'].split(' of '))
+    assert 0 < read <= frames, values
 
 
 def test_facing_check_with_unusable_weights_is_off_and_the_node_runs(processes, ros2_cmd, peer,

@@ -18,8 +18,11 @@ the one that faces away is taken:
 4. if that reading faces away by more than ``min_width``, the person's left and right
    keypoints are exchanged.
 
-A person whose labels face away, or side on, is never changed. The cost is a second detector
-run on every frame.
+A person whose labels face away, or side on, is never changed, so a frame where nobody's
+labels face the camera needs no second reading: with ``only_when_needed`` the second detector
+runs only on the other frames, and starts afresh (forgets whom it tracked) after a frame it
+skipped. By default it reads every frame (its tracking then never has gaps; measured a little
+better). The cost is a second detector run per frame read.
 """
 
 from __future__ import annotations
@@ -74,6 +77,9 @@ class MirrorCheckParams:
     min_width: float = 0.25
     #: the two readings are one person when their points lie this close (share of height)
     match_fraction: float = 0.1
+    #: read the mirrored frame only when someone's labels face the camera (else every frame:
+    #: measured better, docs/keypoints.md)
+    only_when_needed: bool = False
 
 
 @dataclass
@@ -81,6 +87,7 @@ class MirrorCheckStats:
     """Counts since the check started, and its recent times (diagnostics)."""
 
     frames: int = 0          # frames checked
+    read: int = 0            # ... on which the mirrored frame was read
     candidates: int = 0      # persons whose labels faced the camera
     matched: int = 0         # ... found in the mirrored reading
     exchanged: int = 0       # ... whose left and right were exchanged
@@ -102,10 +109,12 @@ class MirrorCheck:
         self.detector = make_detector()
         self.params = params or MirrorCheckParams()
         self.stats = MirrorCheckStats()
+        self._skipped = False
 
     def reset(self) -> None:
         """A new stream: the mirrored detector forgets whom it tracked."""
         self.detector.reset()
+        self._skipped = False
 
     def close(self) -> None:
         self.detector.close()
@@ -126,17 +135,24 @@ class MirrorCheck:
 
         people = np.asarray(people)
         exchanged = np.zeros(len(people), dtype=bool)
+        p = self.params
+        self.stats.frames += 1
+        candidates = [r for r in range(len(people))
+                      if np.any(people[r, :, 2] > 0) and signed_width(people[r]) > p.min_width]
+        self.stats.candidates += len(candidates)
+        if not candidates and p.only_when_needed:
+            self._skipped = True
+            return people, exchanged
+        if self._skipped:       # frames were skipped: what it tracked is stale
+            self.detector.reset()
+            self._skipped = False
         t0 = time.perf_counter()
         found = self.detector.detect(cv2.flip(image, 1))
         self.stats.times.add(time.perf_counter() - t0)
-        self.stats.frames += 1
+        self.stats.read += 1
         other = mirrored_back(found, image.shape[1]) if len(found) else np.zeros(
             (0, NUM_KEYPOINTS, 3))
-        p = self.params
-        for r in range(len(people)):
-            if not np.any(people[r, :, 2] > 0) or not signed_width(people[r]) > p.min_width:
-                continue
-            self.stats.candidates += 1
+        for r in candidates:
             if not len(other):
                 continue
             d = [same_person_distance(people[r], o) for o in other]

@@ -108,7 +108,7 @@ def test_check_exchanges_where_the_mirrored_reading_faces_away():
         out, ex = check.apply(image, facing[None])
         assert not ex.any() and signed_width(out[0]) > 0
     s = check.stats
-    assert (s.frames, s.candidates, s.matched, s.exchanged) == (3, 3, 2, 1)
+    assert (s.frames, s.read, s.candidates, s.matched, s.exchanged) == (3, 3, 3, 2, 1)
     assert len(s.times) == 3 and s.times.summary()['median'] >= 0
 
 
@@ -119,11 +119,23 @@ def test_check_leaves_people_facing_away_side_on_or_absent_alone():
     for n in ('shoulder', 'hip'):
         side[KEYPOINT_INDEX[f'left_{n}'], 0] = side[KEYPOINT_INDEX[f'right_{n}'], 0] + 5.0
     for person in (away, side, np.zeros((NUM_KEYPOINTS, 3))):
-        det = Scripted([_as_seen_mirrored(person[MIR])[None]])
-        check = MirrorCheck(lambda d=det: d)
-        out, ex = check.apply(image, person[None])
-        assert not ex.any() and out is not None
-        assert check.stats.candidates == 0
+        for every_frame in (False, True):
+            det = Scripted([_as_seen_mirrored(person[MIR])[None]])
+            check = MirrorCheck(lambda d=det: d, MirrorCheckParams(
+                only_when_needed=not every_frame))
+            assert MirrorCheckParams().only_when_needed is False   # every frame by default
+            out, ex = check.apply(image, person[None])
+            assert not ex.any() and out is not None
+            assert check.stats.candidates == 0
+            # nobody to check: the mirrored frame is read only when asked to read every frame
+            assert det.calls == int(every_frame) == check.stats.read
+    # after frames it skipped, the second detector starts afresh (its tracking is stale)
+    facing = _person(True)
+    det = Scripted([_as_seen_mirrored(facing)[None]])
+    check = MirrorCheck(lambda: det, MirrorCheckParams(only_when_needed=True))
+    for person in (facing, facing, away, away, facing):
+        check.apply(image, person[None])
+    assert (det.calls, det.resets, check.stats.read, check.stats.frames) == (3, 1, 3, 5)
     # nobody found in the mirrored frame: nothing to go by
     check = MirrorCheck(lambda: Scripted([np.zeros((0, NUM_KEYPOINTS, 3))]))
     assert not check.apply(image, _person(True)[None])[1].any()
