@@ -415,6 +415,42 @@ def test_shipped_facing_network_tells_which_way_a_rendered_person_faces(rendered
     assert right.mean() >= 0.8, (prob, crops.toward[clear])
 
 
+def test_train_and_eval_facing_commands_on_a_rendered_clip(rendered, tmp_path, capsys):
+    """``mocap train facing`` and ``mocap eval facing`` end to end on the rendered clip (as a
+    training and a validation clip at once: a check of the commands, not of the model): crops
+    cut and cached, weights written with their figures, the report written; a rerun reuses
+    the crops."""
+    from mocap_core.cli.mocap import main
+    from mocap_keypoints.facing import FacingClassifier
+
+    root, out, _, _ = rendered
+    renders = tmp_path / 'renders'
+    (renders / 'train').mkdir(parents=True)
+    (renders / 'train' / out.name).symlink_to(out)
+    (renders / 'validation').symlink_to(root / 'validation')
+    run = tmp_path / 'run'
+    assert main(['train', 'facing', '--renders', str(renders), '--steps', '3', '--step', '4',
+                 '--run-dir', str(run), '--quiet']) == 0
+    clf = FacingClassifier(run / 'facing.pt')
+    assert clf.info['train_clips'] == 1 and clf.info['config']['steps'] == 3
+    assert '--step 4' in clf.info['command'] and (run / 'log.csv').exists()
+    stamp = (run / 'crops_train.npz').stat().st_mtime_ns
+    assert main(['train', 'facing', '--renders', str(renders), '--steps', '1', '--step', '4',
+                 '--run-dir', str(run), '--quiet']) == 0
+    assert (run / 'crops_train.npz').stat().st_mtime_ns == stamp      # crops reused
+    assert main(['train', 'facing', '--renders', str(renders), '--steps', '0',
+                 '--run-dir', str(run), '--quiet']) == 2
+    report = tmp_path / 'report'
+    assert main(['eval', 'facing', '--weights', str(run / 'facing.pt'), '--renders',
+                 str(renders), str(tmp_path / 'missing'), '--videos', '--out', str(report),
+                 '--quiet']) == 0
+    assert 'no rendered clips' in capsys.readouterr().err            # the missing one skipped
+    data = json.loads((report / 'report.json').read_text())
+    assert list(data['reports']) == ['renders/validation'] and data['videos'] == {}
+    assert data['reports']['renders/validation']['clips'] == 1
+    assert '| renders/validation | 1 |' in (report / 'report.md').read_text()
+
+
 def test_eval_video_scores_the_pipeline_on_a_rendered_clip(rendered, tmp_path, capsys):
     """mocap eval video from the recorded detections and from the video itself: every stage
     is scored, and the keypoint node finds the same keypoints the render recorded."""
