@@ -136,3 +136,30 @@ def textured_floor_view(R_wc, C, K, size=(640, 480), seed: int = 3):
 
 
 _FLOOR_TEXTURES: Dict[tuple, Any] = {}
+
+
+def upright_keypoints(facing_camera: bool = True, cx: float = 320.0, top: float = 60.0,
+                      height: float = 300.0, conf: float = 0.9):
+    """(23, 3) image keypoints (u, v px, confidence) of an upright person ``height`` px tall
+    from ``top``, centred on ``cx``: the left points on the image's right when
+    ``facing_camera`` (labels facing the camera), else on its left; shoulders at 0.2 and hips
+    at 0.5 of the height."""
+    import numpy as np
+
+    from .skeleton import KEYPOINT_INDEX, NUM_KEYPOINTS
+
+    kp = np.zeros((NUM_KEYPOINTS, 3))
+    kp[:, 0] = cx
+    kp[:, 1] = np.linspace(top, top + height, NUM_KEYPOINTS)
+    kp[:, 2] = conf
+    s = 1.0 if facing_camera else -1.0
+    for name, i in KEYPOINT_INDEX.items():
+        if name.startswith('left_'):
+            kp[i, 0] = cx + s * 0.12 * height
+        elif name.startswith('right_'):
+            kp[i, 0] = cx - s * 0.12 * height
+    for part, at in (('shoulder', 0.2), ('hip', 0.5)):
+        kp[[KEYPOINT_INDEX[f'left_{part}'], KEYPOINT_INDEX[f'right_{part}']], 1] = \
+            top + at * height
+    return kp
+

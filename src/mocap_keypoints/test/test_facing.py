@@ -11,6 +11,7 @@ import pytest
 
 from mocap_core.checkpoint import WeightsError
 from mocap_core.skeleton import KEYPOINT_INDEX, KEYPOINT_MIRROR, NUM_KEYPOINTS
+from mocap_core.testing import upright_keypoints
 from mocap_keypoints.facing import (CROP_MIN_CONFIDENCE, CROP_MIN_POINTS, CROP_SIZE,
                                     FacingCheck, FacingCheckParams, FacingClassifier,
                                     FacingNet, default_weights, person_crop, save_weights,
@@ -21,23 +22,7 @@ LS, RS = KEYPOINT_INDEX['left_shoulder'], KEYPOINT_INDEX['right_shoulder']
 LH, RH = KEYPOINT_INDEX['left_hip'], KEYPOINT_INDEX['right_hip']
 
 
-def _standing(facing_camera: bool = True, cx: float = 320.0, top: float = 60.0,
-              height: float = 300.0, conf: float = 0.9) -> np.ndarray:
-    """(23, 3) keypoints of an upright person: left on the image's right when facing the
-    camera (labels facing it), else on its left."""
-    kp = np.zeros((NUM_KEYPOINTS, 3))
-    kp[:, 0] = cx
-    kp[:, 1] = np.linspace(top, top + height, NUM_KEYPOINTS)
-    kp[:, 2] = conf
-    s = 1.0 if facing_camera else -1.0
-    for name, i in KEYPOINT_INDEX.items():
-        if name.startswith('left_'):
-            kp[i, 0] = cx + s * 0.12 * height
-        elif name.startswith('right_'):
-            kp[i, 0] = cx - s * 0.12 * height
-    kp[[LS, RS], 1] = top + 0.2 * height
-    kp[[LH, RH], 1] = top + 0.5 * height
-    return kp
+_standing = upright_keypoints
 
 
 class FixedProbability:

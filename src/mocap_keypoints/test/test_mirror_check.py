@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from mocap_core.skeleton import KEYPOINT_INDEX, KEYPOINT_MIRROR, NUM_KEYPOINTS
+from mocap_core.testing import upright_keypoints
 from mocap_keypoints.facing import signed_width
 from mocap_keypoints.mirror_check import (MirrorCheck, MirrorCheckParams, mirrored_back,
                                           same_person_distance)
@@ -21,19 +22,7 @@ W = 640
 def _person(facing_camera: bool, cx: float = 320.0, height: float = 300.0) -> np.ndarray:
     """(23, 3) an upright person, labels facing the camera or away, slightly asymmetric (the
     left arm raised) so that a labelling and its exchange differ in more than the sign."""
-    kp = np.zeros((NUM_KEYPOINTS, 3))
-    kp[:, 0] = cx
-    kp[:, 1] = np.linspace(60.0, 60.0 + height, NUM_KEYPOINTS)
-    kp[:, 2] = 0.9
-    s = 1.0 if facing_camera else -1.0
-    for name, i in KEYPOINT_INDEX.items():
-        if name.startswith('left_'):
-            kp[i, 0] = cx + s * 0.12 * height
-        elif name.startswith('right_'):
-            kp[i, 0] = cx - s * 0.12 * height
-    for n in ('shoulder', 'hip'):
-        kp[[KEYPOINT_INDEX[f'left_{n}'], KEYPOINT_INDEX[f'right_{n}']], 1] = \
-            60.0 + (0.2 if n == 'shoulder' else 0.5) * height
+    kp = upright_keypoints(facing_camera, cx=cx, top=60.0, height=height)
     kp[KEYPOINT_INDEX['left_wrist'], 1] = 30.0
     return kp
 
