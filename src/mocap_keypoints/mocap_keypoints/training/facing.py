@@ -262,6 +262,7 @@ def check_clip(clip_dir: Path, classifier, params: FacingCheckParams) -> Dict[st
     fps = float(gt['fps'])
     check = FacingCheck(_Recording(classifier), params)
     after = kp.copy()
+    prob = np.full(len(kp), np.nan)
     cap = cv2.VideoCapture(str(Path(clip_dir) / 'video.mp4'))
     try:
         for f in range(len(kp)):
@@ -271,23 +272,21 @@ def check_clip(clip_dir: Path, classifier, params: FacingCheckParams) -> Dict[st
             check.classifier.last = math.nan
             out, _ = check.apply(image, kp[f:f + 1], None, f / fps)
             after[f] = out[0]
-            check.classifier.frames.append(check.classifier.last)
+            prob[f] = check.classifier.last
     finally:
         cap.release()
-    prob = np.full(len(kp), np.nan)
-    prob[:len(check.classifier.frames)] = check.classifier.frames
     return {'view': np.asarray(gt['view']), 'before': detector_swaps(gt),
             'after': detector_swaps({**gt, 'keypoints': after}),
             'toward': body_toward_camera(gt['joints_camera']), 'prob': prob}
 
 
 class _Recording:
-    """A classifier that remembers its last probability (for :func:`check_clip`)."""
+    """A classifier that remembers its last probability (for :func:`check_clip` and
+    :func:`video_check`)."""
 
     def __init__(self, classifier) -> None:
         self.classifier = classifier
         self.last = math.nan
-        self.frames: List[float] = []
 
     def probabilities(self, crops):
         p = self.classifier.probabilities(crops)
