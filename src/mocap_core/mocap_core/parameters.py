@@ -89,7 +89,8 @@ def spin_node(make_node, args, name: str) -> int:
 
     Returns the exit code: 0 after Ctrl-C or an external shutdown; 2 with a one-line
     ``<name>: error: ...`` on stderr when building the node raises FileNotFoundError or
-    ValueError (missing or unreadable weights, a bad parameter). Once the node runs, an
+    ValueError (missing or unreadable weights, a bad parameter). The executor is the one
+    ``$MOCAP_EXECUTOR`` names (:mod:`mocap_core.executors`). Once the node runs, an
     exception that escapes a callback (nodes wrap theirs with :func:`mocap_core.guard.guarded`,
     so this is a last resort) is counted and logged like a guarded one, and spinning goes on:
     a frame that fails never stops the node. Always destroys the node and shuts down."""
@@ -98,6 +99,7 @@ def spin_node(make_node, args, name: str) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
+    from .executors import make_executor, spin_until
     from .guard import record_failure
 
     rclpy.init(args=args)
@@ -108,13 +110,9 @@ def spin_node(make_node, args, name: str) -> int:
         except (FileNotFoundError, ValueError) as exc:
             print(f'{name}: error: {exc}', file=sys.stderr)
             return 2
-        while rclpy.ok():
-            try:
-                rclpy.spin(node)
-            except (KeyboardInterrupt, ExternalShutdownException):
-                raise
-            except Exception as exc:  # noqa: BLE001 - the failing-callback policy
-                record_failure(node, 'callback', exc)
+        executor = make_executor()
+        executor.add_node(node)
+        spin_until(executor, rclpy.ok, lambda exc: record_failure(node, 'callback', exc))
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0

@@ -73,6 +73,7 @@ from mocap_core.checkpoint import WeightsError
 from mocap_core.tracking import PersonTracker, TrackerParams
 from mocap_core.data.openpose import infer_image_size
 from mocap_core.diagnostics import NodeDiagnostics
+from mocap_core.executors import make_executor, spin_until
 from mocap_core.guard import KeyedRateLimit, guarded, record_failure
 from mocap_core.metrics import LatencyStats, RateMeter
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested
@@ -310,20 +311,17 @@ def main(args: Optional[List[str]] = None) -> int:
         except (SourceError, FileNotFoundError, ValueError, ParameterException) as exc:
             print(f'keypoints: error: {exc}', file=sys.stderr)
             return 2
-        while rclpy.ok() and not node.done:
-            try:
-                rclpy.spin_once(node, timeout_sec=0.1)
-            except (KeyboardInterrupt, ExternalShutdownException):
-                raise
-            except Exception as exc:  # noqa: BLE001 - the failing-callback policy
-                record_failure(node, 'callback', exc)
+        executor = make_executor(guard_conditions=True)     # the detector thread's wake-up
+        executor.add_node(node)
+        spin_until(executor, lambda: rclpy.ok() and not node.done,
+                   lambda exc: record_failure(node, 'callback', exc))
         node._drain()
         reason, error = node.source_end or ('stopped', None)
         # Let the last messages leave before the publishers go away.
         for _ in range(5):
             if not rclpy.ok():
                 break
-            rclpy.spin_once(node, timeout_sec=0.1)
+            executor.spin_once(timeout_sec=0.1)
         if error is not None:
             node.get_logger().error(f'source failed: {reason} ({node.summary()})')
             return 1

@@ -440,7 +440,12 @@ def write_report(res: Dict, out: Path) -> None:
                    'Four `ros2 run` processes') + ', the video looped at 30 fps for '
                   f"{live['seconds']:.0f} s; latency = arrival time - image stamp, after a "
                   f"2 s warm-up. Look-ahead: {live['lookahead_frames']} frames = "
-                  f"{live['lookahead_budget_ms']:.0f} ms at the rate the keypoints arrived.",
+                  f"{live['lookahead_budget_ms']:.0f} ms at the rate the keypoints arrived. "
+                  'rclpy executor: ' + (
+                      'single-threaded (the keypoint node wakes it with a guard condition)'
+                      if c.get('composed') else
+                      c.get('env', {}).get('MOCAP_EXECUTOR', 'events') + ' (lifter, physics, '
+                      'GMR; the keypoint node: single-threaded)') + '.',
                   '',
                   '| stage topic | frames | rate (Hz) | latency median (ms) | p95 (ms) | '
                   'growth last-first quarter (ms) |', '|---|---|---|---|---|---|']
@@ -460,6 +465,10 @@ def write_report(res: Dict, out: Path) -> None:
                   '|---|---|---|']
         for n, v in live['nodes'].items():
             lines.append(f"| {n} | {v['cpu_percent']:.0f} | {v['peak_mib']:.0f} |")
+        stages3 = [live['nodes'][n]['cpu_percent'] for n in ('lifter', 'physics', 'gmr')
+                   if n in live['nodes']]
+        if len(stages3) == 3:
+            lines.append(f'| lifter + physics + gmr (goal <= 60) | **{sum(stages3):.0f}** | |')
         if not live.get('stopped_on_sigint', True):
             lines += ['', '**The first process did not stop within 15 s of SIGINT** (it was '
                       'killed).']
@@ -498,9 +507,16 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
         configs.insert(0, {'name': 'defaults, max_persons 1 (single-person detector)',
                            'lifter_mode': 'windowed', 'lookahead': 15,
                            'keypoints': {'max_persons': 1}})
+    if args.executor_baseline:
+        # the node processes with rclpy's SingleThreadedExecutor beside the default (the
+        # events executor: mocap_core.executors), same run
+        configs.insert(0, {'name': 'defaults, single-threaded executor (MOCAP_EXECUTOR='
+                                   'single_threaded)', 'lifter_mode': 'windowed',
+                           'lookahead': 15, 'env': {'MOCAP_EXECUTOR': 'single_threaded'}})
     for c in configs:
         print(f"live, {c['name']} ({args.seconds:.0f} s) ...", flush=True)
-        res['live'].append(bench_live(c, args.seconds, Path(args.video), work, env))
+        res['live'].append(bench_live(c, args.seconds, Path(args.video), work,
+                                      {**env, **c.get('env', {})}))
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_report(res, out)
@@ -525,6 +541,9 @@ def add_parser(sub) -> None:
     pp.add_argument('--single-person-baseline', action='store_true',
                     help='also run the live defaults with the single-person keypoint stage '
                     '(max_persons 1), first, for a side-by-side comparison')
+    pp.add_argument('--executor-baseline', action='store_true',
+                    help='also run the live defaults with the single-threaded rclpy executor '
+                    '(MOCAP_EXECUTOR=single_threaded), first, for a side-by-side comparison')
     pp.add_argument('--seconds', type=float, default=20.0, help='live run per configuration')
     pp.add_argument('--configs', type=int, default=2, choices=(0, 1, 2),
                     help='live configurations to run (defaults, then low latency)')

@@ -18,7 +18,9 @@ Usage::
 
 Node parameters: ``--param NODE.NAME=VALUE`` (NODE = keypoints, lifter, physics, gmr), or the
 usual ``--ros-args -p NODE:NAME:=VALUE`` after ``--``; ``--ros-args`` remappings apply to every
-node. A file source ends the run when it ends (the frames waiting for look-ahead are emitted
+node. The executor is rclpy's SingleThreadedExecutor (the keypoint node wakes it with a guard
+condition, which the events executor does not support: :mod:`mocap_core.executors`). A file
+source ends the run when it ends (the frames waiting for look-ahead are emitted
 first); Ctrl-C ends any run. Exit status: 0, 2 for a bad argument or a node that cannot start.
 """
 
@@ -43,8 +45,9 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
 
     import rclpy
     from rclpy.context import Context
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
 
+    from ..executors import make_executor, spin_until
     from ..guard import record_failure
     from ..inprocess import InProcessGraph
     from .process import _overrides
@@ -52,7 +55,7 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
     context = Context()
     rclpy.init(args=['--ros-args', *(ros_args or [])] if ros_args else None, context=context)
     nodes: Dict[str, Any] = {}
-    executor = SingleThreadedExecutor(context=context)
+    executor = make_executor(context=context, guard_conditions=True)   # keypoints: guard cond.
 
     def on_error(node: str, topic: str, exc: BaseException) -> None:
         target = nodes.get(node)
@@ -75,15 +78,10 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
             executor.add_node(node)
         source = nodes['keypoints']
         t0 = time.monotonic()
-        while context.ok() and not getattr(source, 'done', False):
-            if max_seconds and time.monotonic() - t0 > max_seconds:
-                break
-            try:
-                executor.spin_once(timeout_sec=0.1)
-            except (KeyboardInterrupt, ExternalShutdownException):
-                raise
-            except Exception as exc:  # noqa: BLE001 - the failing-callback policy
-                record_failure(source, 'callback', exc)
+        spin_until(executor,
+                   lambda: (context.ok() and not getattr(source, 'done', False)
+                            and not (max_seconds and time.monotonic() - t0 > max_seconds)),
+                   lambda exc: record_failure(source, 'callback', exc))
         drain = getattr(source, '_drain', None)
         if drain is not None:
             drain()
