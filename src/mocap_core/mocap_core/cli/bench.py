@@ -481,6 +481,14 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
     import random
     import tempfile
 
+    variants = []
+    for item in args.keypoints_variant:
+        pairs = dict(kv.split('=', 1) for kv in item.split(',') if '=' in kv)
+        if not pairs or len(pairs) != len(item.split(',')):
+            print(f'mocap bench pipeline: error: --keypoints-variant {item!r}: expected '
+                  'NAME=VALUE[,NAME=VALUE]', file=sys.stderr)
+            return 2
+        variants.append(pairs)
     _default_sigint()
     work = Path(tempfile.mkdtemp(prefix='mocap_bench_'))
     env = dict(os.environ)
@@ -507,6 +515,12 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
         configs.insert(0, {'name': 'defaults, max_persons 1 (single-person detector)',
                            'lifter_mode': 'windowed', 'lookahead': 15,
                            'keypoints': {'max_persons': 1}})
+    for pairs in variants:
+        # the live defaults with keypoint-node parameters changed (e.g. mirror_check=true),
+        # after the others, same run
+        configs.append({'name': 'defaults, keypoints ' + ', '.join(
+            f'{k}={v}' for k, v in pairs.items()), 'lifter_mode': 'windowed',
+            'lookahead': 15, 'keypoints': pairs})
     if args.executor_baseline:
         # the node processes with rclpy's SingleThreadedExecutor beside the default (the
         # events executor: mocap_core.executors), same run
@@ -544,6 +558,10 @@ def add_parser(sub) -> None:
     pp.add_argument('--executor-baseline', action='store_true',
                     help='also run the live defaults with the single-threaded rclpy executor '
                     '(MOCAP_EXECUTOR=single_threaded), first, for a side-by-side comparison')
+    pp.add_argument('--keypoints-variant', action='append', default=[],
+                    metavar='NAME=VALUE[,NAME=VALUE]',
+                    help='also run the live defaults with these keypoint-node parameters '
+                    '(e.g. mirror_check=true), last, in the same run (repeatable)')
     pp.add_argument('--seconds', type=float, default=20.0, help='live run per configuration')
     pp.add_argument('--configs', type=int, default=2, choices=(0, 1, 2),
                     help='live configurations to run (defaults, then low latency)')
