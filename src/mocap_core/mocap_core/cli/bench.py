@@ -405,7 +405,7 @@ def write_report(res: Dict, out: Path) -> None:
         '# Pipeline benchmark', '',
         f"Video of the live runs: `{res.get('video', '')}`.", '',
         f"{res['date']}, commit `{res['commit']}`, {res['machine']}. Command: "
-        '`mocap bench pipeline` (see `mocap_core/cli/bench.py`).', '',
+        f"`{res.get('command', 'mocap bench pipeline')}` (see `mocap_core/cli/bench.py`).", '',
     ]
     if off is not None:
         lines += [
@@ -479,6 +479,7 @@ def write_report(res: Dict, out: Path) -> None:
 def cmd_pipeline(args: argparse.Namespace) -> int:
     import platform
     import random
+    import shlex
     import tempfile
 
     variants = []
@@ -499,6 +500,9 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
     res = {'date': datetime.date.today().isoformat(), 'commit': _git_commit(),
            'machine': f'{platform.machine()}, {os.cpu_count()} CPU cores (shared)'}
     res['video'] = str(args.video)
+    if 'pipeline' in sys.argv:      # the options as given (reports say how they were made)
+        res['command'] = ' '.join(['mocap bench pipeline'] + [
+            shlex.quote(a) for a in sys.argv[sys.argv.index('pipeline') + 1:]])
     if args.repeat > 0:
         print('offline (mocap process) ...', flush=True)
         res['offline'] = bench_offline(Path(args.bag), args.repeat, work)
