@@ -95,6 +95,7 @@ class Idle(Node):
     def __init__(self):
         super().__init__('idle')
         self.diag = None
+        self.declare_parameter('gain', 2.5)
         self.once = self.create_timer(0.05, self.tick)
 
     def tick(self):
@@ -125,3 +126,44 @@ def test_a_node_process_stops_on_sigint_with_either_executor(tmp_path, kind):
             proc.kill()
     assert proc.returncode == 0, err
     assert 'Traceback' not in err, err
+
+
+@pytest.mark.parametrize('kind', ['events', 'single_threaded'])
+def test_a_node_process_answers_parameter_requests_with_either_executor(tmp_path, kind):
+    """`ros2 param get` works on a node spun by spin_node (its parameter services are served
+    by the executor like any other entity)."""
+    import os
+    import random
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter_client import AsyncParameterClient
+
+    domain = str(random.randint(1, 200))
+    script = tmp_path / 'idle.py'
+    script.write_text(IDLE_NODE_SCRIPT)
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, 'MOCAP_EXECUTOR': kind, 'ROS_DOMAIN_ID': domain,
+                                 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'})
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=int(domain))
+    try:
+        node = rclpy.create_node('param_client', context=ctx)
+        client = AsyncParameterClient(node, 'idle')
+        assert client.wait_for_services(timeout_sec=60)
+        future = client.get_parameters(['gain'])
+        executor = make_executor('single_threaded', context=ctx)
+        executor.add_node(node)
+        executor.spin_until_future_complete(future, timeout_sec=60)
+        assert future.done() and future.result().values[0].double_value == 2.5
+        node.destroy_node()
+    finally:
+        ctx.try_shutdown()
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 0
