@@ -10,9 +10,13 @@ process starts spinning:
   GMR processes need about a sixth less CPU at 30 frames/s for the same output (0.83x,
   median of seven pairs of runs).
 * ``single_threaded``: rclpy's ``SingleThreadedExecutor``, what ``rclpy.spin`` uses (the
-  fallback where the events executor is missing or misbehaves). A process whose nodes use
-  guard conditions (the keypoint node, ``mocap run``) always gets this one: the events
-  executor of the pinned rclpy does not support them.
+  fallback where the events executor is missing or misbehaves).
+
+A node that must wake its executor from another thread (the keypoint node's detector and
+source threads) calls ``node.executor.create_task(callback)``, which both executors run in
+their own thread. Guard conditions are not an option: the events executor of the pinned rclpy
+refuses any node that has one (``RuntimeError: Guard conditions not supported`` at the first
+``spin_once``, measured).
 
 An unknown value, or an rclpy without the events executor, falls back to
 ``single_threaded`` with a warning on stderr. Whatever the executor, the loop is
@@ -44,19 +48,13 @@ def executor_kind(value: Optional[str] = None) -> str:
     return kind
 
 
-def make_executor(kind: Optional[str] = None, context: Any = None,
-                  guard_conditions: bool = False) -> Any:
+def make_executor(kind: Optional[str] = None, context: Any = None) -> Any:
     """A new executor of ``kind`` (None: :func:`executor_kind`) for ``context`` (None: the
     default context). Falls back to ``SingleThreadedExecutor`` (warning on stderr) when the
-    events executor cannot be created.
-
-    ``guard_conditions``: a node of the process wakes its executor with a guard condition
-    (the keypoint node's detector thread does). The events executor of the pinned rclpy
-    refuses them (``RuntimeError: Guard conditions not supported``, measured), so such a
-    process gets ``SingleThreadedExecutor`` whatever ``kind`` says."""
+    events executor cannot be created."""
     from rclpy.executors import SingleThreadedExecutor
 
-    if executor_kind(kind) == 'events' and not guard_conditions:
+    if executor_kind(kind) == 'events':
         try:
             from rclpy.experimental import EventsExecutor
             return EventsExecutor(context=context)

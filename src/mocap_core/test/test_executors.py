@@ -34,16 +34,13 @@ def context():
     ctx.try_shutdown()
 
 
-def test_make_executor_kinds_and_guard_conditions(context):
+def test_make_executor_kinds(context):
     from rclpy.executors import SingleThreadedExecutor
 
     events = make_executor('events', context=context)
     assert not isinstance(events, SingleThreadedExecutor)
     assert type(events).__name__ == 'EventsExecutor'
     assert isinstance(make_executor('single_threaded', context=context),
-                      SingleThreadedExecutor)
-    # a process whose node wakes its executor with a guard condition (the keypoint node)
-    assert isinstance(make_executor('events', context=context, guard_conditions=True),
                       SingleThreadedExecutor)
 
 

@@ -311,7 +311,7 @@ def main(args: Optional[List[str]] = None) -> int:
         except (SourceError, FileNotFoundError, ValueError, ParameterException) as exc:
             print(f'keypoints: error: {exc}', file=sys.stderr)
             return 2
-        executor = make_executor(guard_conditions=True)     # the detector thread's wake-up
+        executor = make_executor()
         executor.add_node(node)
         spin_until(executor, lambda: rclpy.ok() and not node.done,
                    lambda exc: record_failure(node, 'callback', exc))
@@ -477,7 +477,10 @@ class KeypointsNode(Node):
         # a file read as fast as possible (realtime false) or a synchronous topic never drops
         self._live_pace = (self.kind == 'camera' or (self.kind == 'topic' and not p['synchronous'])
                            or (self.kind not in ('camera', 'topic') and p['realtime']))
-        self.guard = self.create_guard_condition(guarded(self, self._drain, 'results'))
+        # the worker and feeder threads hand their results to the executor's thread as tasks
+        # (Executor.create_task, thread-safe): a guard condition would do the same, but the
+        # events executor refuses nodes that have one (mocap_core.executors)
+        self._drain_task = guarded(self, self._drain, 'results')
         self.worker = LatestWorker(self.processor.process, self._on_result).start()
         self.feeder: Optional[SourceFeeder] = None
         self.source_end: Optional[Tuple[str, Optional[BaseException]]] = None
@@ -562,7 +565,7 @@ class KeypointsNode(Node):
 
     def _on_source_end(self, reason: str, error: Optional[BaseException]) -> None:
         self.source_end = (reason, error)  # feeder thread
-        self.guard.trigger()
+        self._wake()
 
     # --- topic source ------------------------------------------------------------------
     def _on_image_from(self, sub, msg) -> None:
@@ -708,7 +711,15 @@ class KeypointsNode(Node):
     # --- results -----------------------------------------------------------------------
     def _on_result(self, frame, result, error, seconds) -> None:
         self.results.append((frame, result, error, seconds))  # worker thread
-        self.guard.trigger()
+        self._wake()
+
+    def _wake(self) -> None:
+        """From the worker or feeder thread: have the executor that spins this node run
+        :meth:`_drain` in its own thread. Not spun yet: the results wait for the next wake
+        (or the final drain)."""
+        executor = self.executor
+        if executor is not None:
+            executor.create_task(self._drain_task)
 
     def _drain(self) -> None:
         # only the results that are here now: a detector faster than the executor (in one

@@ -18,10 +18,10 @@ Usage::
 
 Node parameters: ``--param NODE.NAME=VALUE`` (NODE = keypoints, lifter, physics, gmr), or the
 usual ``--ros-args -p NODE:NAME:=VALUE`` after ``--``; ``--ros-args`` remappings apply to every
-node. The executor is rclpy's SingleThreadedExecutor (the keypoint node wakes it with a guard
-condition, which the events executor does not support: :mod:`mocap_core.executors`). A file
-source ends the run when it ends (the frames waiting for look-ahead are emitted
-first); Ctrl-C ends any run. Exit status: 0, 2 for a bad argument or a node that cannot start.
+node. The executor is the one ``$MOCAP_EXECUTOR`` names (:mod:`mocap_core.executors`; default
+rclpy's events executor). A file source ends the run when it ends (the frames waiting for
+look-ahead are emitted first); Ctrl-C ends any run. Exit status: 0, 2 for a bad argument or
+a node that cannot start.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
     context = Context()
     rclpy.init(args=['--ros-args', *(ros_args or [])] if ros_args else None, context=context)
     nodes: Dict[str, Any] = {}
-    executor = make_executor(context=context, guard_conditions=True)   # keypoints: guard cond.
+    executor = make_executor(context=context)
 
     def on_error(node: str, topic: str, exc: BaseException) -> None:
         target = nodes.get(node)
