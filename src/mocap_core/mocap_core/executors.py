@@ -7,8 +7,8 @@ process starts spinning:
 * ``events`` (default): rclpy's ``EventsExecutor`` (``rclpy.experimental``), which reacts
   to the middleware's events in C++ instead of rebuilding a wait set in Python for every
   callback. Measured side by side (``docs/benchmarks/executors.md``): the lifter, physics and
-  GMR processes need about a sixth less CPU at 30 frames/s for the same output (0.83x,
-  median of seven pairs of runs).
+  GMR processes need about a fifth less CPU at 30 frames/s for the same output (0.82x,
+  median of ten pairs of runs).
 * ``single_threaded``: rclpy's ``SingleThreadedExecutor``, what ``rclpy.spin`` uses (the
   fallback where the events executor is missing or misbehaves).
 

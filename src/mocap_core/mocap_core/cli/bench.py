@@ -441,11 +441,7 @@ def write_report(res: Dict, out: Path) -> None:
                   f"{live['seconds']:.0f} s; latency = arrival time - image stamp, after a "
                   f"2 s warm-up. Look-ahead: {live['lookahead_frames']} frames = "
                   f"{live['lookahead_budget_ms']:.0f} ms at the rate the keypoints arrived. "
-                  'rclpy executor: ' + (
-                      'single-threaded (the keypoint node wakes it with a guard condition)'
-                      if c.get('composed') else
-                      c.get('env', {}).get('MOCAP_EXECUTOR', 'events') + ' (lifter, physics, '
-                      'GMR; the keypoint node: single-threaded)') + '.',
+                  'rclpy executor: ' + c.get('env', {}).get('MOCAP_EXECUTOR', 'events') + '.',
                   '',
                   '| stage topic | frames | rate (Hz) | latency median (ms) | p95 (ms) | '
                   'growth last-first quarter (ms) |', '|---|---|---|---|---|---|']
@@ -526,7 +522,7 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
             f'{k}={v}' for k, v in pairs.items()), 'lifter_mode': 'windowed',
             'lookahead': 15, 'keypoints': pairs})
     if args.executor_baseline:
-        # the node processes with rclpy's SingleThreadedExecutor beside the default (the
+        # every node process with rclpy's SingleThreadedExecutor beside the default (the
         # events executor: mocap_core.executors), same run
         configs.insert(0, {'name': 'defaults, single-threaded executor (MOCAP_EXECUTOR='
                                    'single_threaded)', 'lifter_mode': 'windowed',
