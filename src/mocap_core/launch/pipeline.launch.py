@@ -7,12 +7,14 @@
     ros2 bag play my_keypoints_bag                                  #   /mocap/keypoints2d
 
 Starts keypoints (unless ``source:=none``), lifter, physics and gmr, each in its own process;
-``record:=true`` also records every pipeline topic with ``ros2 bag record`` into ``bag``.
+``record:=true`` also records every pipeline topic with ``ros2 bag record`` into ``bag``;
+``executor:=single_threaded`` spins the nodes with rclpy's default executor instead of the events
+executor (``MOCAP_EXECUTOR``, :mod:`mocap_core.executors`).
 ``scripts/live.sh`` does the same with ``ros2 run`` where ``ros2 launch`` is not installed.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, SetEnvironmentVariable
 from launch.conditions import IfCondition, UnlessCondition
 from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
@@ -48,7 +50,11 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('record', default_value='false',
                               description='record every pipeline topic'),
         DeclareLaunchArgument('bag', default_value='mocap_live', description='recording folder'),
+        DeclareLaunchArgument('executor', default_value='events',
+                              description="the node processes' rclpy executor: events or "
+                              'single_threaded (MOCAP_EXECUTOR; mocap_core.executors)'),
     ]
+    executor = SetEnvironmentVariable('MOCAP_EXECUTOR', arg('executor'))
     keypoints = Node(
         package='mocap_keypoints', executable='keypoints', name='keypoints', output='screen',
         condition=UnlessCondition(PythonExpression(["'", arg('source'), "' == 'none'"])),
@@ -64,4 +70,4 @@ def generate_launch_description() -> LaunchDescription:
                             'static_camera': arg('static_camera')}])
     record = ExecuteProcess(cmd=['ros2', 'bag', 'record', '-o', arg('bag')] + TOPICS,
                             output='screen', condition=IfCondition(arg('record')))
-    return LaunchDescription(args + [record, lifter, physics, gmr, keypoints])
+    return LaunchDescription(args + [executor, record, lifter, physics, gmr, keypoints])

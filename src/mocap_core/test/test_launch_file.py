@@ -52,3 +52,22 @@ def test_launch_file_records_the_demo_topics():
         f'/mocap/{s}/bodies/{leaf}' for s in ('lifter', 'physics', 'world')
         for leaf in ('motion', 'joints3d', 'markers')}
     assert set(namespace['TOPICS']) == expected
+
+
+def test_launch_file_passes_the_executor_choice_to_the_nodes():
+    """`executor:=...` sets MOCAP_EXECUTOR for the node processes, its default is the
+    project's."""
+    from mocap_core.executors import DEFAULT, ENV
+
+    tree = ast.parse(LAUNCH.read_text())
+    declared = {ast.literal_eval(c.args[0]): {k.arg: k.value for k in c.keywords}
+                for c in _calls(tree, 'DeclareLaunchArgument')}
+    assert ast.literal_eval(declared['executor']['default_value']) == DEFAULT
+    (setenv,) = _calls(tree, 'SetEnvironmentVariable')
+    assert ast.literal_eval(setenv.args[0]) == ENV
+    assert ast.literal_eval(setenv.args[1].args[0]) == 'executor'
+    ret = next(n for n in ast.walk(tree) if isinstance(n, ast.Return))
+    # the variable is set before the nodes start
+    names = [e.id for e in ret.value.args[0].right.elts]
+    assert names.index('executor') < min(names.index(n) for n in
+                                          ('lifter', 'physics', 'gmr', 'keypoints'))
