@@ -858,14 +858,21 @@ class KeypointsNode(Node):
                                min_detection_confidence=p['min_detection_confidence'],
                                min_tracking_confidence=p['min_tracking_confidence'])
 
+    def _has_images(self, check: str) -> bool:
+        """Whether the source gives images for ``check`` (a parameter name); the OpenPose
+        source does not: warned once, False."""
+        if self.kind != 'openpose_json':
+            return True
+        self.get_logger().warn(f'{check} needs images; the OpenPose source has none')
+        return False
+
     def _mirror_check(self, p) -> Optional[MirrorCheck]:
         """The mirror check when ``mirror_check`` is on and the source has images."""
         self.mirror_status = 'off (mirror_check false)'
         if not p['mirror_check']:
             return None
-        if self.kind == 'openpose_json':
+        if not self._has_images('mirror_check'):
             self.mirror_status = 'off (no images: OpenPose source)'
-            self.get_logger().warn('mirror_check needs images; the OpenPose source has none')
             return None
         self.mirror_status = 'on'
         self.get_logger().info('mirror check on: a second detector reads the mirrored frames')
@@ -879,9 +886,8 @@ class KeypointsNode(Node):
         self.facing_status = 'off (facing_check false)'
         if not p['facing_check']:
             return None
-        if self.kind == 'openpose_json':
+        if not self._has_images('facing_check'):
             self.facing_status = 'off (no images: OpenPose source)'
-            self.get_logger().warn('facing_check needs images; the OpenPose source has none')
             return None
         try:
             clf = FacingClassifier(p['facing_weights'] or None)
