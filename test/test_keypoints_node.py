@@ -204,6 +204,7 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
     assert 'taiji_640x360.mp4' in values['source']
     assert values['detector'] == 'mediapipe_blazepose_full_multi'     # max_persons 4
     assert values['camera_motion_rotation'] == 'plane'
+    assert values['finish_thread'] == 'on'      # the camera motion beside the detector
     assert values['person_ids'] == '1' and values['ids_given'] == '1'
     assert 'calibration file' in values['intrinsics']
     # the facing check ran on the frames with a person (what it decides there is

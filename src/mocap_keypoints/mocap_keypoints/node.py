@@ -261,6 +261,11 @@ PARAMETERS = (
               "the solution nearest the pure turn) or 'homography' (the best pure turn, which "
               "takes a walking camera's step for a turn: 12-18 deg/s off on rendered walks; "
               'docs/global.md)', read_only=True, additional_constraints="'plane' or 'homography'"),
+    ParamSpec('finish_thread', True, 'Estimate the camera motion (and draw the annotated '
+              'image) in a second thread, while the next frame is detected: the frames come '
+              'out in order and unchanged, the detector thread is free sooner (keypoint rate; '
+              'docs/speed.md). false: both in the detector thread, one after the other',
+              read_only=True),
 )
 
 ANNOTATED_TOPIC = topics.ANNOTATED
@@ -481,7 +486,12 @@ class KeypointsNode(Node):
         # (Executor.create_task, thread-safe): a guard condition would do the same, but the
         # events executor refuses nodes that have one (mocap_core.executors)
         self._drain_task = guarded(self, self._drain, 'results')
-        self.worker = LatestWorker(self.processor.process, self._on_result).start()
+        split = p['finish_thread'] and self.processor.has_finish_work
+        self.worker = (LatestWorker(self.processor.detect, self._on_result,
+                                    finish=self.processor.finish, finish_name='camera_motion')
+                       if split else
+                       LatestWorker(self.processor.process, self._on_result)).start()
+        self.diag.set_value('finish_thread', 'on' if split else 'off')
         self.feeder: Optional[SourceFeeder] = None
         self.source_end: Optional[Tuple[str, Optional[BaseException]]] = None
         self.published = 0

@@ -125,6 +125,19 @@ class FrameResult:
         return self.keypoints is not None and bool(np.any(self.keypoints[..., 2] > 0))
 
 
+@dataclass
+class Detected:
+    """A frame between :meth:`FrameProcessor.detect` and :meth:`FrameProcessor.finish`: the
+    result so far, the decoded image (None: no image, or the frame failed), the persons as
+    detected and labelled, before undistortion ((P, 23, 3), pixels) and whether the frame
+    started a new stream."""
+
+    result: FrameResult
+    image: Optional[np.ndarray] = None
+    raw: Optional[np.ndarray] = None
+    restart: bool = False
+
+
 class FrameProcessor:
     """See the module docstring. ``detector`` may be None for sources that bring their own
     keypoints (OpenPose); ``fixed_size`` is then the image size for the intrinsics."""
@@ -217,6 +230,14 @@ class FrameProcessor:
         res.camera_motion_s = time.perf_counter() - t0
 
     def process(self, frame: Frame) -> FrameResult:
+        """The whole frame in the calling thread: :meth:`finish` of :meth:`detect`."""
+        return self.finish(self.detect(frame))
+
+    def detect(self, frame: Frame) -> Detected:
+        """The first part of a frame's work: decode, detect, track, check the labels, pick
+        the intrinsics and undistort. Calls must come in the frames' order, and each result
+        must go through :meth:`finish`, in the same order (possibly in another thread, while
+        the next frame is detected: the two parts share no state)."""
         res = FrameResult(frame.stamp_ns, frame.index, frame.name, frame.frame_id)
         restart = self.order.check(frame.stamp_ns) == 'restart'
         if restart and self.detector is not None:
@@ -225,13 +246,13 @@ class FrameProcessor:
             self.tracker.reset()
         if frame.error is not None:
             res.error = frame.error
-            return res
+            return Detected(res)
         image = None
         if frame.keypoints is not None:
             people = np.asarray(frame.keypoints, dtype=np.float64).reshape(-1, NUM_KEYPOINTS, 3)
             if self.fixed_size is None:
                 res.error = f'{frame.name}: no image size known for OpenPose keypoints'
-                return res
+                return Detected(res)
             width, height = self.fixed_size
         else:
             try:
@@ -239,11 +260,11 @@ class FrameProcessor:
                 image = check_image(image, frame.name or f'frame {frame.index}')
             except ValueError as exc:
                 res.error = str(exc)
-                return res
+                return Detected(res)
             height, width = image.shape[:2]
             if self.detector is None:
                 res.error = 'no detector configured for image frames'
-                return res
+                return Detected(res)
             t0 = time.perf_counter()
             people = self.detector.detect(image)
             res.detector_s = time.perf_counter() - t0
@@ -299,11 +320,25 @@ class FrameProcessor:
                 res.notes.append(f'distortion model {fi.distortion_model!r} is not supported: '
                                  'keypoints are published without undistortion')
         res.keypoints = kp
-        if self.camera_motion_params is not None and image is not None:
-            self._estimate_camera_motion(res, image, raw, restart)
-        if self.annotate and image is not None:
+        return Detected(res, image, raw, restart)
+
+    @property
+    def has_finish_work(self) -> bool:
+        """Whether :meth:`finish` does anything worth a thread of its own (the camera-motion
+        estimate or the annotated image)."""
+        return self.camera_motion_params is not None or self.annotate
+
+    def finish(self, detected: Detected) -> FrameResult:
+        """The second part: the camera's motion from the image background (it needs the
+        frame's persons, to leave them out) and the annotated image. Returns the result."""
+        res, image, raw = detected.result, detected.image, detected.raw
+        if res.error is not None or image is None or raw is None:
+            return res
+        if self.camera_motion_params is not None:
+            self._estimate_camera_motion(res, image, raw, detected.restart)
+        if self.annotate:
             seen = int(np.sum(raw[0, :, 2] > 0.5)) if len(raw) else 0
             res.annotated = draw_keypoints(
-                image, raw, text=f'{frame.name}  {seen}/{NUM_KEYPOINTS} points > 0.5  '
+                image, raw, text=f'{res.name}  {seen}/{NUM_KEYPOINTS} points > 0.5  '
                                  f'{res.detector_s * 1e3:.0f} ms', ids=res.ids)
         return res

@@ -9,6 +9,14 @@ to be free: nothing is dropped (offline playback "as fast as possible").
 MediaPipe releases the GIL while its graph runs, so a thread suffices to keep the executor
 responsive; the per-frame Python work in the thread is small (colour conversion, mapping).
 
+With ``finish`` the work is split over two threads: ``process`` (the detector) in the first,
+``finish`` (the camera-motion estimate, which needs the frame's keypoints) on its result in a
+second one, so that the next frame is detected while the last one is finished. The results
+still come out in the order of the items, at most one result waits between the two threads
+(the detector thread waits for the hand-off to be free, and meanwhile newer frames replace
+the one in the input slot, counted in ``dropped`` as before), and ``seconds`` is the time
+spent in both calls, without the waits.
+
 :class:`SourceFeeder` reads a :class:`~mocap_keypoints.sources.FrameSource` in a second thread
 and submits its frames: paced at the source's frame rate (``realtime``: a video then behaves
 like a camera and drops frames the detector cannot keep up with), or as fast as the worker
@@ -34,21 +42,29 @@ class LatestWorker(Generic[T, R]):
 
     def __init__(self, process: Callable[[T], R],
                  on_result: Callable[[T, Optional[R], Optional[BaseException], float], None],
-                 name: str = 'detector') -> None:
+                 name: str = 'detector', finish: Optional[Callable[[R], R]] = None,
+                 finish_name: str = 'finish') -> None:
         self._process = process
+        self._finish = finish
         self._on_result = on_result
         self._cond = threading.Condition()
         self._slot: Any = _EMPTY
+        self._handoff: Any = _EMPTY     # (item, result, error, seconds) for the finish thread
         self._busy = False
+        self._finishing = False
         self._stop = False
         self.submitted = 0
         self.dropped = 0
         self.processed = 0
         self.failed = 0
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._finish_thread = (threading.Thread(target=self._run_finish, name=finish_name,
+                                                daemon=True) if finish is not None else None)
 
     def start(self) -> 'LatestWorker':
         self._thread.start()
+        if self._finish_thread is not None:
+            self._finish_thread.start()
         return self
 
     def submit(self, item: T, block: bool = False, timeout: Optional[float] = None) -> int:
@@ -68,11 +84,15 @@ class LatestWorker(Generic[T, R]):
             self._cond.notify_all()
             return dropped
 
+    def _idle(self) -> bool:
+        return (self._slot is _EMPTY and not self._busy and self._handoff is _EMPTY
+                and not self._finishing)
+
     @property
     def idle(self) -> bool:
-        """Nothing waiting and nothing being processed."""
+        """Nothing waiting and nothing being processed or finished."""
         with self._cond:
-            return self._slot is _EMPTY and not self._busy
+            return self._idle()
 
     def wait_free(self, timeout: Optional[float] = None) -> bool:
         """Wait until no item is waiting (the next submit drops nothing) or the worker stops."""
@@ -81,21 +101,23 @@ class LatestWorker(Generic[T, R]):
 
     def wait_idle(self, timeout: Optional[float] = None) -> bool:
         with self._cond:
-            return self._cond.wait_for(lambda: self._slot is _EMPTY and not self._busy,
-                                       timeout)
+            return self._cond.wait_for(self._idle, timeout)
 
     @property
     def running(self) -> bool:
-        """Whether the thread is still alive (e.g. after :meth:`stop` timed out)."""
-        return self._thread.is_alive()
+        """Whether a thread is still alive (e.g. after :meth:`stop` timed out)."""
+        return self._thread.is_alive() or (self._finish_thread is not None
+                                           and self._finish_thread.is_alive())
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Stop after the item in progress (a waiting item is discarded)."""
+        """Stop after the items in progress (waiting items are discarded)."""
         with self._cond:
             self._stop = True
             self._cond.notify_all()
-        if self._thread.is_alive() and threading.current_thread() is not self._thread:
-            self._thread.join(timeout)
+        for thread in (self._thread, self._finish_thread):
+            if thread is not None and thread.is_alive() and \
+                    threading.current_thread() is not thread:
+                thread.join(timeout)
 
     def _run(self) -> None:
         while True:
@@ -115,16 +137,51 @@ class LatestWorker(Generic[T, R]):
             except Exception as exc:  # noqa: BLE001 - reported, never kills the thread
                 error = exc
             seconds = time.perf_counter() - t0
-            try:
-                self._on_result(item, result, error, seconds)
-            finally:
-                with self._cond:
-                    self._busy = False
-                    if error is None:
-                        self.processed += 1
-                    else:
-                        self.failed += 1
+            if self._finish is None:
+                self._deliver(item, result, error, seconds)
+                continue
+            with self._cond:  # hand over in order; wait while the last one is still there
+                self._cond.wait_for(lambda: self._handoff is _EMPTY or self._stop)
+                self._busy = False
+                if not self._stop:
+                    self._handoff = (item, result, error, seconds)
+                self._cond.notify_all()
+
+    def _run_finish(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._handoff is not _EMPTY or self._stop)
+                if self._stop:
+                    self._finishing = False
                     self._cond.notify_all()
+                    return
+                (item, result, error, seconds), self._handoff = self._handoff, _EMPTY
+                self._finishing = True
+                self._cond.notify_all()
+            if error is None:
+                t0 = time.perf_counter()
+                try:
+                    result = self._finish(result)
+                except Exception as exc:  # noqa: BLE001 - reported, never kills the thread
+                    result, error = None, exc
+                seconds += time.perf_counter() - t0
+            self._deliver(item, result, error, seconds)
+
+    def _deliver(self, item, result, error, seconds: float) -> None:
+        """Hand one result to ``on_result`` and count it (in the last thread of the two)."""
+        try:
+            self._on_result(item, result, error, seconds)
+        finally:
+            with self._cond:
+                if self._finish is None:
+                    self._busy = False
+                else:
+                    self._finishing = False
+                if error is None:
+                    self.processed += 1
+                else:
+                    self.failed += 1
+                self._cond.notify_all()
 
 
 class SourceFeeder:

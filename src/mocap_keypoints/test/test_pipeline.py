@@ -232,3 +232,54 @@ def test_processor_measures_the_camera_translation_over_a_floor_it_is_given():
     assert all(c.translation_known for c in cms[6:]), [c.frame_state for c in cms]
     step = cms[-1].position - cms[6].position       # 13 frames of 4 cm, along the optical z
     assert np.linalg.norm(step - R_wc.T @ [0.52, 0.0, 0.0]) < 0.03, step
+
+
+def test_detect_and_finish_in_two_threads_give_what_process_gives():
+    """The node's default (``finish_thread``): frames detected in one thread and finished
+    (camera motion, annotation) in another, the next frame detected meanwhile, come out as
+    the same results as one ``process`` call per frame: the two parts share no state. A
+    failed frame passes through ``finish`` unchanged."""
+    from mocap_core.camera_motion import CameraMotionParams
+    from mocap_core.rotations import axis_angle_to_matrix
+    from mocap_core.testing import textured_floor_view
+    from mocap_keypoints.worker import LatestWorker
+
+    intr = CameraIntrinsics(640, 480, 500.0, 500.0, 319.5, 239.5)
+    base = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    frames = []
+    for i in range(16):
+        R_wc = axis_angle_to_matrix(np.array([0.0, np.radians(25.0), 0.01 * i])) @ base
+        img = textured_floor_view(R_wc, [0.03 * i, 0.0, 1.5], intr.K)
+        frames.append(Frame(int(i * 1e9 / 30), img, i, f'f{i}'))
+    frames.insert(8, Frame(int(7.5e9 / 30), None, 99, 'broken', error='unreadable'))
+    person = np.zeros((1, NUM_KEYPOINTS, 3))
+    person[0, :, :2] = np.linspace(280, 360, NUM_KEYPOINTS)[:, None]
+    person[0, :, 2] = 0.9
+
+    def processor():
+        return FrameProcessor(FakeDetector(person), IntrinsicsProvider(_calib(intr)),
+                              camera_motion=CameraMotionParams(), annotate=True)
+
+    one = processor()
+    expected = [one.process(f) for f in frames]
+    two = processor()
+    got = []
+    w = LatestWorker(two.detect, lambda f, r, e, s: got.append(r), finish=two.finish).start()
+    for f in frames:
+        w.submit(f, block=True)
+    assert w.wait_idle(30.0)
+    w.stop()
+    assert [r.index for r in got] == [r.index for r in expected]
+    assert got[8].error == 'unreadable' and got[8].camera_motion is None
+    moving = 0
+    for a, b in zip(got, expected):
+        if b.error is not None:
+            continue
+        np.testing.assert_array_equal(a.keypoints, b.keypoints)
+        np.testing.assert_array_equal(a.annotated, b.annotated)
+        ca, cb = a.camera_motion, b.camera_motion
+        assert (ca.state, ca.frame_state) == (cb.state, cb.frame_state)
+        np.testing.assert_array_equal(ca.orientation, cb.orientation)
+        np.testing.assert_array_equal(ca.angular_velocity, cb.angular_velocity)
+        moving += ca.state != 'static'
+    assert moving >= 10     # the camera turns: the estimates carry something to compare

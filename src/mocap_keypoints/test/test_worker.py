@@ -67,6 +67,117 @@ def test_exceptions_are_reported_and_the_worker_goes_on():
     assert isinstance(out.errors[0][2], RuntimeError)
 
 
+# --- two threads: process, then finish ------------------------------------------------------
+def test_finish_runs_beside_the_next_items_processing_and_keeps_the_order():
+    """finish(k) runs while item k + 1 is processed (it waits for that to start: without the
+    second thread it would wait in vain), the results come out in order, finished, and the
+    seconds count both calls."""
+    out = Collector()
+    started = {i: threading.Event() for i in range(6)}
+    overlapped = []
+
+    def process(item):
+        started[item].set()
+        return item * 10
+
+    def finish(result):
+        item = result // 10
+        if item + 1 in started:
+            overlapped.append(started[item + 1].wait(10.0))
+        time.sleep(0.002)
+        return result + 1
+
+    w = LatestWorker(process, out, finish=finish).start()
+    for i in range(6):
+        assert w.submit(i, block=True) == 0
+    assert w.wait_idle(10.0)
+    w.stop()
+    assert overlapped == [True] * 5
+    assert [(i, r) for i, r, *_ in out.items] == [(i, i * 10 + 1) for i in range(6)]
+    assert w.processed == 6 and w.dropped == 0 and not w.running
+    assert all(s >= 0.0015 for *_, s in out.items)
+
+
+def test_at_most_one_result_waits_between_the_two_threads():
+    """While finish is held, the first thread hands over one result, processes one more and
+    waits; newer items replace each other in the input slot (counted), as with one thread."""
+    out = Collector()
+    release, finishing = threading.Event(), threading.Event()
+    done = []
+    cond = threading.Condition()
+
+    def process(item):
+        with cond:
+            done.append(item)
+            cond.notify_all()
+        return item
+
+    def finish(result):
+        if result == 0:
+            finishing.set()
+            assert release.wait(10.0)
+        return result
+
+    def wait_done(n):
+        with cond:
+            assert cond.wait_for(lambda: len(done) >= n, 10.0)
+
+    w = LatestWorker(process, out, finish=finish).start()
+    w.submit(0)
+    assert finishing.wait(10.0)
+    w.submit(1)
+    wait_done(2)                 # handed over, waiting for finish
+    assert not w.wait_idle(0.0) and not w.idle
+    w.submit(2)
+    wait_done(3)                 # processed; the thread waits for the hand-off
+    for i in range(3, 10):
+        w.submit(i)
+    release.set()
+    assert w.wait_idle(10.0)
+    w.stop()
+    assert [i for i, *_ in out.items] == [0, 1, 2, 9]
+    assert w.dropped == 6 and w.processed == 4 and done == [0, 1, 2, 9]
+
+
+def test_errors_of_either_thread_are_reported_in_order():
+    out = Collector()
+    got = []
+
+    def on_result(item, result, error, seconds):
+        got.append((item, result, type(error).__name__ if error else None))
+
+    def process(item):
+        if item == 1:
+            raise RuntimeError('detector')
+        return item
+
+    def finish(result):
+        if result == 2:
+            raise ValueError('estimate')
+        return -result
+
+    w = LatestWorker(process, on_result, finish=finish).start()
+    for i in range(4):
+        w.submit(i, block=True)
+    assert w.wait_idle(10.0)
+    w.stop()
+    assert got == [(0, 0, None), (1, None, 'RuntimeError'), (2, None, 'ValueError'),
+                   (3, -3, None)]
+    assert w.processed == 2 and w.failed == 2
+    del out
+
+
+def test_stop_does_not_wait_for_items_still_waiting():
+    out = Collector()
+    release = threading.Event()
+    w = LatestWorker(lambda x: x, out, finish=lambda r: release.wait(10.0) and r).start()
+    for i in range(3):
+        w.submit(i)
+    release.set()
+    w.stop(10.0)
+    assert not w.running
+
+
 class FakeSource:
     def __init__(self, n, fps, live=False, fail_at=None):
         self.n, self.fps, self.live, self.fail_at = n, fps, live, fail_at
