@@ -370,6 +370,43 @@ def test_process_video_file(tmp_path):
     assert '# test run' in text and '| physics |' in text and 'keypoints: keypoints' in text
 
 
+def test_process_video_detects_beside_the_later_stages_with_the_same_output(tmp_path):
+    """By default (keypoint parameter ``finish_thread``) a video's next frame is detected
+    while the last one is finished and published through the later stages in a second
+    thread. The output is that of one frame after the other: the same keypoints, camera
+    motion and frames, in the same order, every stage's joints equal to rounding (two runs
+    one frame after the other differ by 1e-6 m too: the video's stamps start at the wall
+    clock). The frames recorded with ``--record-images`` are there, with their keypoints'
+    stamps."""
+    from mocap_core.bag_io import BagReader, deserialize
+    from mocap_core.run_report import load_run
+
+    def camera_motion(bag):
+        out = []
+        with BagReader(bag) as reader:
+            for m in reader.messages(topics=['/mocap/camera/motion']):
+                o = deserialize(m.data, m.msgtype).pose.pose.orientation
+                out.append((o.x, o.y, o.z, o.w))
+        return np.array(out)
+
+    split, one = tmp_path / 'split', tmp_path / 'one'
+    res = _mocap('process', VIDEO, '-o', split, '--no-progress', '--record-images')
+    assert res.returncode == 0, res.stdout + res.stderr
+    res = _mocap('process', VIDEO, '-o', one, '--no-progress',
+                 '--param', 'keypoints.finish_thread=false')
+    assert res.returncode == 0, res.stdout + res.stderr
+    a, b = load_run(split), load_run(one)
+    assert len(a.keypoint_stamps) == len(b.keypoint_stamps) > 90
+    np.testing.assert_array_equal(np.diff(a.keypoint_stamps), np.diff(b.keypoint_stamps))
+    np.testing.assert_array_equal(a.keypoints, b.keypoints)
+    np.testing.assert_array_equal(camera_motion(split), camera_motion(one))
+    assert len(camera_motion(split)) == len(a.keypoint_stamps)
+    for stage in ('lifter', 'physics', 'world'):
+        assert len(a.stages[stage].joints) == len(b.stages[stage].joints) > 90
+        np.testing.assert_allclose(a.stages[stage].joints, b.stages[stage].joints, atol=1e-5)
+    assert _stamps(split, '/camera/image_raw') == list(a.keypoint_stamps)
+
+
 # --- bad input -----------------------------------------------------------------------------
 
 def test_process_bad_inputs_give_one_clear_line(tmp_path):

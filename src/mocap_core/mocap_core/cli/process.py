@@ -401,24 +401,27 @@ def _run_bag(reader, infos, plan: Plan, feeders, graph, recorder, writer, proble
 
 
 def _run_video(node, graph, recorder, writer, record_images: bool, progress: bool) -> int:
+    """The keypoint node's file source through the graph (``KeypointNode.run_offline``: the
+    detection beside the later stages, in order); the frames also go to the bag with
+    ``record_images``."""
     from tqdm import tqdm
 
     from ..ros_conversions import bgr_to_image, make_header
 
-    frames = 0
+    def decode(frame) -> None:
+        if record_images and frame.image is None and frame.decode is not None:
+            frame.image = frame.decode()
+
+    def before_publish(frame) -> None:
+        recorder.now_ns = frame.stamp_ns
+        if record_images and frame.image is not None:
+            header = make_header(frame.stamp_ns, node.frame_id)
+            writer.write_msg(T.IMAGE, frame.stamp_ns, bgr_to_image(frame.image, header))
+
     with tqdm(total=node.frame_count, desc='mocap process', unit='frame',
               disable=not progress) as bar:
-        for frame in node.offline_frames():
-            recorder.now_ns = frame.stamp_ns
-            if record_images:
-                image = frame.image if frame.image is not None else frame.decode()
-                frame.image = image
-                header = make_header(frame.stamp_ns, node.frame_id)
-                writer.write_msg(T.IMAGE, frame.stamp_ns, bgr_to_image(image, header))
-            node.process_offline(frame)
-            frames += 1
-            bar.update(1)
-    return frames
+        return node.run_offline(before_detect=decode, before_publish=before_publish,
+                                after_publish=lambda frame: bar.update(1))
 
 
 def add_parser(sub) -> None:
