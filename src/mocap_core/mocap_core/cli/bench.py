@@ -174,6 +174,31 @@ def bench_offline(bag: Path, repeat: int, work: Path, times: int = 5) -> Dict:
                         for n, vals in per_node.items()}}
 
 
+def bench_video_offline(video: Path, repeat: int, work: Path) -> Dict:
+    """``mocap process`` on ``video`` (keypoints from the detector -> world), ``repeat`` pairs:
+    the detection beside the later stages (keypoint ``finish_thread``, the default) and one
+    frame after the other, in turn (the first of a pair alternates)."""
+    from .process import NODES, process
+
+    fps: Dict[str, List[float]] = {'split': [], 'one': []}
+    frames = 0
+    for k in range(repeat):
+        for key in (('split', 'one') if k % 2 == 0 else ('one', 'split')):
+            params: Dict[str, Dict] = {n: {} for n in NODES}
+            params['keypoints'] = {'finish_thread': key == 'split'}
+            s = process(video, work / f'video_{key}_{k}', overwrite=True, progress=False,
+                        log=lambda *a: None, log_level='error', params=params)
+            fps[key].append(s['fps'])
+            frames = s['frames']
+            print(f"  video pass {k + 1}, {key}: {s['frames']} frames in {s['seconds']:.2f} s "
+                  f"({s['fps']:.1f} frames/s)", flush=True)
+    ratios = [a / b for a, b in zip(fps['split'], fps['one'])]
+    return {'video': str(video.relative_to(ROOT) if video.is_relative_to(ROOT) else video),
+            'frames': frames, 'fps': fps,
+            'fps_median': {k: float(np.median(v)) for k, v in fps.items()},
+            'ratio_passes': ratios, 'ratio_median': float(np.median(ratios))}
+
+
 class _Listener:
     """Receive times of every stage's output, keyed by header stamp: ``samples[stage]`` is a
     list of (header stamp ns, arrival time ns), filled by a background thread."""
@@ -432,6 +457,21 @@ def write_report(res: Dict, out: Path) -> None:
                   '| node | mean (ms) | p95 (ms) |', '|---|---|---|']
         for n, v in sorted(off['node_ms'].items()):
             lines.append(f"| {n} | {v['mean']:.2f} | {v['p95']:.2f} |")
+    vid = res.get('video_offline')
+    if vid is not None:
+        lines += [
+            '', '## Offline from a video: `mocap process`, detector -> world motion', '',
+            f"`{vid['video']}` ({vid['frames']} frames), {len(vid['ratio_passes'])} pairs of "
+            'runs, in turn: the next frame detected while the last one is finished (camera '
+            'motion) and published through the later stages in a second thread (keypoint '
+            '`finish_thread`, the default), and one frame after the other.', '',
+            '| run | frames/s, median | passes |', '|---|---|---|',
+            f"| detection beside the later stages (default) | {vid['fps_median']['split']:.1f} "
+            '| ' + ', '.join(f'{x:.1f}' for x in vid['fps']['split']) + ' |',
+            f"| one frame after the other | {vid['fps_median']['one']:.1f} | "
+            + ', '.join(f'{x:.1f}' for x in vid['fps']['one']) + ' |', '',
+            f"Ratio, median of the pairs: **{vid['ratio_median']:.2f}x** ("
+            + ', '.join(f'{x:.2f}' for x in vid['ratio_passes']) + ').']
     for live in res['live']:
         c = live['config']
         lines += ['', f"## Live, {c['name']}: lifter {c['lifter_mode']}, GMR look-ahead "
@@ -502,6 +542,9 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
     if args.repeat > 0:
         print('offline (mocap process) ...', flush=True)
         res['offline'] = bench_offline(Path(args.bag), args.repeat, work)
+    if args.video_offline > 0:
+        print('offline from the video (mocap process) ...', flush=True)
+        res['video_offline'] = bench_video_offline(Path(args.video), args.video_offline, work)
     res['live'] = []
     configs = [{'name': 'defaults', 'lifter_mode': 'windowed', 'lookahead': 15},
                {'name': 'low latency', 'lifter_mode': 'causal', 'lookahead': 0}]
@@ -549,6 +592,10 @@ def add_parser(sub) -> None:
     pp.add_argument('--video', default=str(ROOT / 'data' / 'video_example' /
                                            'taiji_640x360.mp4'))
     pp.add_argument('--repeat', type=int, default=3, help='offline passes (0: none)')
+    pp.add_argument('--video-offline', type=int, default=0, metavar='PAIRS',
+                    help='also run mocap process on the video, PAIRS pairs of runs: the '
+                    'detection beside the later stages (the default) and one frame after the '
+                    'other, in turn (0: none)')
     pp.add_argument('--composed', action='store_true',
                     help='also run each live configuration as one process (mocap run), '
                     'after the separate processes, in the same run')
