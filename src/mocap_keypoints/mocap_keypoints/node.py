@@ -705,9 +705,12 @@ class KeypointsNode(Node):
                 self.diag.input.tick()
                 worker.submit(frame, block=True)
                 count += 1
-            worker.wait_idle()
         finally:
-            worker.stop()
+            # the frames in flight are published, also when reading failed (not on Ctrl-C),
+            # and no thread is left publishing once this returns
+            if not isinstance(sys.exc_info()[1], KeyboardInterrupt):
+                worker.wait_idle()
+            worker.stop(timeout=None)
         return count
 
     def process_now(self, frame) -> None:

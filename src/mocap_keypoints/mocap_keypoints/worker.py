@@ -57,6 +57,8 @@ class LatestWorker(Generic[T, R]):
         self.dropped = 0
         self.processed = 0
         self.failed = 0
+        self.callback_errors = 0
+        self.callback_error: Optional[BaseException] = None
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._finish_thread = (threading.Thread(target=self._run_finish, name=finish_name,
                                                 daemon=True) if finish is not None else None)
@@ -100,8 +102,11 @@ class LatestWorker(Generic[T, R]):
             return self._cond.wait_for(lambda: self._slot is _EMPTY or self._stop, timeout)
 
     def wait_idle(self, timeout: Optional[float] = None) -> bool:
+        """Wait until nothing waits or is processed; False on timeout or once stopped with
+        work left."""
         with self._cond:
-            return self._cond.wait_for(self._idle, timeout)
+            self._cond.wait_for(lambda: self._idle() or self._stop, timeout)
+            return self._idle()
 
     @property
     def running(self) -> bool:
@@ -109,10 +114,12 @@ class LatestWorker(Generic[T, R]):
         return self._thread.is_alive() or (self._finish_thread is not None
                                            and self._finish_thread.is_alive())
 
-    def stop(self, timeout: float = 5.0) -> None:
-        """Stop after the items in progress (waiting items are discarded)."""
+    def stop(self, timeout: Optional[float] = 5.0) -> None:
+        """Stop after the items in progress (waiting items are discarded); waits up to
+        ``timeout`` s for each thread (None: until it ends)."""
         with self._cond:
             self._stop = True
+            self._slot = self._handoff = _EMPTY
             self._cond.notify_all()
         for thread in (self._thread, self._finish_thread):
             if thread is not None and thread.is_alive() and \
@@ -168,9 +175,14 @@ class LatestWorker(Generic[T, R]):
             self._deliver(item, result, error, seconds)
 
     def _deliver(self, item, result, error, seconds: float) -> None:
-        """Hand one result to ``on_result`` and count it (in the last thread of the two)."""
+        """Hand one result to ``on_result`` and count it (in the last thread of the two). An
+        exception of ``on_result`` is counted in ``callback_errors`` (the last one kept in
+        ``callback_error``): the thread goes on."""
         try:
             self._on_result(item, result, error, seconds)
+        except Exception as exc:  # noqa: BLE001 - a failing consumer never stops the worker
+            self.callback_errors += 1
+            self.callback_error = exc
         finally:
             with self._cond:
                 if self._finish is None:

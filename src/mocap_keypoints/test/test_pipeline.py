@@ -276,7 +276,8 @@ def test_detect_and_finish_in_two_threads_give_what_process_gives():
         if b.error is not None:
             continue
         np.testing.assert_array_equal(a.keypoints, b.keypoints)
-        np.testing.assert_array_equal(a.annotated, b.annotated)
+        # the drawing, without the top line's text (it carries the detector's time)
+        np.testing.assert_array_equal(a.annotated[40:], b.annotated[40:])
         ca, cb = a.camera_motion, b.camera_motion
         assert (ca.state, ca.frame_state) == (cb.state, cb.frame_state)
         np.testing.assert_array_equal(ca.orientation, cb.orientation)

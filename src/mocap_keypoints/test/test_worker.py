@@ -167,15 +167,60 @@ def test_errors_of_either_thread_are_reported_in_order():
     del out
 
 
-def test_stop_does_not_wait_for_items_still_waiting():
+def test_stop_discards_what_waits_and_ends_both_threads():
+    """Stopped while finish is held, the first thread waiting on the hand-off and a third item
+    in the input slot: stop returns once the held item is through, the waiting items are
+    discarded, and waiting for idle does not hang."""
     out = Collector()
-    release = threading.Event()
-    w = LatestWorker(lambda x: x, out, finish=lambda r: release.wait(10.0) and r).start()
-    for i in range(3):
-        w.submit(i)
+    release, finishing = threading.Event(), threading.Event()
+    done = []
+    cond = threading.Condition()
+
+    def process(item):
+        with cond:
+            done.append(item)
+            cond.notify_all()
+        return item
+
+    def finish(result):
+        if result == 0:
+            finishing.set()
+            assert release.wait(10.0)
+        return result
+
+    w = LatestWorker(process, out, finish=finish).start()
+    w.submit(0)
+    assert finishing.wait(10.0)
+    w.submit(1)
+    with cond:
+        assert cond.wait_for(lambda: len(done) >= 2, 10.0)
+    w.submit(2)                 # 1 is handed over or about to be; 2 waits
+    stopper = threading.Thread(target=w.stop, kwargs={'timeout': 10.0})
+    stopper.start()
+    with w._cond:
+        assert w._cond.wait_for(lambda: w._stop, 10.0)
     release.set()
-    w.stop(10.0)
-    assert not w.running
+    stopper.join(10.0)
+    assert not stopper.is_alive() and not w.running
+    assert [i for i, *_ in out.items] == [0]
+    assert not w.wait_idle(None) or w.idle       # returns at once after stop
+
+
+def test_a_failing_consumer_is_counted_and_the_worker_goes_on():
+    got = []
+
+    def on_result(item, result, error, seconds):
+        if item == 1:
+            raise RuntimeError('consumer')
+        got.append(item)
+
+    w = LatestWorker(lambda x: x, on_result, finish=lambda r: r).start()
+    for i in range(3):
+        w.submit(i, block=True)
+    assert w.wait_idle(10.0)
+    w.stop()
+    assert got == [0, 2] and w.callback_errors == 1
+    assert str(w.callback_error) == 'consumer'
 
 
 class FakeSource:

@@ -22,6 +22,15 @@ field lies inside the pass; VTM lifts each frame from the window it would get fr
 :meth:`mocap_lifter.vtm.VTM.lift_frames`) for a fraction of the time per frame, ``chunk - 1``
 frames later.
 
+Frames missing from the stream (``fill_rate_hz``): the networks were trained on motion at
+30 frames/s and read the frames they get as consecutive. A keypoint node that drops frames
+(a busy machine: 13 of 30 frames/s) or a slower camera would show them the motion two or
+three times too fast. A gap of ``m + 1`` periods of ``fill_rate_hz`` between two stamps (up to
+``max_gap_s``) is filled with ``m`` frames linearly interpolated between its ends (the
+confidence of a point the smaller of its two), lifted as context and never returned: only the
+frames received come out, each with its own stamp, and the look-ahead stays ``latency``
+periods of that rate in seconds (measured in docs/lifter.md, "Frames the lifter never got").
+
 The skeleton (bone lengths) is estimated by E_S over the growing buffer until
 ``skeleton_frames`` frames were seen, then held for this person. A gap longer than
 ``max_gap_s``, a stamp going backwards or a change of camera intrinsics resets the buffer
@@ -93,6 +102,9 @@ class OnlineLifter:
             delays the output by ``ceil(2 * sigma)`` frames more (:attr:`delay`) for the
             larger of the two sigmas.
         output_root_sigma: the same for the root position (None: ``output_sigma``).
+        fill_rate_hz: the frame rate the network reads its input at: gaps between stamps
+            of 1.5 periods or more are filled (module docstring); 0 = off (every frame
+            received is taken as the next one).
         subject_height: the person's stature in metres (floor to the top of the head), when
             it is known (0 = estimate the size from the keypoints). The estimated skeleton is
             scaled to this stature (:meth:`~mocap_core.skeleton.Skeleton.stature`) and the
@@ -106,7 +118,7 @@ class OnlineLifter:
                  device: str = 'cpu', chunk: int = 1, flip: bool = False,
                  smooth: float = 0.0, streaming: bool = True,
                  output_sigma: float = 0.0, output_root_sigma: Optional[float] = None,
-                 subject_height: float = 0.0) -> None:
+                 subject_height: float = 0.0, fill_rate_hz: float = 0.0) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -140,6 +152,11 @@ class OnlineLifter:
             raise ValueError(f'subject_height must be 0 (estimate) or a stature of 0.5-3 m, '
                              f'got {subject_height}')
         self.subject_height = float(subject_height)
+        if not np.isfinite(fill_rate_hz) or fill_rate_hz < 0:
+            raise ValueError(f'fill_rate_hz must be >= 0, got {fill_rate_hz}')
+        self.fill_period_ns = int(round(1e9 / fill_rate_hz)) if fill_rate_hz > 0 else 0
+        #: frames filled in so far (lifted as context, never returned)
+        self.filled_frames = 0
         self._stream: Optional[StreamingEncoder] = None
         if streaming and self.chunk == 1 and self.smooth == 0 and device == 'cpu' \
                 and context_frames is None and isinstance(model, MotioNet):
@@ -170,6 +187,7 @@ class OnlineLifter:
         self._held_skeleton: Optional[Tuple[torch.Tensor, Skeleton, float]] = None
         self.frames_seen = 0
         self._last_emitted = -1
+        self._filled: set = set()          # stamps of the filled-in frames not yet returned
         # chunk > 1: the skeleton estimate after each push (frames_seen -> lengths), so that
         # every frame gets the skeleton it would have got frame by frame
         self._lengths_at: Dict[int, torch.Tensor] = {}
@@ -202,6 +220,42 @@ class OnlineLifter:
         if event:
             frames = self.flush()
             self.reset()
+        elif self.fill_period_ns and self._stamps:
+            frames = self._fill(stamp_ns, kp, intrinsics)
+        frames += self._push(stamp_ns, kp, intrinsics)
+        return self._received(frames), event
+
+    def _fill(self, stamp_ns: int, kp: np.ndarray, intrinsics: CameraIntrinsics
+              ) -> List[LiftedFrame]:
+        """Push the frames missing before ``stamp_ns`` (module docstring); returns what they
+        released."""
+        last, prev = self._stamps[-1], self._kp[-1]
+        gap = stamp_ns - last
+        missing = int(round(gap / self.fill_period_ns)) - 1
+        frames: List[LiftedFrame] = []
+        for j in range(1, missing + 1):
+            a = j / (missing + 1)
+            filled = (1.0 - a) * prev + a * kp
+            filled[:, 2] = np.minimum(prev[:, 2], kp[:, 2])
+            stamp = last + int(round(a * gap))
+            self._filled.add(stamp)
+            self.filled_frames += 1
+            frames += self._push(stamp, filled, intrinsics)
+        return frames
+
+    def _received(self, frames: List[LiftedFrame]) -> List[LiftedFrame]:
+        """``frames`` without the filled-in ones."""
+        if not self._filled:
+            return frames
+        out = [f for f in frames if f.stamp_ns not in self._filled]
+        for f in frames:
+            self._filled.discard(f.stamp_ns)
+        return out
+
+    def _push(self, stamp_ns: int, kp: np.ndarray, intrinsics: CameraIntrinsics
+              ) -> List[LiftedFrame]:
+        """Add one frame to the buffer; returns the frames it released."""
+        frames: List[LiftedFrame] = []
         self._intr = intrinsics
         self._kp.append(kp)
         self._stamps.append(int(stamp_ns))
@@ -217,12 +271,13 @@ class OnlineLifter:
         if self._unlifted() >= self.latency + self.chunk:
             lifted = self._infer([-self._unlifted() + j for j in range(self.chunk)], streamed)
             frames.extend(lifted if self._smoother is None else self._smoother.push(lifted))
-        return frames, event
+        return frames
 
     def pending(self) -> int:
         """Frames received but not yet returned (windowed mode waits for look-ahead, the
-        output smoothing for its radius)."""
-        return self._unlifted() + (self._smoother.pending() if self._smoother else 0)
+        output smoothing for its radius); filled-in frames are not counted."""
+        waiting = self._unlifted() + (self._smoother.pending() if self._smoother else 0)
+        return waiting - len(self._filled)
 
     def _unlifted(self) -> int:
         """Frames received but not yet through the network."""
@@ -236,7 +291,7 @@ class OnlineLifter:
         frames = self._infer([-n + j for j in range(n)]) if n else []
         if self._smoother is not None:
             frames = self._smoother.push(frames) + self._smoother.flush()
-        return frames
+        return self._received(frames)
 
     def _stream_push(self) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Give the streaming encoder the newest frame (with the window's features, see

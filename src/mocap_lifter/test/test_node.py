@@ -76,6 +76,24 @@ def _values(node) -> dict:
     return {kv.key: kv.value for kv in node.diag.status().values}
 
 
+def test_frames_missing_from_the_stream_are_filled_and_not_published(lifter, clouds):
+    """Every second keypoint frame of a 30 fps stream (a busy keypoint node): the node lifts
+    the gaps filled (fill_rate_hz 30, the default) and publishes exactly the frames it
+    received; diagnostics count the filled ones."""
+    from mocap_core import topics
+
+    graph, node, recorded = lifter
+    kp, _ = clouds
+    for k in range(0, 20, 2):
+        graph.publish(topics.KEYPOINTS, _stamped(kp[k], k))
+    graph.flush()
+    node.flush()
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+              for topic, m in recorded if topic == topics.LIFTER_MOTION]
+    assert stamps == [T0 + k * DT for k in range(0, 20, 2)]
+    assert _values(node)['filled_frames'] == '9'
+
+
 def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds, capfd):
     """Regression: 20 frames with a person, then 40 with every confidence 0, and no
     camera_info. The node used to reset at every frame (intrinsics from each frame's extent)

@@ -134,6 +134,8 @@ def cmd_train_vtm(args: argparse.Namespace) -> int:
 def add_eval_parser(sub) -> None:
     from ..signatures_cli import add_signatures_parser
     add_signatures_parser(sub)      # mocap eval signatures: bone lengths as a signature
+    from .drops import add_parser as add_drops_parser
+    add_drops_parser(sub)           # mocap eval drops: keypoint frames missing
     p = sub.add_parser('lifter', help='evaluate the lifter on the validation split')
     p.add_argument('--model', choices=('motionet', 'vtm'), default='motionet',
                    help='which shipped lifter to evaluate (default motionet); VTM adds its '
