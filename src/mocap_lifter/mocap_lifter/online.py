@@ -22,14 +22,23 @@ field lies inside the pass; VTM lifts each frame from the window it would get fr
 :meth:`mocap_lifter.vtm.VTM.lift_frames`) for a fraction of the time per frame, ``chunk - 1``
 frames later.
 
-Frames missing from the stream (``fill_rate_hz``): the networks were trained on motion at
-30 frames/s and read the frames they get as consecutive. A keypoint node that drops frames
-(a busy machine: 13 of 30 frames/s) or a slower camera would show them the motion two or
-three times too fast. A gap of ``m + 1`` periods of ``fill_rate_hz`` between two stamps (up to
-``max_gap_s``) is filled with ``m`` frames linearly interpolated between its ends (the
-confidence of a point the smaller of its two), lifted as context and never returned: only the
-frames received come out, each with its own stamp, and the look-ahead stays ``latency``
-periods of that rate in seconds (measured in docs/lifter.md, "Frames the lifter never got").
+The network's frame rate (``network_rate_hz``): the networks were trained on motion at 30
+frames/s and read the frames they get as consecutive. A keypoint node that drops frames (a
+busy machine: 13 of 30 frames/s) or a slower camera would show them the motion two or three
+times too fast, a 60 frames/s camera at half its pace. So the network is given frames at
+that rate:
+
+* a gap of ``m + 1`` periods between two stamps (1.5 periods or more, up to ``max_gap_s``)
+  is filled with ``m`` frames linearly interpolated between its ends (the confidence of a
+  point the smaller of its two), lifted as context and never returned;
+* a frame less than 0.75 periods after the last frame given to the network is not given to
+  it: its output is interpolated between the outputs of the network frames before and after
+  it (rotations by slerp, root, contacts and depth linearly), or, at the end of a stream, the
+  last one's held.
+
+Only the frames received come out, each with its own stamp, in order, and the look-ahead
+stays ``latency`` periods of that rate in seconds (measured in docs/lifter.md, "Frames the
+lifter never got, and frames it gets too often").
 
 The skeleton (bone lengths) is estimated by E_S over the growing buffer until
 ``skeleton_frames`` frames were seen, then held for this person. A gap longer than
@@ -56,6 +65,7 @@ import torch
 
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.pose import Pose
+from mocap_core.rotations import quat_slerp
 from mocap_core.skeleton import NUM_JOINTS, NUM_KEYPOINTS, Skeleton
 from mocap_core.streams import StampOrder
 
@@ -76,6 +86,19 @@ class LiftedFrame:
     contacts: np.ndarray          # (4,) probabilities: left heel, left toe, right heel, right toe
     skeleton_fixed: bool          # True once the skeleton estimate is held
     depth: float                  # root depth, m
+
+
+def _between_frame(a: LiftedFrame, b: LiftedFrame, stamp_ns: int) -> LiftedFrame:
+    """The frame at ``stamp_ns`` between the lifted frames ``a`` and ``b`` (``a`` itself when
+    they are one frame): rotations by slerp, root, contacts and depth linearly; ``b``'s
+    skeleton."""
+    span = b.stamp_ns - a.stamp_ns
+    t = 0.0 if span <= 0 else min(max((stamp_ns - a.stamp_ns) / span, 0.0), 1.0)
+    rot = quat_slerp(a.pose.rotations, b.pose.rotations, np.full(len(a.pose.rotations), t))
+    root = (1.0 - t) * a.pose.root_position + t * b.pose.root_position
+    return LiftedFrame(int(stamp_ns), Pose(b.pose.skeleton, rot, root),
+                       (1.0 - t) * a.contacts + t * b.contacts, b.skeleton_fixed,
+                       float((1.0 - t) * a.depth + t * b.depth))
 
 
 class OnlineLifter:
@@ -102,9 +125,9 @@ class OnlineLifter:
             delays the output by ``ceil(2 * sigma)`` frames more (:attr:`delay`) for the
             larger of the two sigmas.
         output_root_sigma: the same for the root position (None: ``output_sigma``).
-        fill_rate_hz: the frame rate the network reads its input at: gaps between stamps
-            of 1.5 periods or more are filled (module docstring); 0 = off (every frame
-            received is taken as the next one).
+        network_rate_hz: the frame rate the network reads its input at: gaps of 1.5 periods
+            or more are filled, frames closer than 0.75 periods thinned (module docstring);
+            0 = off (every frame received is given to the network as the next one).
         subject_height: the person's stature in metres (floor to the top of the head), when
             it is known (0 = estimate the size from the keypoints). The estimated skeleton is
             scaled to this stature (:meth:`~mocap_core.skeleton.Skeleton.stature`) and the
@@ -118,7 +141,7 @@ class OnlineLifter:
                  device: str = 'cpu', chunk: int = 1, flip: bool = False,
                  smooth: float = 0.0, streaming: bool = True,
                  output_sigma: float = 0.0, output_root_sigma: Optional[float] = None,
-                 subject_height: float = 0.0, fill_rate_hz: float = 0.0) -> None:
+                 subject_height: float = 0.0, network_rate_hz: float = 0.0) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -152,11 +175,13 @@ class OnlineLifter:
             raise ValueError(f'subject_height must be 0 (estimate) or a stature of 0.5-3 m, '
                              f'got {subject_height}')
         self.subject_height = float(subject_height)
-        if not np.isfinite(fill_rate_hz) or fill_rate_hz < 0:
-            raise ValueError(f'fill_rate_hz must be >= 0, got {fill_rate_hz}')
-        self.fill_period_ns = int(round(1e9 / fill_rate_hz)) if fill_rate_hz > 0 else 0
+        if not np.isfinite(network_rate_hz) or network_rate_hz < 0:
+            raise ValueError(f'network_rate_hz must be >= 0, got {network_rate_hz}')
+        self.period_ns = int(round(1e9 / network_rate_hz)) if network_rate_hz > 0 else 0
         #: frames filled in so far (lifted as context, never returned)
         self.filled_frames = 0
+        #: frames received but not given to the network so far (outputs interpolated)
+        self.thinned_frames = 0
         self._stream: Optional[StreamingEncoder] = None
         if streaming and self.chunk == 1 and self.smooth == 0 and device == 'cpu' \
                 and context_frames is None and isinstance(model, MotioNet):
@@ -188,6 +213,8 @@ class OnlineLifter:
         self.frames_seen = 0
         self._last_emitted = -1
         self._filled: set = set()          # stamps of the filled-in frames not yet returned
+        self._between: List[int] = []      # stamps of thinned frames waiting for an output
+        self._previous: Optional[LiftedFrame] = None   # the last network frame released
         # chunk > 1: the skeleton estimate after each push (frames_seen -> lengths), so that
         # every frame gets the skeleton it would have got frame by frame
         self._lengths_at: Dict[int, torch.Tensor] = {}
@@ -209,7 +236,7 @@ class OnlineLifter:
             raise ValueError(f'keypoints must have shape ({NUM_KEYPOINTS}, 3), got {kp.shape}')
         event = ''
         if self._stamps:
-            dt = stamp_ns - self._stamps[-1]
+            dt = stamp_ns - max(self._stamps[-1], self._between[-1] if self._between else 0)
             if dt <= 0:
                 event = 'backwards'
             elif dt > self.max_gap_ns:
@@ -220,7 +247,11 @@ class OnlineLifter:
         if event:
             frames = self.flush()
             self.reset()
-        elif self.fill_period_ns and self._stamps:
+        elif self.period_ns and self._stamps:
+            if 4 * (stamp_ns - self._stamps[-1]) < 3 * self.period_ns:
+                self._between.append(int(stamp_ns))       # thinned (module docstring)
+                self.thinned_frames += 1
+                return self._received(frames), event
             frames = self._fill(stamp_ns, kp, intrinsics)
         frames += self._push(stamp_ns, kp, intrinsics)
         return self._received(frames), event
@@ -231,7 +262,7 @@ class OnlineLifter:
         released."""
         last, prev = self._stamps[-1], self._kp[-1]
         gap = stamp_ns - last
-        missing = int(round(gap / self.fill_period_ns)) - 1
+        missing = int(round(gap / self.period_ns)) - 1
         frames: List[LiftedFrame] = []
         for j in range(1, missing + 1):
             a = j / (missing + 1)
@@ -243,13 +274,28 @@ class OnlineLifter:
             frames += self._push(stamp, filled, intrinsics)
         return frames
 
-    def _received(self, frames: List[LiftedFrame]) -> List[LiftedFrame]:
-        """``frames`` without the filled-in ones."""
-        if not self._filled:
+    def _received(self, frames: List[LiftedFrame], end: bool = False) -> List[LiftedFrame]:
+        """The frames received, from the network frames ``frames`` released: without the
+        filled-in ones, with the thinned ones interpolated between their neighbours (held
+        after the last one at the ``end`` of a stream)."""
+        if not self._filled and not self._between:
+            if frames:
+                self._previous = frames[-1]
             return frames
-        out = [f for f in frames if f.stamp_ns not in self._filled]
+        out: List[LiftedFrame] = []
         for f in frames:
-            self._filled.discard(f.stamp_ns)
+            while self._between and self._between[0] < f.stamp_ns and \
+                    self._previous is not None:
+                out.append(_between_frame(self._previous, f, self._between.pop(0)))
+            if f.stamp_ns in self._filled:
+                self._filled.discard(f.stamp_ns)
+            else:
+                out.append(f)
+            self._previous = f
+        if end and self._previous is not None:
+            while self._between:
+                out.append(_between_frame(self._previous, self._previous,
+                                          self._between.pop(0)))
         return out
 
     def _push(self, stamp_ns: int, kp: np.ndarray, intrinsics: CameraIntrinsics
@@ -275,9 +321,10 @@ class OnlineLifter:
 
     def pending(self) -> int:
         """Frames received but not yet returned (windowed mode waits for look-ahead, the
-        output smoothing for its radius); filled-in frames are not counted."""
+        output smoothing for its radius, a thinned frame for its successor); filled-in frames
+        are not counted."""
         waiting = self._unlifted() + (self._smoother.pending() if self._smoother else 0)
-        return waiting - len(self._filled)
+        return waiting - len(self._filled) + len(self._between)
 
     def _unlifted(self) -> int:
         """Frames received but not yet through the network."""
@@ -291,7 +338,7 @@ class OnlineLifter:
         frames = self._infer([-n + j for j in range(n)]) if n else []
         if self._smoother is not None:
             frames = self._smoother.push(frames) + self._smoother.flush()
-        return self._received(frames)
+        return self._received(frames, end=True)
 
     def _stream_push(self) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Give the streaming encoder the newest frame (with the window's features, see

@@ -78,7 +78,7 @@ def _values(node) -> dict:
 
 def test_frames_missing_from_the_stream_are_filled_and_not_published(lifter, clouds):
     """Every second keypoint frame of a 30 fps stream (a busy keypoint node): the node lifts
-    the gaps filled (fill_rate_hz 30, the default) and publishes exactly the frames it
+    the gaps filled (network_rate_hz 30, the default) and publishes exactly the frames it
     received; diagnostics count the filled ones."""
     from mocap_core import topics
 
@@ -91,7 +91,8 @@ def test_frames_missing_from_the_stream_are_filled_and_not_published(lifter, clo
     stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
               for topic, m in recorded if topic == topics.LIFTER_MOTION]
     assert stamps == [T0 + k * DT for k in range(0, 20, 2)]
-    assert _values(node)['filled_frames'] == '9'
+    values = _values(node)
+    assert values['filled_frames'] == '9' and values['thinned_frames'] == '0'
 
 
 def test_person_leaving_without_camera_info_keeps_frames_flowing(lifter, clouds, capfd):

@@ -125,12 +125,12 @@ def test_a_restarted_stream_flushes_the_old_one_and_estimates_again():
     assert (stream.intrinsics.current.width, stream.intrinsics.current.height) == (1920, 1080)
 
 
-# --- frames missing from the stream (fill_rate_hz) -------------------------------------------
+# --- frames missing from the stream (network_rate_hz) -------------------------------------------
 def _lifter(fill: float, mode: str = 'windowed', **kw) -> OnlineLifter:
     import torch
     torch.manual_seed(0)
     model = MotioNet(LifterConfig(**SMALL, causal=(mode == 'causal'))).eval()
-    return OnlineLifter(model, mode, skeleton_frames=20, fill_rate_hz=fill, **kw)
+    return OnlineLifter(model, mode, skeleton_frames=20, network_rate_hz=fill, **kw)
 
 
 INTR = CameraIntrinsics(1280, 720, 1000.0, 1000.0, 639.5, 359.5)
@@ -185,9 +185,39 @@ def test_gaps_are_filled_and_only_the_frames_received_come_out(mode):
                            np.stack([f.pose.rotations for f in other]))
 
 
-def test_a_negative_fill_rate_is_refused():
-    with pytest.raises(ValueError, match='fill_rate_hz'):
+def test_a_negative_network_rate_is_refused():
+    with pytest.raises(ValueError, match='network_rate_hz'):
         _lifter(-1.0)
+
+
+@pytest.mark.parametrize('mode', ['windowed', 'causal'])
+def test_a_faster_stream_is_thinned_and_every_frame_comes_out(mode):
+    """60 frames/s, then a gap of three periods, then 60 frames/s to the end: every second
+    frame goes to the network, the gap is filled, and every frame received comes out once,
+    in order; a thinned frame's rotations lie between its neighbours' (slerp), the ones
+    after the last network frame hold it."""
+    from mocap_core.rotations import quat_angle
+
+    half = DT // 2
+    stamps = [T0 + j * half for j in range(41)]
+    stamps += [stamps[-1] + 3 * DT + j * half for j in range(30)]
+    lifter = _lifter(30.0, mode, output_sigma=1.0)
+    out, pending = [], []
+    for j, s in enumerate(stamps):
+        out += lifter.push(s, _people(j)[0], INTR)[0]
+        pending.append(lifter.pending())
+    out += lifter.flush()
+    assert [f.stamp_ns for f in out] == stamps
+    assert lifter.thinned_frames == 20 + 15 and lifter.filled_frames == 2
+    assert lifter.pending() == 0 and max(pending) <= 2 * lifter.delay + 3
+    for a, b, c in zip(out[0:40:2], out[1:41:2], out[2:41:2]):
+        ab, bc, ac = (float(np.max(quat_angle(x.pose.rotations, y.pose.rotations)))
+                      for x, y in ((a, b), (b, c), (a, c)))
+        assert ab <= ac + 1e-9 and bc <= ac + 1e-9
+        np.testing.assert_allclose(b.pose.root_position,
+                                   0.5 * (a.pose.root_position + c.pose.root_position),
+                                   atol=1e-9)
+    np.testing.assert_array_equal(out[-1].pose.rotations, out[-2].pose.rotations)
 
 
 def test_filled_gaps_lift_a_walk_seen_at_a_third_of_its_rate_better():

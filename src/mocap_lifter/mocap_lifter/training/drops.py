@@ -2,16 +2,19 @@
 
 A keypoint node on a busy machine publishes fewer frames than its camera gives (13 of 30
 frames/s on a slow 2-core VM, ``docs/speed.md``), and some cameras run slower than the 30
-frames/s the networks were trained at. The lifter reads the frames it gets as consecutive, so
-the motion it sees is two or three times too fast. :class:`~mocap_lifter.online.OnlineLifter`
-fills such gaps (``fill_rate_hz``); this evaluation measures what that gives.
+frames/s the networks were trained at; others run faster. The lifter reads the frames it gets
+as consecutive, so the motion it sees is two or three times too fast, or at half its pace.
+:class:`~mocap_lifter.online.OnlineLifter` feeds the network at its own rate
+(``network_rate_hz``: gaps filled in, faster input thinned); this evaluation measures what
+that gives.
 
 For every ground-truth bag (keypoints, intrinsics and the true camera-frame pose per frame,
 ``mocap data to-bag`` or the committed ``bags/``), frames are dropped by a pattern (every
 second, every third, a random 45 % kept: the slow VM's rate), the rest are lifted frame by
 frame with the node's defaults (windowed MotioNet, test-time flip, output smoothing), once as
-they come (``fill_rate_hz`` 0) and once with the gaps filled (30), and MPJPE / PA-MPJPE are
-scored on the frames kept. The all-frames run is the reference.
+they come (``network_rate_hz`` 0) and once with the gaps filled (30), and MPJPE / PA-MPJPE are
+scored on the frames kept. The all-frames run is the reference. A 60 frames/s camera is
+simulated by adding the midpoint between consecutive frames (keypoints and truth alike).
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ COMMITTED = ('rendered_cmu_05_01', 'gt_cmu_walk_12_02', 'gt_bandai_walk_exhauste
 CACHE_BAGS = Path.home() / '.cache' / 'mocap' / 'drops_bags'
 PERIOD_NS = 33_333_333
 PATTERNS = ('every 2nd frame (15 Hz)', 'every 3rd frame (10 Hz)', 'random 45 % (13.5 Hz)')
+#: a faster camera, simulated: each frame and the midpoint to the next, 16.7 ms apart (the
+#: truth at the midpoints interpolated too)
+FAST = '60 frames/s (midpoints added)'
 
 
 def read_bag(path: Path) -> Tuple[np.ndarray, object, np.ndarray]:
@@ -69,24 +75,44 @@ def kept_frames(pattern: str, frames: int, seed: int) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def lift_kept(model, kp: np.ndarray, intr, kept: np.ndarray, fill_rate_hz: float
-              ) -> Tuple[np.ndarray, int]:
-    """The node's lifter (windowed defaults) on the kept frames, stamped as the camera gave
-    them: ((K, 18, 3) joints of the kept frames, frames filled in)."""
+def lift_stamped(model, kp: np.ndarray, intr, stamps: Sequence[int], network_rate_hz: float
+                 ) -> Tuple[np.ndarray, object]:
+    """The node's lifter (windowed defaults) frame by frame on keypoints (K, 23, 3) stamped
+    ``stamps`` (ns): ((K, 18, 3) joints of those frames, the lifter)."""
     from ..online import OnlineLifter
     from ..output_smoothing import DEFAULT_OUTPUT_ROOT_SIGMA, DEFAULT_OUTPUT_SIGMA
 
     lifter = OnlineLifter(model, 'windowed', flip=True, output_sigma=DEFAULT_OUTPUT_SIGMA,
                           output_root_sigma=DEFAULT_OUTPUT_ROOT_SIGMA,
-                          fill_rate_hz=fill_rate_hz)
+                          network_rate_hz=network_rate_hz)
     frames = []
-    for i in kept:
-        frames += lifter.push(PERIOD_NS * int(i), kp[i], intr)[0]
+    for stamp, k in zip(stamps, kp):
+        frames += lifter.push(int(stamp), k, intr)[0]
     frames += lifter.flush()
-    by_stamp = {f.stamp_ns: f.pose.joint_positions() for f in frames}
-    if sorted(by_stamp) != [PERIOD_NS * int(i) for i in kept]:
+    if [f.stamp_ns for f in frames] != [int(s) for s in stamps]:
         raise RuntimeError('the lifter did not return exactly the frames it was given')
-    return np.stack([by_stamp[PERIOD_NS * int(i)] for i in kept]), lifter.filled_frames
+    return np.stack([f.pose.joint_positions() for f in frames]), lifter
+
+
+def lift_kept(model, kp: np.ndarray, intr, kept: np.ndarray, network_rate_hz: float
+              ) -> Tuple[np.ndarray, int]:
+    """The kept frames of a 30 frames/s sequence, stamped as the camera gave them: ((K, 18,
+    3) joints of the kept frames, frames filled in)."""
+    joints, lifter = lift_stamped(model, kp[kept], intr, [PERIOD_NS * int(i) for i in kept],
+                                  network_rate_hz)
+    return joints, lifter.filled_frames
+
+
+def with_midpoints(x: np.ndarray, confidence: bool = False) -> np.ndarray:
+    """(T, ...) -> (2T - 1, ...): each frame and the midpoint to the next (a keypoint's
+    confidence at a midpoint the smaller of its two)."""
+    out = np.empty((2 * len(x) - 1,) + x.shape[1:])
+    out[0::2] = x
+    mid = 0.5 * (x[:-1] + x[1:])
+    if confidence:
+        mid[..., 2] = np.minimum(x[:-1, ..., 2], x[1:, ..., 2])
+    out[1::2] = mid
+    return out
 
 
 def evaluate(bags: Sequence[Path], progress: bool = True) -> Dict:
@@ -116,8 +142,17 @@ def evaluate(bags: Sequence[Path], progress: bool = True) -> Dict:
                             'pa_mpjpe_mm': pa_mpjpe_mm(pred, gt[kept]),
                             'filled_frames': filled}
             rows.append(row)
+        kp60, gt60 = with_midpoints(kp, confidence=True), with_midpoints(gt)
+        stamps = [PERIOD_NS * i // 2 for i in range(len(kp60))]
+        row = {'bag': path.name, 'pattern': FAST, 'frames': len(kp60), 'kept': len(kp60)}
+        for key, rate in (('as_is', 0.0), ('filled', 30.0)):
+            pred, lifter = lift_stamped(model, kp60, intr, stamps, rate)
+            row[key] = {'mpjpe_mm': mpjpe_mm(pred, gt60),
+                        'pa_mpjpe_mm': pa_mpjpe_mm(pred, gt60),
+                        'thinned_frames': lifter.thinned_frames}
+        rows.append(row)
     summary = {}
-    for pattern in PATTERNS:
+    for pattern in PATTERNS + (FAST,):
         sel = [r for r in rows if r['pattern'] == pattern]
         summary[pattern] = {
             'bags': len(sel),
@@ -141,14 +176,17 @@ def write_report(res: Dict, out: Path, command: str) -> None:
              f'Command: `{command}`. The node\'s lifter (windowed MotioNet, default weights, '
              'test-time flip, output smoothing) on ground-truth bags with frames dropped; '
              'scored on the frames kept (`mocap_lifter/training/drops.py`). "as is": every '
-             'frame received taken as the next one (`fill_rate_hz:=0`); "filled": the gaps '
-             'filled at 30 frames/s (`fill_rate_hz:=30`, the default).', '',
+             'frame received given to the network as the next one (`network_rate_hz:=0`); '
+             '"filled": the network fed at 30 frames/s (`network_rate_hz:=30`, the default: '
+             'gaps filled in, the 60 frames/s input thinned and the frames between '
+             'interpolated). The 60 frames/s row is scored on every frame, the truth at the '
+             'midpoints interpolated as well.', '',
              f"All frames (reference): MPJPE {s['all']['mpjpe_mm']:.1f} mm, PA-MPJPE "
              f"{s['all']['pa_mpjpe_mm']:.1f} mm (median over {s['all']['bags']} bags).", '',
              '| frames kept | bags | MPJPE as is | MPJPE filled | PA-MPJPE as is | '
              'PA-MPJPE filled | bags better filled (PA / MPJPE) |',
              '|---|---|---|---|---|---|---|']
-    for pattern in PATTERNS:
+    for pattern in PATTERNS + (FAST,):
         v = s[pattern]
         lines.append(f"| {pattern} | {v['bags']} | {v['as_is_mpjpe_mm']:.1f} | "
                      f"**{v['filled_mpjpe_mm']:.1f}** | {v['as_is_pa_mpjpe_mm']:.1f} | "
