@@ -337,10 +337,9 @@ class LifterNode(Node):
         self.diag.set_value('person_ids', ' '.join(map(str, sorted(self.people.streams)))
                             or 'none')
         self.diag.set_value('persons_ignored', self.people.ignored)
-        self.diag.set_value('filled_frames', sum(
-            st.lifter.filled_frames for st in self.people.streams.values()))
-        self.diag.set_value('thinned_frames', sum(
-            st.lifter.thinned_frames for st in self.people.streams.values()))
+        filled, thinned = self.people.rate_counts()
+        self.diag.set_value('filled_frames', filled)
+        self.diag.set_value('thinned_frames', thinned)
 
     def _finite(self, frame: LiftedFrame) -> bool:
         pose = frame.pose

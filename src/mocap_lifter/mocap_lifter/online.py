@@ -214,6 +214,7 @@ class OnlineLifter:
         self._last_emitted = -1
         self._filled: set = set()          # stamps of the filled-in frames not yet returned
         self._between: List[int] = []      # stamps of thinned frames waiting for an output
+        self._last_received = -1           # the newest stamp pushed (thinned ones too)
         self._previous: Optional[LiftedFrame] = None   # the last network frame released
         # chunk > 1: the skeleton estimate after each push (frames_seen -> lengths), so that
         # every frame gets the skeleton it would have got frame by frame
@@ -236,7 +237,7 @@ class OnlineLifter:
             raise ValueError(f'keypoints must have shape ({NUM_KEYPOINTS}, 3), got {kp.shape}')
         event = ''
         if self._stamps:
-            dt = stamp_ns - max(self._stamps[-1], self._between[-1] if self._between else 0)
+            dt = stamp_ns - max(self._stamps[-1], self._last_received)
             if dt <= 0:
                 event = 'backwards'
             elif dt > self.max_gap_ns:
@@ -247,7 +248,8 @@ class OnlineLifter:
         if event:
             frames = self.flush()
             self.reset()
-        elif self.period_ns and self._stamps:
+        self._last_received = int(stamp_ns)
+        if not event and self.period_ns and self._stamps:
             if 4 * (stamp_ns - self._stamps[-1]) < 3 * self.period_ns:
                 self._between.append(int(stamp_ns))       # thinned (module docstring)
                 self.thinned_frames += 1
@@ -664,6 +666,9 @@ class PeopleStreams:
         self.streams: Dict[int, LifterStream] = {}
         self.last_seen: Dict[int, int] = {}
         self.ignored = 0           # rows of ids beyond max_persons
+        #: frames filled in / thinned by the lifters of persons who are gone
+        self.filled_ended = 0
+        self.thinned_ended = 0
         self._last_ns: Optional[int] = None
 
     @staticmethod
@@ -731,8 +736,17 @@ class PeopleStreams:
             out.steps[pid] = s.flush()
         return out
 
+    def rate_counts(self) -> Tuple[int, int]:
+        """Frames filled in and thinned (``network_rate_hz``) so far, every person's."""
+        live = list(self.streams.values())
+        return (self.filled_ended + sum(st.lifter.filled_frames for st in live),
+                self.thinned_ended + sum(st.lifter.thinned_frames for st in live))
+
     def _end(self, pid: int, out: PeopleStep) -> None:
-        step = self.streams.pop(pid).flush()
+        stream = self.streams.pop(pid)
+        step = stream.flush()
+        self.filled_ended += stream.lifter.filled_frames
+        self.thinned_ended += stream.lifter.thinned_frames
         self.last_seen.pop(pid, None)
         if pid in out.steps:
             out.steps[pid].frames.extend(step.frames)
