@@ -98,49 +98,60 @@ def test_finish_runs_beside_the_next_items_processing_and_keeps_the_order():
     assert all(s >= 0.0015 for *_, s in out.items)
 
 
+class HeldFinish:
+    """``process`` records the items it starts; ``finish`` holds item 0 until ``release``
+    (``finishing`` is set meanwhile)."""
+
+    def __init__(self):
+        self.release, self.finishing = threading.Event(), threading.Event()
+        self.done = []
+        self.cond = threading.Condition()
+
+    def process(self, item):
+        with self.cond:
+            self.done.append(item)
+            self.cond.notify_all()
+        return item
+
+    def finish(self, result):
+        if result == 0:
+            self.finishing.set()
+            assert self.release.wait(10.0)
+        return result
+
+    def wait_done(self, n):
+        with self.cond:
+            assert self.cond.wait_for(lambda: len(self.done) >= n, 10.0)
+
+    def worker_holding(self, out) -> LatestWorker:
+        """A two-thread worker with item 0 held in finish and item 1 processed."""
+        w = LatestWorker(self.process, out, finish=self.finish).start()
+        w.submit(0)
+        assert self.finishing.wait(10.0)
+        w.submit(1)
+        self.wait_done(2)
+        return w
+
+
 def test_at_most_one_result_waits_between_the_two_threads():
     """While finish is held, the first thread hands over one result, processes one more and
     waits; newer items replace each other in the input slot (counted), as with one thread."""
     out = Collector()
-    release, finishing = threading.Event(), threading.Event()
-    done = []
-    cond = threading.Condition()
-
-    def process(item):
-        with cond:
-            done.append(item)
-            cond.notify_all()
-        return item
-
-    def finish(result):
-        if result == 0:
-            finishing.set()
-            assert release.wait(10.0)
-        return result
-
-    def wait_done(n):
-        with cond:
-            assert cond.wait_for(lambda: len(done) >= n, 10.0)
-
-    w = LatestWorker(process, out, finish=finish).start()
-    w.submit(0)
-    assert finishing.wait(10.0)
-    w.submit(1)
-    wait_done(2)                 # handed over, waiting for finish
+    h = HeldFinish()
+    w = h.worker_holding(out)    # 1 handed over, waiting for finish
     assert not w.wait_idle(0.0) and not w.idle
     w.submit(2)
-    wait_done(3)                 # processed; the thread waits for the hand-off
+    h.wait_done(3)               # processed; the thread waits for the hand-off
     for i in range(3, 10):
         w.submit(i)
-    release.set()
+    h.release.set()
     assert w.wait_idle(10.0)
     w.stop()
     assert [i for i, *_ in out.items] == [0, 1, 2, 9]
-    assert w.dropped == 6 and w.processed == 4 and done == [0, 1, 2, 9]
+    assert w.dropped == 6 and w.processed == 4 and h.done == [0, 1, 2, 9]
 
 
 def test_errors_of_either_thread_are_reported_in_order():
-    out = Collector()
     got = []
 
     def on_result(item, result, error, seconds):
@@ -164,7 +175,6 @@ def test_errors_of_either_thread_are_reported_in_order():
     assert got == [(0, 0, None), (1, None, 'RuntimeError'), (2, None, 'ValueError'),
                    (3, -3, None)]
     assert w.processed == 2 and w.failed == 2
-    del out
 
 
 def test_stop_discards_what_waits_and_ends_both_threads():
@@ -172,34 +182,14 @@ def test_stop_discards_what_waits_and_ends_both_threads():
     in the input slot: stop returns once the held item is through, the waiting items are
     discarded, and waiting for idle does not hang."""
     out = Collector()
-    release, finishing = threading.Event(), threading.Event()
-    done = []
-    cond = threading.Condition()
-
-    def process(item):
-        with cond:
-            done.append(item)
-            cond.notify_all()
-        return item
-
-    def finish(result):
-        if result == 0:
-            finishing.set()
-            assert release.wait(10.0)
-        return result
-
-    w = LatestWorker(process, out, finish=finish).start()
-    w.submit(0)
-    assert finishing.wait(10.0)
-    w.submit(1)
-    with cond:
-        assert cond.wait_for(lambda: len(done) >= 2, 10.0)
+    h = HeldFinish()
+    w = h.worker_holding(out)
     w.submit(2)                 # 1 is handed over or about to be; 2 waits
     stopper = threading.Thread(target=w.stop, kwargs={'timeout': 10.0})
     stopper.start()
     with w._cond:
         assert w._cond.wait_for(lambda: w._stop, 10.0)
-    release.set()
+    h.release.set()
     stopper.join(10.0)
     assert not stopper.is_alive() and not w.running
     assert [i for i, *_ in out.items] == [0]
