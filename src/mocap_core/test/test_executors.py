@@ -2,6 +2,7 @@
 
 import signal
 import subprocess
+import time
 import sys
 
 import pytest
@@ -149,10 +150,17 @@ def test_a_node_process_answers_parameter_requests_with_either_executor(tmp_path
         node = rclpy.create_node('param_client', context=ctx)
         client = AsyncParameterClient(node, 'idle')
         assert client.wait_for_services(timeout_sec=60)
-        future = client.get_parameters(['gain'])
         executor = make_executor('single_threaded', context=ctx)
         executor.add_node(node)
-        executor.spin_until_future_complete(future, timeout_sec=60)
+        # The service being discovered does not mean the reply path is matched yet (DDS matches
+        # the request and the reply topics separately), so a first request can go unanswered on
+        # a busy machine, as `ros2 param get` would then time out. Ask again until answered.
+        deadline = time.monotonic() + 60
+        while True:
+            future = client.get_parameters(['gain'])
+            executor.spin_until_future_complete(future, timeout_sec=5)
+            if future.done() or time.monotonic() > deadline:
+                break
         assert future.done() and future.result().values[0].double_value == 2.5
         node.destroy_node()
     finally:
