@@ -21,7 +21,7 @@ from mocap_core.data.bvh_synth import synthetic_walk_bvh
 from mocap_core.data.bvh import parse_bvh
 from mocap_core.data.dataset import process_clip
 from mocap_core.data.gt_bag import (DEFAULT_START_NS, GT_TOPICS, OPTICAL_FRAME, WORLD_FRAME,
-                                    write_groundtruth_bag)
+                                    read_groundtruth_bag, write_groundtruth_bag)
 from mocap_core.data.synth2d import CameraSampling, Corruption
 from mocap_core.kinematics import forward_kinematics
 from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
@@ -146,6 +146,14 @@ def test_groundtruth_bag_clean_reprojects_within_a_pixel(tmp_path, synth_motion)
     s = write_groundtruth_bag(synth_motion, out, CameraSampling(), corruption=None, seed=4)
     assert s.frames == synth_motion.num_frames == 90 and s.clean
     check_groundtruth_bag(out, 90, 30.0, clean=True)
+    # read back as a lifter's evaluation reads it: the camera's keypoints and camera-frame poses
+    kp, intr, poses = read_groundtruth_bag(out)
+    raw = read_bag(out)
+    assert kp.shape == (90, 23, 3) and len(poses) == 90
+    assert np.array_equal(kp[37], cloud_to_keypoints(raw[GT_TOPICS['keypoints']][37][2])[0])
+    assert (intr.width, intr.height) == (s.intrinsics.width, s.intrinsics.height)
+    assert np.allclose(poses[37].joint_positions(),
+                       cloud_to_positions(raw[GT_TOPICS['joints3d']][37][2], NUM_JOINTS))
 
 
 def test_groundtruth_bag_corrupted_and_reproducible(tmp_path, synth_motion):

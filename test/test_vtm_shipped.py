@@ -17,22 +17,9 @@ BAGS = ['gt_cmu_walk_12_02', 'gt_bandai_walk_exhausted', 'gt_bandai_wave_normal'
 
 
 def _ground_truth(name: str):
-    """Keypoints (T, 23, 3), intrinsics, camera-frame poses and contacts of a GT bag."""
-    from mocap_core.bag_io import BagReader, deserialize
-    from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
-                                            motion_to_pose)
-    kp, poses, intr = [], [], None
-    with BagReader(ROOT / 'bags' / name) as bag:
-        for m in bag.messages(topics=['/mocap/keypoints2d', '/mocap/camera_info',
-                                      '/mocap/groundtruth/motion']):
-            msg = deserialize(m.data, m.msgtype)
-            if m.topic == '/mocap/keypoints2d':
-                kp.append(cloud_to_keypoints(msg)[0])
-            elif m.topic == '/mocap/camera_info':
-                intr = camera_info_to_intrinsics(msg)
-            else:
-                poses.append(motion_to_pose(msg))
-    return np.stack(kp), intr, poses
+    """Keypoints (T, 23, 3), intrinsics and camera-frame poses of a committed GT bag."""
+    from mocap_core.data.gt_bag import read_groundtruth_bag
+    return read_groundtruth_bag(ROOT / 'bags' / name)
 
 
 @pytest.fixture(scope='module')

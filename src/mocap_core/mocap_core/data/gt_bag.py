@@ -61,7 +61,8 @@ from .synth2d import (CameraSampling, ConfidenceModel, Corruption, VirtualCamera
 
 __all__ = [
     'OPTICAL_FRAME', 'WORLD_FRAME', 'DEFAULT_START_NS', 'GT_TOPICS', 'BagSummary',
-    'crop_motion', 'facing_direction', 'write_groundtruth_bag', 'write_openpose_bag',
+    'crop_motion', 'facing_direction', 'read_groundtruth_bag', 'write_groundtruth_bag',
+    'write_openpose_bag',
 ]
 
 #: frame_id of the camera topics (the keypoint node's default ``frame_id`` parameter).
@@ -106,6 +107,29 @@ class BagSummary:
 def stamps_ns(frames: int, fps: float, start_ns: int = DEFAULT_START_NS) -> np.ndarray:
     """(frames,) int64 stamps ``start_ns + round(i * 1e9 / fps)``."""
     return start_ns + np.round(np.arange(frames) * (1e9 / fps)).astype(np.int64)
+
+
+def read_groundtruth_bag(path: Union[str, os.PathLike]):
+    """What a lifter is fed and scored with in a ground-truth bag (:func:`write_groundtruth_bag`,
+    or a rendered clip's ``gt_bag``): ``(keypoints, intrinsics, poses)`` with keypoints
+    (T, 23, 3) (u, v in pixels, confidence) of the cloud's first person, the last
+    :class:`~mocap_core.camera.CameraIntrinsics` of ``/mocap/camera_info``, and the T
+    camera-optical-frame :class:`~mocap_core.pose.Pose` of ``/mocap/groundtruth/motion``
+    (T: the shorter of the two streams)."""
+    from ..bag_io import BagReader, deserialize
+    from ..ros_conversions import camera_info_to_intrinsics, cloud_to_keypoints, motion_to_pose
+    kp, poses, intr = [], [], None
+    with BagReader(path) as bag:
+        for m in bag.messages(topics=[T.KEYPOINTS, T.CAMERA_INFO, T.GROUNDTRUTH_MOTION]):
+            msg = deserialize(m.data, m.msgtype)
+            if m.topic == T.KEYPOINTS:
+                kp.append(cloud_to_keypoints(msg)[0])
+            elif m.topic == T.CAMERA_INFO:
+                intr = camera_info_to_intrinsics(msg)
+            else:
+                poses.append(motion_to_pose(msg))
+    n = min(len(kp), len(poses))
+    return np.stack(kp[:n]), intr, poses[:n]
 
 
 def crop_motion(motion: Motion, start: int = 0, frames: Optional[int] = None) -> Motion:

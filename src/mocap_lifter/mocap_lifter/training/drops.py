@@ -44,22 +44,9 @@ FAST = '60 frames/s (midpoints added)'
 def read_bag(path: Path) -> Tuple[np.ndarray, object, np.ndarray]:
     """(T, 23, 3) keypoints of the first person, the camera intrinsics and (T, 18, 3) true
     joint positions (camera optical frame, m) of a ground-truth bag."""
-    from mocap_core.bag_io import BagReader, deserialize
-    from mocap_core.ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
-                                            motion_to_pose)
-    kp, joints, intr = [], [], None
-    with BagReader(path) as bag:
-        for m in bag.messages(topics=['/mocap/keypoints2d', '/mocap/camera_info',
-                                      '/mocap/groundtruth/motion']):
-            msg = deserialize(m.data, m.msgtype)
-            if m.topic == '/mocap/keypoints2d':
-                kp.append(cloud_to_keypoints(msg)[0])
-            elif m.topic == '/mocap/camera_info':
-                intr = camera_info_to_intrinsics(msg)
-            else:
-                joints.append(motion_to_pose(msg).joint_positions())
-    n = min(len(kp), len(joints))
-    return np.stack(kp[:n]), intr, np.stack(joints[:n])
+    from mocap_core.data.gt_bag import read_groundtruth_bag
+    kp, intr, poses = read_groundtruth_bag(path)
+    return kp, intr, np.stack([p.joint_positions() for p in poses])
 
 
 def kept_frames(pattern: str, frames: int, seed: int) -> np.ndarray:
