@@ -474,6 +474,20 @@ def test_eval_video_scores_the_pipeline_on_a_rendered_clip(rendered, tmp_path, c
     # same detector, same frames: the same numbers from the video as from the recording
     assert abs(reports['video']['clips'][0]['mpjpe']
                - reports['keypoints']['clips'][0]['mpjpe']) < 1.0
+    # --live: the composed live pipeline reads the video (here without dropping frames, so
+    # that the test does not depend on the machine's speed): every frame reaches the outputs
+    out = tmp_path / 'live'
+    rc = main(['eval', 'video', '--renders', str(root), '-o', str(out), '--live',
+               '--param', 'keypoints.realtime=false', '--work', str(tmp_path / 'work_live'),
+               '--quiet'])
+    assert rc == 0, capsys.readouterr().err
+    (clip,) = json.loads((out / 'report.json').read_text())['clips']
+    assert clip['live_keypoint_share'] == 1.0 and clip['scored'] == 24
+    assert clip['live_world_share'] > 0.8
+    assert abs(clip['mpjpe'] - reports['video']['clips'][0]['mpjpe']) < 5.0
+    assert 'live: frames that reached' in (out / 'report.md').read_text()
+    assert main(['eval', 'video', '--renders', str(root), '-o', str(out), '--live',
+                 '--start', 'keypoints', '--quiet']) == 2
     # a clip folder without any lifter output is counted, not scored
     gt, _ = load_clip(clip_dir)
     assert gt['keypoints'].shape == (24, 23, 3)

@@ -12,6 +12,13 @@ approx``) or on the clip's bag from the keypoints it recorded (start ``keypoints
 detector output, faster). The output bags are kept under
 ``~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>/`` (``--work``) and reused by a rerun
 with the same tag. Writes ``OUT_DIR/report.md``, ``report.json`` and plots.
+
+``--live`` (with start ``video``): each clip is played at its frame rate through the composed
+live pipeline (``mocap run``: the four nodes in one process, every stage at live settings),
+recorded from inside the process and scored as above. The keypoint node drops the frames
+its detector cannot keep up with, as with a camera, so the figures are what a live user of
+this machine gets; the report adds the share of the frames that reached each stage. Run it
+on an otherwise idle machine: the share depends on the CPU left to the pipeline.
 """
 
 from __future__ import annotations
@@ -197,15 +204,21 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
     return acc
 
 
+#: the topics a live run records (what :func:`_read_output` and the skating split read)
+LIVE_TOPICS = ('/mocap/keypoints2d', '/mocap/camera/motion', '/mocap/lifter/joints3d',
+               '/mocap/physics/joints3d', '/mocap/world/joints3d', '/mocap/physics/floor')
+
+
 def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
              params: Dict[str, Dict], progress: bool = False, camera_motion: bool = True,
-             camera_floor: str = 'physics', known_height: bool = False):
+             camera_floor: str = 'physics', known_height: bool = False, live: bool = False):
     """Process one rendered clip (reusing a finished output) and score it. With
     ``camera_motion`` and start ``keypoints``, the input bag carries the camera-motion
     estimate from the clip's video (start ``video``: the keypoint node makes it), its
     translation measured over ``camera_floor`` ('physics': the physics floor of a first run;
     'true': the render's floor, an oracle). With ``known_height`` the lifter is given the
-    rendered body's stature (``lifter.subject_height``)."""
+    rendered body's stature (``lifter.subject_height``). ``live`` (start ``video``): played
+    at its rate through the composed live pipeline (module docstring)."""
     from .. import topics as T
     from ..camera import CameraCalibration, CameraIntrinsics, write_camera_info_yaml
     from ..render.clip import load_clip
@@ -252,8 +265,22 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
                             log=lambda *a: None, log_level='error', **kw)
                     acc = _camera_motion_bag(clip_dir, gt, src, out / 'floor_bag')
                 (out / 'camera_motion.json').write_text(json.dumps(acc, indent=1))
-        summary = process(src, bag, params=p, overwrite=True, progress=progress,
-                          log=lambda *a: None, log_level='error', **kw)
+        if live:
+            from .run import RunError, run
+            kp = p.setdefault('keypoints', {})
+            kp.update(source='video', path=str(src), loop=False)
+            kp.setdefault('realtime', True)    # (false: no frame dropped, for tests)
+            try:
+                status = run(p, record=bag, topics_out=LIVE_TOPICS, overwrite=True,
+                             log_level='error')
+            except RunError as exc:
+                raise EvalError(str(exc)) from None
+            if status != 0:
+                raise EvalError(f'the live run ended with status {status}')
+            summary = {'live': True}
+        else:
+            summary = process(src, bag, params=p, overwrite=True, progress=progress,
+                              log=lambda *a: None, log_level='error', **kw)
         (out / 'summary.json').write_text(json.dumps(summary, indent=1, default=str))
         (out / 'done').write_text('1')
     data = _read_output(bag)
@@ -275,12 +302,19 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             roots[stage] = (j, _index(s, first, fps))   # all joints: the feet are scored
     score = score_clip(meta['clip'], meta, gt, lj if len(lj) else None,
                        _index(ls, first, fps), roots)
+    if live:
+        # the share of the rendered frames that reached each stage (the rest were dropped
+        # by the keypoint node, as a camera's frames are when the detector falls behind)
+        n = max(int(meta.get('frames') or len(gt['joints_world'])), 1)
+        score.root['live'] = {'keypoint_share': len(kp_stamps) / n,
+                              'world_share': len(data[T.WORLD_JOINTS3D][0]) / n}
     cm = out / 'camera_motion.json'
     if cm.exists():
         score.root.setdefault('camera', {}).update(json.loads(cm.read_text()))
-    if (out / 'input_bag').exists() and 'world' in roots and 'contacts' in gt:
+    motion_bag = bag if live else out / 'input_bag'     # live: the keypoint node's estimate
+    if motion_bag.exists() and 'world' in roots and 'contacts' in gt:
         from ..render.evaluate import skating_by_camera_state
-        groups = _camera_state_groups(out / 'input_bag', first, fps, len(gt['contacts']))
+        groups = _camera_state_groups(motion_bag, first, fps, len(gt['contacts']))
         if groups is not None:
             score.world_skating_by_state = skating_by_camera_state(
                 *roots['world'], gt['contacts'], groups)
@@ -361,6 +395,10 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
         print('mocap eval video: error: --known-camera-pose needs --start keypoints (the '
               "camera's pose is in the rendered clip's bag)", file=sys.stderr)
         return 2
+    if args.live and args.start != 'video':
+        print('mocap eval video: error: --live needs --start video (the keypoint node reads '
+              'the video live)', file=sys.stderr)
+        return 2
     renders = Path(args.renders) if args.renders else DEFAULT_OUT
     clips = list(iter_done(renders, args.split))
     if not clips:
@@ -383,7 +421,7 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
             f'gmr.camera_pose_topic={T_GT_CAMERA_POSE}', 'gmr.camera_pose_type=pose']
     tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
     work_root = Path(args.work) if args.work else Path.home() / '.cache' / 'mocap' / 'eval_video'
-    work = work_root / f'{tag}_{args.start}_{args.intrinsics}'
+    work = work_root / (f'{tag}_{args.start}_{args.intrinsics}' + ('_live' if args.live else ''))
     try:
         params = parse_params(args.param)
     except ProcessError as exc:
@@ -396,7 +434,7 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
             scores.append(run_clip(d, work, args.start, args.intrinsics, params,
                                    camera_motion=not args.no_camera_motion,
                                    camera_floor=args.camera_floor,
-                                   known_height=args.known_height))
+                                   known_height=args.known_height, live=args.live))
         except NoOutput as exc:
             no_output.append(str(exc))
         except (EvalError, ProcessError, ValueError, OSError) as exc:
@@ -414,7 +452,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
         shown = str(renders)
     setup = ['`mocap eval video' + (f' --renders {shown}' if args.renders else '')
              + f' --split {args.split} --start {args.start} --intrinsics '
-             f'{args.intrinsics}' + ''.join(f' --param {p}' for p in args.param)
+             f'{args.intrinsics}' + (' --live' if args.live else '')
+             + ''.join(f' --param {p}' for p in args.param)
              + (' --known-height' if args.known_height else '') + '`'
              + (f' (first {args.limit} clips)' if args.limit else ''),
              f'Rendered clips: `{shown}` ({args.split} split: subjects, contents and styles '
@@ -465,6 +504,10 @@ def add_eval_parser(sub) -> None:
                    'measured: physics (as the keypoint node does: the physics floor of a first '
                    "run, 30 frames late) or true (the render's floor, same lag: an oracle that "
                    'separates the floor error from the tracking error)')
+    p.add_argument('--live', action='store_true',
+                   help='--start video: play each clip at its frame rate through the composed '
+                   'live pipeline (mocap run), frames dropped as live; run it on an idle '
+                   'machine')
     p.add_argument('--tag', help='name of this run (output bags reused by the same tag)')
     p.add_argument('--work', help='where the output bags are kept (default '
                    '~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>)')

@@ -15,6 +15,14 @@ Usage::
     mocap run --image-topic /camera/image_raw      # images from a topic
     mocap run --video clip.mp4 --param lifter.mode=causal --param gmr.lookahead=0
     mocap run --camera 0 -- --ros-args -r /mocap/world/motion:=/person/motion
+    mocap run --video clip.mp4 --record out_bag --topics '/mocap/world/*'
+
+``--record OUT`` writes what the nodes publish to an MCAP bag, as ``mocap process`` does
+(``--topics``: glob patterns of the topics to write, default every topic; the nodes build
+only the optional outputs that are written or that someone else listens to), from inside the
+process: no DDS subscriber, nothing lost to a best-effort topic. Messages are stamped with
+their header stamp (live: the frame's capture time), others with the time they were
+published.
 
 Node parameters: ``--param NODE.NAME=VALUE`` (NODE = keypoints, lifter, physics, gmr), or the
 usual ``--ros-args -p NODE:NAME:=VALUE`` after ``--``; ``--ros-args`` remappings apply to every
@@ -28,7 +36,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any, Dict, List, Optional
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence
 
 from .. import plugins
 
@@ -38,9 +47,14 @@ class RunError(RuntimeError):
 
 
 def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
-        max_seconds: float = 0.0) -> int:
+        max_seconds: float = 0.0, record: Optional[Path] = None,
+        topics_out: Optional[Sequence[str]] = None, overwrite: bool = False,
+        log_level: str = '') -> int:
     """Run the composed pipeline until the source ends, Ctrl-C or ``max_seconds`` (0: no
-    limit). Returns the exit status."""
+    limit). With ``record``, every message published (``topics_out``: glob patterns of the
+    topics to write, None = all) is written to that MCAP bag (``overwrite`` an existing one).
+    ``log_level`` (debug, info, warn, error; '' = ROS's default) applies to every node.
+    Returns the exit status."""
     import time
 
     import rclpy
@@ -52,8 +66,20 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
     from ..inprocess import InProcessGraph
     from .process import _overrides
 
+    writer = recorder = None
+    if record is not None:
+        from ..bag_io import BagError, BagWriter
+        from .process import Recorder
+        try:
+            writer = BagWriter(record, overwrite=overwrite)
+        except BagError as exc:
+            raise RunError(str(exc)) from None
+        recorder = Recorder(writer, only=topics_out)
+    args = list(ros_args or [])
+    if log_level:
+        args += ['--log-level', log_level]
     context = Context()
-    rclpy.init(args=['--ros-args', *(ros_args or [])] if ros_args else None, context=context)
+    rclpy.init(args=['--ros-args', *args] if args else None, context=context)
     nodes: Dict[str, Any] = {}
     executor = make_executor(context=context)
 
@@ -62,7 +88,13 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
         if target is not None:
             record_failure(target, f'{topic} message', exc)
 
-    graph = InProcessGraph(on_error=on_error, live=True)
+    def write(topic: str, msg: Any, qos: Any) -> None:
+        recorder.now_ns = time.time_ns()        # for messages without a header stamp
+        recorder(topic, msg, qos)
+
+    graph = InProcessGraph(on_error=on_error, live=True,
+                           record=write if recorder is not None else None, record_raw=True,
+                           record_filter=recorder.wants if recorder is not None else None)
     try:
         for name in plugins.PIPELINE:
             try:
@@ -102,6 +134,8 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
             executor.remove_node(node)
             node.destroy_node()
         context.try_shutdown()
+        if writer is not None:
+            writer.close()
 
 
 def add_parser(sub) -> None:
@@ -116,6 +150,11 @@ def add_parser(sub) -> None:
                    help='node parameter (repeatable)')
     p.add_argument('--seconds', type=float, default=0.0, help='stop after this long (0: no '
                    'limit)')
+    p.add_argument('--record', metavar='OUT', help='write the published messages to this '
+                   'MCAP bag (from inside the process; see above)')
+    p.add_argument('--topics', nargs='+', metavar='TOPIC', help='with --record: glob patterns '
+                   'of the topics to write (default every topic)')
+    p.add_argument('--overwrite', action='store_true', help='with --record: replace OUT')
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
                    help='after --: --ros-args ... for every node (remappings, parameters)')
     p.set_defaults(func=cmd_run)
@@ -143,8 +182,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     extra = [a for a in args.ros_args if a != '--']
     if extra and extra[0] == '--ros-args':
         extra = extra[1:]
+    if args.topics and not args.record:
+        print('mocap run: error: --topics needs --record', file=sys.stderr)
+        return 2
     try:
-        return run(params, extra, args.seconds)
+        return run(params, extra, args.seconds,
+                   record=Path(args.record) if args.record else None, topics_out=args.topics,
+                   overwrite=args.overwrite)
     except RunError as exc:
         print(f'mocap run: error: {exc}', file=sys.stderr)
         return 2

@@ -634,6 +634,11 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                f"{_f(100 * m.get(f'{st}_frames_below_5mm', float('nan')))} % / "
                f"{_f(m.get(f'{st}_skating_mm'))} mm per frame |" for st in ('physics', 'world')],
              f"| person detected | {_f(100 * m.get('detected', float('nan')))} % of frames |",
+             *([f"| live: frames that reached the keypoint output / the world output (the "
+                f"rest dropped as the detector fell behind) | "
+                f"{_f(100 * m['live_keypoint_share'], '{:.0f}')} % / "
+                f"{_f(100 * m.get('live_world_share', float('nan')), '{:.0f}')} % |"]
+               if 'live_keypoint_share' in m else []),
              '', '## By view (pooled over frames)', '',
              '| view | frames | MPJPE | RA-MPJPE | PA-MPJPE | orientation error (deg, '
              'median) | leg swaps | detector leg swaps (2D) |',
@@ -697,6 +702,8 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
 
 #: Rows of :func:`comparison_markdown`: (label, median key, format).
 COMPARISON_ROWS = (
+    ('live: frames that reached the keypoint output (%)', 'live_keypoint_share', 'pct'),
+    ('live: frames that reached the world output (%)', 'live_world_share', 'pct'),
     ('lifter MPJPE (mm)', 'mpjpe', '{:.1f}'),
     ('lifter PA-MPJPE (mm)', 'pa_mpjpe', '{:.1f}'),
     ('lifter RA-MPJPE: rigidly aligned, no scale (mm)', 'ra_mpjpe', '{:.1f}'),
@@ -749,6 +756,9 @@ def comparison_markdown(reports: Sequence[Tuple[str, dict]], title: str,
     lines.append('| clips scored | ' + ' | '.join(str(r['aggregate']['clips'])
                                                  for _, r in reports) + ' |')
     for label, key, fmt in COMPARISON_ROWS:
+        if key.startswith('live_') and not any(key in r['aggregate']['median']
+                                               for _, r in reports):
+            continue                                    # no live run among them
         cells = []
         for _, r in reports:
             v = r['aggregate']['median'].get(key, float('nan'))
