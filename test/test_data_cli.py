@@ -147,9 +147,10 @@ def test_groundtruth_bag_clean_reprojects_within_a_pixel(tmp_path, synth_motion)
     assert s.frames == synth_motion.num_frames == 90 and s.clean
     check_groundtruth_bag(out, 90, 30.0, clean=True)
     # read back as a lifter's evaluation reads it: the camera's keypoints and camera-frame poses
-    kp, intr, poses = read_groundtruth_bag(out)
+    b = read_groundtruth_bag(out)
+    kp, intr, poses = b['keypoints'], b['intrinsics'], b['poses']
     raw = read_bag(out)
-    assert kp.shape == (90, 23, 3) and len(poses) == 90
+    assert kp.shape == (90, 23, 3) and len(poses) == 90 and len(b['stamps']) == 90
     assert np.array_equal(kp[37], cloud_to_keypoints(raw[GT_TOPICS['keypoints']][37][2])[0])
     assert (intr.width, intr.height) == (s.intrinsics.width, s.intrinsics.height)
     assert np.allclose(poses[37].joint_positions(),

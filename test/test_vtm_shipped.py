@@ -19,7 +19,8 @@ BAGS = ['gt_cmu_walk_12_02', 'gt_bandai_walk_exhausted', 'gt_bandai_wave_normal'
 def _ground_truth(name: str):
     """Keypoints (T, 23, 3), intrinsics and camera-frame poses of a committed GT bag."""
     from mocap_core.data.gt_bag import read_groundtruth_bag
-    return read_groundtruth_bag(ROOT / 'bags' / name)
+    b = read_groundtruth_bag(ROOT / 'bags' / name)
+    return b['keypoints'], b['intrinsics'], b['poses']
 
 
 @pytest.fixture(scope='module')

@@ -59,7 +59,7 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     import torch
 
-    from .bags import read_groundtruth_bag
+    from mocap_core.data.gt_bag import read_groundtruth_bag
     from .model import GMR, GMRConfig, with_tta
     from .weights import default_weights, load_weights
 

@@ -128,6 +128,12 @@ PARAMETERS = (
               additional_constraints="one of: none, mirror, reverse, both"),
     ParamSpec('max_gap_s', 0.25, 'A larger gap between input stamps restarts the '
               'accumulation from a new gravity-aligned pose', min_value=0.0),
+    ParamSpec('fill_missing_frames', True, 'GMR reads its input at the rate the weights were '
+              'trained at (the shipped ones: 30 frames/s): frames missing from the stream '
+              '(dropped by a busy keypoint node, a slower camera) are filled in by '
+              'interpolation, run through the network and the accumulation, and never '
+              'published; every frame received is published, once (docs/global.md). false: '
+              'every frame is read as the next one', read_only=True),
     ParamSpec('tilt_correction', 0.05, 'Fraction per frame by which the accumulated '
               'orientation\'s pitch and roll are pulled towards the network\'s tilt estimate '
               '(removes the tilt drift; 0 = the paper\'s pure accumulation)', min_value=0.0,
@@ -404,7 +410,8 @@ class GMRNode(Node):
                          # a known camera pose carries no estimate noise: followed as it is
                          moving_lock_time_constant_s=(
                              0.0 if self.camera_mode == 'known'
-                             else p['fusion_moving_lock_time_constant_s']))
+                             else p['fusion_moving_lock_time_constant_s']),
+                         network_rate_hz=self.fps if p['fill_missing_frames'] else 0.0)
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera-motion estimate of each stamp (the last ``MAX_CAMERA_FRAMES``)."""
@@ -720,7 +727,12 @@ class GMRNode(Node):
             self.rate_checked = True
             rate = 1.0 / float(np.median(self.intervals))
             self.diag.set_value('input_stamp_rate_hz', f'{rate:.1f}')
-            if abs(rate / self.fps - 1.0) > 0.2:
+            filled = self.p['fill_missing_frames'] and rate < self.fps
+            if abs(rate / self.fps - 1.0) > 0.2 and filled:
+                self.get_logger().info(
+                    f'input rate {rate:.1f} Hz, below the model rate {self.fps:g} fps: the '
+                    'missing frames are filled in for the network (fill_missing_frames)')
+            elif abs(rate / self.fps - 1.0) > 0.2:
                 msg = (f'input rate {rate:.1f} Hz differs from the model rate {self.fps:g} '
                        'fps: the per-frame motions will be off by that ratio')
                 self.diag.warn(msg)
@@ -785,6 +797,7 @@ class GMRNode(Node):
             self._report_nonfinite(online.nonfinite_outputs)
             fusion = online.fusion
             self.diag.set_value('segments', online.segments)
+            self.diag.set_value('filled_frames', online.filled_frames)
             if fusion is not None:
                 self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
             if self.camera_mode == 'known':

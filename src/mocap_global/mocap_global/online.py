@@ -33,6 +33,17 @@ would keep GMR's drift instead (measured in docs/global.md). With
 walking stay locked, and the locked root is pulled towards the fused one with that time
 constant (a walking camera's frames follow the fused root: its path is the person's).
 
+The network's frame rate (``network_rate_hz``, > 0): GMR reads the frames it gets as
+consecutive frames of its training rate (30 frames/s) and predicts the motion from one to
+the next. A live pipeline whose keypoint node drops frames (a busy machine delivers 13-25 of
+30 frames/s) would show it the motion two or three times too fast. A gap of ``m + 1`` periods
+(1.5 periods or more, up to ``max_gap_s``) is therefore filled with ``m`` frames interpolated
+between its ends (joint rotations by slerp, the root linearly; the camera anchor of the frame
+before the gap, or interpolated the same way between two anchors of the same kind). They run
+through the network, the accumulation, the fusion and the foot lock like received frames, but
+are never returned: only the frames received come out, each with its own stamp, and the
+look-ahead stays ``lookahead`` periods in seconds.
+
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
@@ -78,7 +89,7 @@ import torch
 
 from mocap_core.pose import Pose
 from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat,
-                                  quat_from_two_vectors, quat_to_matrix)
+                                  quat_from_two_vectors, quat_slerp, quat_to_matrix)
 from mocap_core.skeleton import CONTACT_POINT_NAMES
 
 from .features import features_for
@@ -131,6 +142,19 @@ class InputAnchor:
     def apply(self, R_in: np.ndarray, T_in: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """An input root pose (R (3, 3), T (3,)) in the fixed frame."""
         return self.rotation @ R_in, self.rotation @ T_in + self.translation
+
+
+def _anchor_between(a: Optional[InputAnchor], b: Optional[InputAnchor], t: float
+                    ) -> Optional[InputAnchor]:
+    """The anchor of a frame filled in at fraction ``t`` between frames anchored ``a`` and
+    ``b``: interpolated (rotation by slerp, translation linearly) when both are fixed anchors
+    of the same kind, else ``a``'s."""
+    if a is None or b is None or not (a.fixed and b.fixed) or a.static != b.static \
+            or a.translating != b.translating:
+        return a
+    q = quat_slerp(matrix_to_quat(a.rotation), matrix_to_quat(b.rotation), t)
+    return InputAnchor(True, quat_to_matrix(q), (1.0 - t) * a.translation + t * b.translation,
+                       static=a.static, translating=a.translating)
 
 
 class StaticCameraFusion:
@@ -278,6 +302,9 @@ class OnlineGMR:
             ``translating`` False) keep the foot lock, and the locked root is pulled towards
             the fused one with this time constant (s); 0: such frames follow the fused root
             (module docstring, foot lock).
+        network_rate_hz: > 0: gaps of 1.5 periods of this rate or more are filled with
+            interpolated frames that are never returned (module docstring, the network's
+            frame rate); 0: every frame is read as the next one.
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
@@ -286,7 +313,8 @@ class OnlineGMR:
                  input_up: Optional[np.ndarray] = None, device: str = 'cpu',
                  chunk: int = 1, floor_input: bool = False, foot_lock: bool = False,
                  lock_height: float = 0.02, heading_smoothing: int = 0,
-                 moving_lock_time_constant_s: float = 0.0) -> None:
+                 moving_lock_time_constant_s: float = 0.0,
+                 network_rate_hz: float = 0.0) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -311,6 +339,11 @@ class OnlineGMR:
                              f'{moving_lock_time_constant_s}')
         if self.heading_smoothing < 0:
             raise ValueError(f'heading_smoothing must be >= 0, got {heading_smoothing}')
+        if not (np.isfinite(network_rate_hz) and network_rate_hz >= 0):
+            raise ValueError(f'network_rate_hz must be >= 0, got {network_rate_hz}')
+        self.period_ns = int(round(1e9 / network_rate_hz)) if network_rate_hz > 0 else 0
+        #: frames filled in so far (run through the network, never returned)
+        self.filled_frames = 0
         if self.cfg.root_input == 'up' and input_up is None:
             raise ValueError("this model needs the input frame's up direction (input_up)")
         self.input_up = None if input_up is None else np.asarray(input_up, dtype=np.float64)
@@ -331,7 +364,8 @@ class OnlineGMR:
         self._poses: Deque[Pose] = collections.deque(maxlen=size)
         self._anchors_in: Deque[Optional[InputAnchor]] = collections.deque(maxlen=size)
         self._stamps: Deque[int] = collections.deque(maxlen=size)
-        self._received = 0          # frames of this segment
+        self._filled: set = set()   # stamps of the filled-in frames not yet emitted
+        self._received = 0          # frames of this segment (filled-in ones too)
         self._emitted = 0           # frames of this segment emitted
         self._R: Optional[np.ndarray] = None
         self._T: Optional[np.ndarray] = None
@@ -397,6 +431,13 @@ class OnlineGMR:
         if event:
             frames = self.flush()
             self.reset()
+        elif self.period_ns and self._stamps \
+                and 2 * (int(stamp_ns) - self._stamps[-1]) >= 3 * self.period_ns:
+            self._fill(int(stamp_ns), pose, anchor)
+        self._append(int(stamp_ns), pose, anchor)
+        return frames, event
+
+    def _append(self, stamp_ns: int, pose: Pose, anchor: Optional[InputAnchor]) -> None:
         up = None
         if self.cfg.root_input == 'up':
             up = quat_to_matrix(pose.rotations[0]).T @ self.input_up
@@ -406,10 +447,37 @@ class OnlineGMR:
                                         None if up is None else up[None])[0])
         self._poses.append(pose)
         self._anchors_in.append(anchor)
-        self._stamps.append(int(stamp_ns))
+        self._stamps.append(stamp_ns)
         self._received += 1
         self._cache = None
-        return frames, event
+
+    def _fill(self, stamp_ns: int, pose: Pose, anchor: Optional[InputAnchor]) -> None:
+        """Add the frames missing before ``stamp_ns`` at the network's rate (module
+        docstring): poses and anchors interpolated between the last frame and this one."""
+        last, prev, prev_anchor = self._stamps[-1], self._poses[-1], self._anchors_in[-1]
+        gap = stamp_ns - last
+        missing = int(round(gap / self.period_ns)) - 1
+        for j in range(1, missing + 1):
+            a = j / (missing + 1)
+            between = Pose(pose.skeleton, quat_slerp(prev.rotations, pose.rotations, a),
+                           (1.0 - a) * np.asarray(prev.root_position, dtype=float)
+                           + a * np.asarray(pose.root_position, dtype=float))
+            stamp = last + int(round(a * gap))
+            self._filled.add(stamp)
+            self.filled_frames += 1
+            self._append(stamp, between, _anchor_between(prev_anchor, anchor, a))
+
+    def _received_only(self, frames: List[WorldFrame]) -> List[WorldFrame]:
+        """``frames`` without the filled-in ones."""
+        if not self._filled:
+            return frames
+        out = []
+        for f in frames:
+            if f.stamp_ns in self._filled:
+                self._filled.discard(f.stamp_ns)
+            else:
+                out.append(f)
+        return out
 
     def ready(self) -> bool:
         """Whether a chunk of frames has its look-ahead (:meth:`take` would emit it)."""
@@ -418,9 +486,10 @@ class OnlineGMR:
     def take(self) -> List[WorldFrame]:
         """The chunk of frames that has its look-ahead, or nothing (one network pass, cached,
         serves the whole chunk; :func:`prepare_outputs` may have run it already)."""
-        if not self.ready():
-            return []
-        return [self._emit() for _ in range(self.chunk)]
+        frames = []
+        while self.ready():         # several chunks after frames were filled in
+            frames += [self._emit() for _ in range(self.chunk)]
+        return self._received_only(frames)
 
     def flush(self) -> List[WorldFrame]:
         """Emit the frames still waiting for look-ahead with the future frames that exist
@@ -428,7 +497,7 @@ class OnlineGMR:
         frames = []
         while self.pending() > 0:
             frames.append(self._emit())
-        return frames
+        return self._received_only(frames)
 
     # -- inference ---------------------------------------------------------------------------
     @torch.no_grad()

@@ -379,6 +379,73 @@ def test_online_pure_accumulation_matches_the_network_motions():
     np.testing.assert_allclose(R0, tilt_rotation(out['up'][0, 0].double().numpy()), atol=1e-6)
 
 
+def _between(a: Pose, b: Pose, t: float) -> Pose:
+    from mocap_core.rotations import quat_slerp
+    return Pose(b.skeleton, quat_slerp(a.rotations, b.rotations, t),
+                (1 - t) * a.root_position + t * b.root_position)
+
+
+@pytest.mark.parametrize('floor_input', [False, True])
+def test_frames_missing_from_the_stream_are_filled_in_at_the_network_rate(floor_input):
+    """network_rate_hz: a stream with frames dropped gives, at the frames received, exactly
+    what the full stream gives when the dropped frames were the interpolation of their
+    neighbours (the filled-in frames run through the network, the accumulation and the foot
+    lock, and never come out); without the fill the same stream reads the motion too fast."""
+    model = _small_model()
+    period = 33_333_333
+    poses = _poses(60)
+    kept = [i for i in range(60) if i % 3 == 0 or i in (1, 2, 40, 41, 50)]   # gaps of 1-2
+    full = list(poses)
+    for a, b in zip(kept, kept[1:]):            # the dropped frames: between their neighbours
+        for i in range(a + 1, b):
+            full[i] = _between(poses[a], poses[b], (i - a) / (b - a))
+    kw = dict(lookahead=5, floor_input=floor_input, foot_lock=floor_input)
+
+    def run(items, **more):
+        online = OnlineGMR(model, **kw, **more)
+        out = []
+        for i, p in items:
+            out += online.push(i * period, p)[0]
+        return out + online.flush(), online
+
+    reference, _ = run(enumerate(full))
+    filled, online = run([(i, poses[i]) for i in kept], network_rate_hz=30.0)
+    assert [f.stamp_ns for f in filled] == [i * period for i in kept]   # each once, in order
+    assert online.filled_frames == 60 - len(kept) - (59 - kept[-1])
+    assert online.pending() == 0 and not online._filled
+    ref = {f.stamp_ns: f for f in reference}
+
+    def worst(frames):
+        return max(np.linalg.norm(f.pose.root_position - ref[f.stamp_ns].pose.root_position)
+                   for f in frames)
+    # the same up to the look-ahead: after a fill, a frame may be emitted from a network pass
+    # that already sees the frames filled in after it (more than `lookahead` future frames);
+    # read without the fill, the same frames put the body 10-200 times further off
+    unfilled, plain = run([(i, poses[i]) for i in kept])
+    assert plain.filled_frames == 0
+    assert worst(unfilled) > 0.3 and worst(filled) < worst(unfilled) / 10
+    # a gap longer than max_gap_s is not filled: the accumulation restarts
+    online = OnlineGMR(model, lookahead=2, max_gap_s=0.2, network_rate_hz=30.0)
+    for i in range(5):
+        online.push(i * period, poses[i])
+    frames, event = online.push(4 * period + int(0.5e9), poses[5])
+    assert event == 'gap' and online.filled_frames == 0
+    with pytest.raises(ValueError, match='network_rate_hz'):
+        OnlineGMR(model, network_rate_hz=-1.0)
+
+
+def test_filled_frames_take_the_camera_anchor_between_their_neighbours():
+    from mocap_global.online import InputAnchor, _anchor_between
+    a = InputAnchor(True, rz(0.0), np.zeros(3), static=False)
+    b = InputAnchor(True, rz(0.4), np.array([1.0, 0.0, 0.0]), static=False)
+    m = _anchor_between(a, b, 0.25)
+    np.testing.assert_allclose(m.rotation, rz(0.1), atol=1e-12)
+    np.testing.assert_allclose(m.translation, [0.25, 0.0, 0.0])
+    assert _anchor_between(a, InputAnchor(False), 0.5) is a          # another kind: the earlier
+    assert _anchor_between(InputAnchor(True, static=True), b, 0.5).static
+    assert _anchor_between(None, b, 0.5) is None
+
+
 def test_several_people_in_one_network_pass_give_each_ones_own_frames():
     """add / prepare_outputs / take for three people (one joins later, so windows differ in
     length) = push each on their own; one pass per window length."""

@@ -34,7 +34,7 @@ def knee_ranges(bag: Path, weights: Path):
     import torch
 
     from mocap_core.kinematics import forward_kinematics
-    from mocap_global.bags import read_groundtruth_bag
+    from mocap_core.data.gt_bag import read_groundtruth_bag
     from mocap_lifter.features import lifter_features
     from mocap_lifter.weights import load_weights
 
@@ -75,7 +75,7 @@ def test_the_check_fails_on_the_stage_6_weights_with_the_rigid_knee():
 def _lift_online(bag: Path, sigma: float, root_sigma: float):
     """The node's windowed lifter (flip on) over one bag frame by frame with the given output
     smoothing: (mean knee range over both legs (deg), mean root acceleration (m/frame^2))."""
-    from mocap_global.bags import read_groundtruth_bag
+    from mocap_core.data.gt_bag import read_groundtruth_bag
     from mocap_lifter.online import OnlineLifter
     from mocap_lifter.weights import default_weights, load_weights
 

@@ -204,8 +204,10 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
     return acc
 
 
-#: the topics a live run records (what :func:`_read_output` and the skating split read)
-LIVE_TOPICS = ('/mocap/keypoints2d', '/mocap/camera/motion', '/mocap/lifter/joints3d',
+#: the topics a live run records (what :func:`_read_output` and the skating split read, and
+#: the camera info: the recorded bag can be processed again from its keypoints)
+LIVE_TOPICS = ('/mocap/keypoints2d', '/mocap/camera_info', '/mocap/camera/motion',
+               '/mocap/lifter/joints3d',
                '/mocap/physics/joints3d', '/mocap/world/joints3d', '/mocap/physics/floor')
 
 

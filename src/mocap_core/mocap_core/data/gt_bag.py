@@ -46,7 +46,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Union
 
 import numpy as np
 
@@ -109,27 +109,46 @@ def stamps_ns(frames: int, fps: float, start_ns: int = DEFAULT_START_NS) -> np.n
     return start_ns + np.round(np.arange(frames) * (1e9 / fps)).astype(np.int64)
 
 
-def read_groundtruth_bag(path: Union[str, os.PathLike]):
-    """What a lifter is fed and scored with in a ground-truth bag (:func:`write_groundtruth_bag`,
-    or a rendered clip's ``gt_bag``): ``(keypoints, intrinsics, poses)`` with keypoints
-    (T, 23, 3) (u, v in pixels, confidence) of the cloud's first person, the last
-    :class:`~mocap_core.camera.CameraIntrinsics` of ``/mocap/camera_info``, and the T
-    camera-optical-frame :class:`~mocap_core.pose.Pose` of ``/mocap/groundtruth/motion``
-    (T: the shorter of the two streams)."""
+def read_groundtruth_bag(path: Union[str, os.PathLike]) -> Dict[str, Any]:
+    """Read a ground-truth bag (:func:`write_groundtruth_bag`, or a rendered clip's
+    ``gt_bag``).
+
+    Returns:
+        ``stamps`` (list of int ns), ``poses`` (list of :class:`~mocap_core.pose.Pose` of
+        ``/mocap/groundtruth/motion``, root in the camera's optical frame, m), ``camera``
+        ((R_c (3, 3), t_c (3,)) the camera pose in the z-up world, ``x_world = R_c x_camera +
+        t_c``), ``keypoints`` ((F, 23, 3) u, v in pixels and confidence of the cloud's first
+        person, or None) and ``intrinsics`` (the last camera info, or None).
+
+    Raises:
+        ValueError: the bag has no camera pose or no ground-truth motion.
+    """
     from ..bag_io import BagReader, deserialize
-    from ..ros_conversions import camera_info_to_intrinsics, cloud_to_keypoints, motion_to_pose
-    kp, poses, intr = [], [], None
+    from ..ros_conversions import (camera_info_to_intrinsics, cloud_to_keypoints,
+                                   motion_to_pose, stamp_to_ns)
+    from ..rotations import quat_to_matrix
+
+    stamps, poses, cam, keypoints, intr = [], [], None, [], None
     with BagReader(path) as bag:
-        for m in bag.messages(topics=[T.KEYPOINTS, T.CAMERA_INFO, T.GROUNDTRUTH_MOTION]):
-            msg = deserialize(m.data, m.msgtype)
-            if m.topic == T.KEYPOINTS:
-                kp.append(cloud_to_keypoints(msg)[0])
-            elif m.topic == T.CAMERA_INFO:
-                intr = camera_info_to_intrinsics(msg)
+        for msg in bag.messages(topics=[T.GROUNDTRUTH_MOTION, T.GROUNDTRUTH_CAMERA_POSE,
+                                        T.KEYPOINTS, T.CAMERA_INFO]):
+            d = deserialize(msg.data, msg.msgtype)
+            if msg.topic == T.KEYPOINTS:
+                keypoints.append(cloud_to_keypoints(d)[0])
+            elif msg.topic == T.CAMERA_INFO:
+                intr = camera_info_to_intrinsics(d)
+            elif msg.topic == T.GROUNDTRUTH_CAMERA_POSE:
+                q = d.pose.orientation
+                p = d.pose.position
+                cam = (quat_to_matrix(np.array([q.x, q.y, q.z, q.w])),
+                       np.array([p.x, p.y, p.z]))
             else:
-                poses.append(motion_to_pose(msg))
-    n = min(len(kp), len(poses))
-    return np.stack(kp[:n]), intr, poses[:n]
+                stamps.append(stamp_to_ns(d.header.stamp))
+                poses.append(motion_to_pose(d))
+    if cam is None or not poses:
+        raise ValueError(f'{path}: no camera pose or no ground-truth motion')
+    return {'stamps': stamps, 'poses': poses, 'camera': cam,
+            'keypoints': np.stack(keypoints) if keypoints else None, 'intrinsics': intr}
 
 
 def crop_motion(motion: Motion, start: int = 0, frames: Optional[int] = None) -> Motion:

@@ -40,7 +40,7 @@ from mocap_core.data.motion import Motion, retime
 from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat,
                                   quat_to_matrix)
 
-from ..bags import read_groundtruth_bag
+from mocap_core.data.gt_bag import read_groundtruth_bag
 from ..features import (body_joint_positions, gmr_features, noisy_lengths, noisy_local_pose,
                         _smooth_noise)
 from ..model import GMR

@@ -45,8 +45,10 @@ def read_bag(path: Path) -> Tuple[np.ndarray, object, np.ndarray]:
     """(T, 23, 3) keypoints of the first person, the camera intrinsics and (T, 18, 3) true
     joint positions (camera optical frame, m) of a ground-truth bag."""
     from mocap_core.data.gt_bag import read_groundtruth_bag
-    kp, intr, poses = read_groundtruth_bag(path)
-    return kp, intr, np.stack([p.joint_positions() for p in poses])
+    b = read_groundtruth_bag(path)
+    n = min(len(b['keypoints']), len(b['poses']))
+    return b['keypoints'][:n], b['intrinsics'], np.stack([p.joint_positions()
+                                                          for p in b['poses'][:n]])
 
 
 def kept_frames(pattern: str, frames: int, seed: int) -> np.ndarray:
