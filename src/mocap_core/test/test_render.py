@@ -488,6 +488,17 @@ def test_eval_video_scores_the_pipeline_on_a_rendered_clip(rendered, tmp_path, c
     assert 'live: frames that reached' in (out / 'report.md').read_text()
     assert main(['eval', 'video', '--renders', str(root), '-o', str(out), '--live',
                  '--start', 'keypoints', '--quiet']) == 2
+    # --replay-live: the keypoint stream that live run recorded, through the later stages
+    # again (here with the lifter's and GMR's rate handling off)
+    replay = tmp_path / 'replay'
+    rc = main(['eval', 'video', '--renders', str(root), '-o', str(replay), '--start',
+               'keypoints', '--replay-live', str(next((tmp_path / 'work_live').iterdir())),
+               '--param', 'gmr.fill_missing_frames=false', '--param',
+               'lifter.network_rate_hz=0', '--work', str(tmp_path / 'work_replay'), '--quiet'])
+    assert rc == 0, capsys.readouterr().err
+    (again,) = json.loads((replay / 'report.json').read_text())['clips']
+    assert again['scored'] == 24 and again['live_keypoint_share'] == 1.0
+    assert abs(again['mpjpe'] - clip['mpjpe']) < 1.0        # no frame missing: nothing to fill
     # a clip folder without any lifter output is counted, not scored
     gt, _ = load_clip(clip_dir)
     assert gt['keypoints'].shape == (24, 23, 3)

@@ -213,14 +213,17 @@ LIVE_TOPICS = ('/mocap/keypoints2d', '/mocap/camera_info', '/mocap/camera/motion
 
 def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
              params: Dict[str, Dict], progress: bool = False, camera_motion: bool = True,
-             camera_floor: str = 'physics', known_height: bool = False, live: bool = False):
+             camera_floor: str = 'physics', known_height: bool = False, live: bool = False,
+             replay: Optional[Path] = None):
     """Process one rendered clip (reusing a finished output) and score it. With
     ``camera_motion`` and start ``keypoints``, the input bag carries the camera-motion
     estimate from the clip's video (start ``video``: the keypoint node makes it), its
     translation measured over ``camera_floor`` ('physics': the physics floor of a first run;
     'true': the render's floor, an oracle). With ``known_height`` the lifter is given the
     rendered body's stature (``lifter.subject_height``). ``live`` (start ``video``): played
-    at its rate through the composed live pipeline (module docstring)."""
+    at its rate through the composed live pipeline (module docstring). ``replay`` (start
+    ``keypoints``): the work folder of a live run, whose recorded keypoint stream (the frames
+    that live run kept, its camera-motion estimate) is processed instead of the render's."""
     from .. import topics as T
     from ..camera import CameraCalibration, CameraIntrinsics, write_camera_info_yaml
     from ..render.clip import load_clip
@@ -248,6 +251,11 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
                     approximate=False)), yaml)
                 p.setdefault('keypoints', {})['calibration_file'] = str(yaml)
             kw = {}
+        elif replay is not None:
+            src = replay / clip_dir.name / 'bag'
+            if not (replay / clip_dir.name / 'done').exists():
+                raise EvalError(f'the live run {replay} has no finished recording of this clip')
+            kw = {'start': 'keypoints'}
         else:
             src = clip_dir / 'gt_bag'
             kw = {'start': 'keypoints'}
@@ -288,7 +296,7 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     data = _read_output(bag)
     fps = float(gt['fps'])
     kp_stamps = data[T.KEYPOINTS][0]
-    if start == 'video':
+    if start == 'video' or replay is not None:
         first = int(kp_stamps.min()) if len(kp_stamps) else 0
     else:
         from ..data.gt_bag import DEFAULT_START_NS
@@ -304,7 +312,7 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             roots[stage] = (j, _index(s, first, fps))   # all joints: the feet are scored
     score = score_clip(meta['clip'], meta, gt, lj if len(lj) else None,
                        _index(ls, first, fps), roots)
-    if live:
+    if live or replay is not None:
         # the share of the rendered frames that reached each stage (the rest were dropped
         # by the keypoint node, as a camera's frames are when the detector falls behind)
         n = max(int(meta.get('frames') or len(gt['joints_world'])), 1)
@@ -313,7 +321,8 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     cm = out / 'camera_motion.json'
     if cm.exists():
         score.root.setdefault('camera', {}).update(json.loads(cm.read_text()))
-    motion_bag = bag if live else out / 'input_bag'     # live: the keypoint node's estimate
+    # live (and its replays): the live keypoint node's estimate
+    motion_bag = bag if live or replay is not None else out / 'input_bag'
     if motion_bag.exists() and 'world' in roots and 'contacts' in gt:
         from ..render.evaluate import skating_by_camera_state
         groups = _camera_state_groups(motion_bag, first, fps, len(gt['contacts']))
@@ -397,6 +406,10 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
         print('mocap eval video: error: --known-camera-pose needs --start keypoints (the '
               "camera's pose is in the rendered clip's bag)", file=sys.stderr)
         return 2
+    if args.replay_live and (args.start != 'keypoints' or args.live):
+        print('mocap eval video: error: --replay-live needs --start keypoints (and no --live)',
+              file=sys.stderr)
+        return 2
     if args.live and args.start != 'video':
         print('mocap eval video: error: --live needs --start video (the keypoint node reads '
               'the video live)', file=sys.stderr)
@@ -423,7 +436,8 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
             f'gmr.camera_pose_topic={T_GT_CAMERA_POSE}', 'gmr.camera_pose_type=pose']
     tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
     work_root = Path(args.work) if args.work else Path.home() / '.cache' / 'mocap' / 'eval_video'
-    work = work_root / (f'{tag}_{args.start}_{args.intrinsics}' + ('_live' if args.live else ''))
+    work = work_root / (f'{tag}_{args.start}_{args.intrinsics}' + ('_live' if args.live else '')
+                        + ('_replay' if args.replay_live else ''))
     try:
         params = parse_params(args.param)
     except ProcessError as exc:
@@ -436,7 +450,9 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
             scores.append(run_clip(d, work, args.start, args.intrinsics, params,
                                    camera_motion=not args.no_camera_motion,
                                    camera_floor=args.camera_floor,
-                                   known_height=args.known_height, live=args.live))
+                                   known_height=args.known_height, live=args.live,
+                                   replay=Path(args.replay_live).expanduser()
+                                   if args.replay_live else None))
         except NoOutput as exc:
             no_output.append(str(exc))
         except (EvalError, ProcessError, ValueError, OSError) as exc:
@@ -455,6 +471,7 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     setup = ['`mocap eval video' + (f' --renders {shown}' if args.renders else '')
              + f' --split {args.split} --start {args.start} --intrinsics '
              f'{args.intrinsics}' + (' --live' if args.live else '')
+             + (f' --replay-live {args.replay_live}' if args.replay_live else '')
              + ''.join(f' --param {p}' for p in args.param)
              + (' --known-height' if args.known_height else '') + '`'
              + (f' (first {args.limit} clips)' if args.limit else ''),
@@ -510,6 +527,11 @@ def add_eval_parser(sub) -> None:
                    help='--start video: play each clip at its frame rate through the composed '
                    'live pipeline (mocap run), frames dropped as live; run it on an idle '
                    'machine')
+    p.add_argument('--replay-live', metavar='WORK', help='--start keypoints: process the '
+                   'keypoint streams a --live run recorded (its work folder, e.g. '
+                   '~/.cache/mocap/eval_video/<tag>_video_true_live) instead of the render\'s: '
+                   'the same dropped frames and camera-motion estimate, other settings, '
+                   'deterministically')
     p.add_argument('--tag', help='name of this run (output bags reused by the same tag)')
     p.add_argument('--work', help='where the output bags are kept (default '
                    '~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>)')
