@@ -89,9 +89,9 @@ def test_shipped_weights_beat_zero_motion_and_constant_velocity(name, step):
 @pytest.mark.parametrize('bag', ['gt_cmu_walk_12_02', 'gt_bandai_walk_exhausted'])
 def test_shipped_weights_keep_the_path_of_a_stream_with_three_frames_in_four_dropped(bag):
     """A walk delivered at a quarter of its rate (a busy machine's keypoint node): with the
-    missing frames filled in (the node's default, fill_missing_frames) GMR's path is nearer
-    the one it gives with every frame than without (measured: CMU walk 4.22 / 4.96 m against
-    4.40 with every frame, Bandai Namco walk 6.42 / 7.80 against 6.82; docs/global.md)."""
+    missing frames filled in (the node's fill_missing_frames) GMR's path is nearer the one it
+    gives with every frame than without (measured: CMU walk 4.22 / 4.96 m against 4.40 with
+    every frame, Bandai Namco walk 6.42 / 7.80 against 6.82; docs/global.md)."""
     from mocap_core.data.gt_bag import read_groundtruth_bag
     from mocap_global.online import OnlineGMR
     from mocap_global.weights import load_weights

@@ -7,7 +7,8 @@ import pytest
 def test_world_skating_is_split_by_the_camera_state():
     """Each step between consecutive frames with the foot on the floor goes to its frames'
     camera-state group (a step across a change of state to its own group); frames off the
-    floor, or not consecutive, count nowhere."""
+    floor count nowhere; a step over frames the output skipped (a live run's dropped frames)
+    counts as that many rendered frames when the foot stood in all of them."""
     from mocap_core.render.evaluate import (CAMERA_STATE_GROUPS, camera_state_group,
                                             skating_by_camera_state)
     assert camera_state_group('static', True) == 'static'
@@ -27,6 +28,10 @@ def test_world_skating_is_split_by_the_camera_state():
     assert got['static'] == pytest.approx([4 * (1 + 2), 8])
     assert got['state changes'] == pytest.approx([4 * 3, 4])
     assert got['translation measured'] == pytest.approx([4 * 4, 4])
-    # a gap in the output frames: no step across it
+    # a gap in the output frames: the step across it (1 -> 6 mm) spans two rendered frames
     got = skating_by_camera_state(joints[[0, 1, 3]], np.array([0, 1, 3]), contacts, groups)
-    assert got == {'static': pytest.approx([4.0, 4])}
+    assert got == {'static': pytest.approx([4.0, 4]), 'state changes': pytest.approx([20.0, 8])}
+    # ... unless the foot left the floor in a frame between
+    contacts[2, 0] = False
+    got = skating_by_camera_state(joints[[0, 1, 3]], np.array([0, 1, 3]), contacts, groups)
+    assert got == {'static': pytest.approx([4.0, 4]), 'state changes': pytest.approx([15.0, 6])}

@@ -27,8 +27,9 @@ Metrics (positions in metres in, millimetres out):
 * the same two stages' feet (:func:`foot_scores`), each against its own floor (z = 0 of its
   output frame): the deepest ankle or toe joint below it after the first second (mm), the
   share of frames with one more than 5 mm below, and foot skating: the mean horizontal
-  displacement (mm per frame) of an ankle or toe joint while the ground truth says that
-  heel or toe is on the floor in both frames; and their PA-MPJPE (per-frame similarity
+  displacement (mm per rendered frame) of an ankle or toe joint while the ground truth says
+  that heel or toe is on the floor in both frames and every frame between (a step over
+  frames a live run dropped counts as that many frames); and their PA-MPJPE (per-frame similarity
   alignment, so the frame does not matter) and jitter against the lifter's (the world
   stage's against the lifter carried into the true world by the true camera pose: a
   moving camera's frame accelerates);
@@ -121,18 +122,24 @@ _FOOT_JOINTS = [JOINT_INDEX[n] for n in ('left_ankle', 'left_toe', 'right_ankle'
 
 
 def _steps_in_contact(joints: np.ndarray, idx: np.ndarray, contacts: np.ndarray
-                      ) -> Tuple[np.ndarray, np.ndarray]:
+                      ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Horizontal steps (N - 1, 4) m of the ankle and toe joints between consecutive output
-    frames, and where they count as skating (N - 1, 4): the true contact of the same column
-    (the ankle moves with the heel label, the toe joint with the toe's) in both rendered
-    frames, which follow each other."""
+    frames, where they count as skating (N - 1, 4): the true contact of the same column (the
+    ankle moves with the heel label, the toe joint with the toe's) in every rendered frame from
+    the one to the other, and the number of rendered frames (N - 1,) each step spans (1 when
+    the outputs follow each other; more where a live run dropped frames, so that skating is
+    per rendered frame either way)."""
     feet = np.asarray(joints, dtype=float)[:, _FOOT_JOINTS, :2]
     c = np.asarray(contacts, dtype=bool)
-    ok = (idx >= 0) & (idx < len(c))
-    lab = np.zeros((len(idx), 4), dtype=bool)
-    lab[ok] = c[idx[ok]]
-    both = lab[1:] & lab[:-1] & (np.diff(idx) == 1)[:, None]
-    return np.linalg.norm(np.diff(feet, axis=0), axis=-1), both
+    idx = np.asarray(idx, dtype=int)
+    gaps = np.diff(idx)
+    ok = (idx[:-1] >= 0) & (idx[1:] < len(c)) & (gaps >= 1)
+    # frames out of contact per column before each rendered frame (cumulative)
+    off = np.concatenate([np.zeros((1, c.shape[1]), int), np.cumsum(~c, axis=0)])
+    a = np.clip(idx[:-1], 0, len(c) - 1)
+    b = np.clip(idx[1:], 0, len(c) - 1)
+    both = ok[:, None] & ((off[b + 1] - off[a]) == 0)
+    return np.linalg.norm(np.diff(feet, axis=0), axis=-1), both, np.maximum(gaps, 1)
 
 
 def foot_scores(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
@@ -151,13 +158,15 @@ def foot_scores(joints: np.ndarray, index: np.ndarray, contacts: np.ndarray,
     feet = joints[:, _FOOT_JOINTS]                       # (N, 4, 3): ankle, toe, ankle, toe
     depth = np.maximum(0.0, -feet[..., 2].min(axis=1))
     late = idx >= int(round(fps))
-    step, both = _steps_in_contact(joints, idx, contacts)
+    step, both, gaps = _steps_in_contact(joints, idx, contacts)
+    spans = np.broadcast_to(gaps[:, None], both.shape)
     return {
         'penetration_after_1s_mm': float(1000 * depth[late].max()) if late.any()
         else float('nan'),
         'frames_below_5mm': float(np.mean(depth[late] > 0.005)) if late.any()
         else float('nan'),
-        'skating_mm': float(1000 * step[both].mean()) if both.any() else float('nan'),
+        'skating_mm': float(1000 * step[both].sum() / spans[both].sum()) if both.any()
+        else float('nan'),
     }
 
 
@@ -188,11 +197,12 @@ def skating_by_camera_state(joints: np.ndarray, index: np.ndarray, contacts: np.
         joints: (N, 18, 3) the stage's joints in its output frame, m. index: (N,) rendered
             frame of each. contacts: (F, 4) true contacts. groups: (F,) the
             :func:`camera_state_group` of each rendered frame.
-    Returns: ``{group: [sum of the displacements (mm), their number]}`` for pooling over
-    clips; a step between two frames of different groups counts as ``state changes``.
+    Returns: ``{group: [sum of the displacements (mm), the rendered frames they span]}`` for
+    pooling over clips; a step between two frames of different groups counts as ``state
+    changes``.
     """
     idx = np.asarray(index, dtype=int)
-    step, both = _steps_in_contact(joints, idx, contacts)
+    step, both, gaps = _steps_in_contact(joints, idx, contacts)
     out: Dict[str, List[float]] = {}
     for k in np.flatnonzero(both.any(axis=1)):
         i, j = idx[k], idx[k + 1]
@@ -201,7 +211,7 @@ def skating_by_camera_state(joints: np.ndarray, index: np.ndarray, contacts: np.
         g = groups[j] if groups[i] == groups[j] else 'state changes'
         acc = out.setdefault(g, [0.0, 0.0])
         acc[0] += float(1000 * step[k][both[k]].sum())
-        acc[1] += float(both[k].sum())
+        acc[1] += float(both[k].sum() * gaps[k])
     return out
 
 
