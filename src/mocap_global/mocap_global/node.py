@@ -130,7 +130,8 @@ PARAMETERS = (
               'accumulation from a new gravity-aligned pose', min_value=0.0),
     ParamSpec('fill_missing_frames', False, 'Frames missing from the stream (dropped by a '
               'busy keypoint node, a slower camera) are filled in by interpolation at the rate '
-              'the weights were trained at (30 frames/s), run through the network and the '
+              'the weights were trained at (the shipped ones: 30 frames/s; gaps of 1.5 periods '
+              'or more), run through the network and the '
               'accumulation, and never published. Off by default: on rendered walks played '
               'live at 41 % of their frames it cut the world skating (28.4 -> 24.8 mm/frame) '
               'but not the path error (world RTE 9.7 -> 11.0 %; docs/global.md). false: every '
@@ -728,7 +729,7 @@ class GMRNode(Node):
             self.rate_checked = True
             rate = 1.0 / float(np.median(self.intervals))
             self.diag.set_value('input_stamp_rate_hz', f'{rate:.1f}')
-            filled = self.p['fill_missing_frames'] and rate < self.fps
+            filled = self.p['fill_missing_frames'] and 2 * self.fps >= 3 * rate
             if abs(rate / self.fps - 1.0) > 0.2 and filled:
                 self.get_logger().info(
                     f'input rate {rate:.1f} Hz, below the model rate {self.fps:g} fps: the '

@@ -38,11 +38,12 @@ consecutive frames of its training rate (30 frames/s) and predicts the motion fr
 the next. A live pipeline whose keypoint node drops frames (a busy machine delivers 13-25 of
 30 frames/s) would show it the motion two or three times too fast. A gap of ``m + 1`` periods
 (1.5 periods or more, up to ``max_gap_s``) is therefore filled with ``m`` frames interpolated
-between its ends (joint rotations by slerp, the root linearly; the camera anchor of the frame
-before the gap, or interpolated the same way between two anchors of the same kind). They run
-through the network, the accumulation, the fusion and the foot lock like received frames, but
-are never returned: only the frames received come out, each with its own stamp, and the
-look-ahead stays ``lookahead`` periods in seconds.
+between its ends (at most as many as the window holds besides the frames waiting): joint
+rotations by slerp, the root linearly, the camera anchor of the frame before the gap or one
+interpolated between two anchors of the same kind. They run through the network, the
+accumulation, the fusion and the foot lock like received frames, but are never returned:
+only the frames received come out, each with its own stamp, and the look-ahead stays
+``lookahead`` periods in seconds.
 
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
@@ -456,7 +457,9 @@ class OnlineGMR:
         docstring): poses and anchors interpolated between the last frame and this one."""
         last, prev, prev_anchor = self._stamps[-1], self._poses[-1], self._anchors_in[-1]
         gap = stamp_ns - last
-        missing = int(round(gap / self.period_ns)) - 1
+        # at most what the window holds besides the frames waiting and this one: a frame must
+        # not leave the buffer before it is emitted (a long max_gap_s, a long look-ahead)
+        missing = min(int(round(gap / self.period_ns)) - 1, self.window - 1 - self.pending())
         for j in range(1, missing + 1):
             a = j / (missing + 1)
             between = Pose(pose.skeleton, quat_slerp(prev.rotations, pose.rotations, a),

@@ -424,6 +424,15 @@ def test_frames_missing_from_the_stream_are_filled_in_at_the_network_rate(floor_
     unfilled, plain = run([(i, poses[i]) for i in kept])
     assert plain.filled_frames == 0
     assert worst(unfilled) > 0.3 and worst(filled) < worst(unfilled) / 10
+    # a long gap behind a long look-ahead: no more frames filled in than the window holds
+    # besides the frames waiting, and none of those lost
+    online = OnlineGMR(model, lookahead=20, max_gap_s=1.0, network_rate_hz=30.0)
+    got, sent = [], [i * period for i in range(30)] + [29 * period + 12 * period]
+    for k, stamp in enumerate(sent):
+        got += online.push(stamp, poses[k])[0]
+    got += online.flush()
+    assert [f.stamp_ns for f in got] == sent
+    assert 0 < online.filled_frames <= 11 and online.filled_frames == 24 - 1 - 20
     # a gap longer than max_gap_s is not filled: the accumulation restarts
     online = OnlineGMR(model, lookahead=2, max_gap_s=0.2, network_rate_hz=30.0)
     for i in range(5):

@@ -211,6 +211,18 @@ LIVE_TOPICS = ('/mocap/keypoints2d', '/mocap/camera_info', '/mocap/camera/motion
                '/mocap/physics/joints3d', '/mocap/world/joints3d', '/mocap/physics/floor')
 
 
+def _live_summary(out: Path) -> Dict:
+    """What a live run of this clip recorded about itself (:func:`~.run.run`'s ``info``), from
+    its own folder or, for a replay, the copy of the live run's."""
+    for name in ('summary.json', 'live_summary.json'):
+        path = out / name
+        if path.exists():
+            data = json.loads(path.read_text())
+            if 'source_start_ns' in data:
+                return data
+    return {}
+
+
 def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
              params: Dict[str, Dict], progress: bool = False, camera_motion: bool = True,
              camera_floor: str = 'physics', known_height: bool = False, live: bool = False,
@@ -256,6 +268,8 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             if not (replay / clip_dir.name / 'done').exists():
                 raise EvalError(f'the live run {replay} has no finished recording of this clip')
             kw = {'start': 'keypoints'}
+            (out / 'live_summary.json').write_text(
+                (replay / clip_dir.name / 'summary.json').read_text())
         else:
             src = clip_dir / 'gt_bag'
             kw = {'start': 'keypoints'}
@@ -280,14 +294,18 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             kp = p.setdefault('keypoints', {})
             kp.update(source='video', path=str(src), loop=False)
             kp.setdefault('realtime', True)    # (false: no frame dropped, for tests)
+            info: Dict = {}
             try:
                 status = run(p, record=bag, topics_out=LIVE_TOPICS, overwrite=True,
-                             log_level='error')
+                             log_level='error', info=info)
             except RunError as exc:
                 raise EvalError(str(exc)) from None
-            if status != 0:
-                raise EvalError(f'the live run ended with status {status}')
-            summary = {'live': True}
+            if status != 0 or info.get('end') == 'interrupted' \
+                    or info.get('source_start_ns') is None:
+                # not marked done: a rerun plays the clip again
+                raise EvalError(f"the live run did not finish ({info.get('end', 'status')} "
+                                f'{status})')
+            summary = {'live': True, **info}
         else:
             summary = process(src, bag, params=p, overwrite=True, progress=progress,
                               log=lambda *a: None, log_level='error', **kw)
@@ -296,7 +314,10 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     data = _read_output(bag)
     fps = float(gt['fps'])
     kp_stamps = data[T.KEYPOINTS][0]
-    if start == 'video' or replay is not None:
+    live_info = _live_summary(out) if live or replay is not None else {}
+    if live_info.get('source_start_ns') is not None:
+        first = int(live_info['source_start_ns'])   # frame 0, kept or dropped
+    elif start == 'video':
         first = int(kp_stamps.min()) if len(kp_stamps) else 0
     else:
         from ..data.gt_bag import DEFAULT_START_NS
@@ -436,8 +457,9 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
             f'gmr.camera_pose_topic={T_GT_CAMERA_POSE}', 'gmr.camera_pose_type=pose']
     tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
     work_root = Path(args.work) if args.work else Path.home() / '.cache' / 'mocap' / 'eval_video'
+    replayed = Path(args.replay_live).expanduser() if args.replay_live else None
     work = work_root / (f'{tag}_{args.start}_{args.intrinsics}' + ('_live' if args.live else '')
-                        + ('_replay' if args.replay_live else ''))
+                        + (f'_replay_{replayed.resolve().name}' if replayed else ''))
     try:
         params = parse_params(args.param)
     except ProcessError as exc:
@@ -451,8 +473,7 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
                                    camera_motion=not args.no_camera_motion,
                                    camera_floor=args.camera_floor,
                                    known_height=args.known_height, live=args.live,
-                                   replay=Path(args.replay_live).expanduser()
-                                   if args.replay_live else None))
+                                   replay=replayed))
         except NoOutput as exc:
             no_output.append(str(exc))
         except (EvalError, ProcessError, ValueError, OSError) as exc:

@@ -49,12 +49,17 @@ class RunError(RuntimeError):
 def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
         max_seconds: float = 0.0, record: Optional[Path] = None,
         topics_out: Optional[Sequence[str]] = None, overwrite: bool = False,
-        log_level: str = '') -> int:
+        log_level: str = '', info: Optional[Dict[str, Any]] = None) -> int:
     """Run the composed pipeline until the source ends, Ctrl-C or ``max_seconds`` (0: no
-    limit). With ``record``, every message published (``topics_out``: glob patterns of the
-    topics to write, None = all) is written to that MCAP bag (``overwrite`` an existing one).
+    limit). With ``record``, every message the wired nodes publish (``topics_out``: glob
+    patterns of the topics to write, None = all; the annotated image, published by a side
+    node, is not among them) is written to that MCAP bag (``overwrite`` an existing one).
     ``log_level`` (debug, info, warn, error; '' = ROS's default) applies to every node.
-    Returns the exit status."""
+    ``info``, a dict, receives how the run ended: ``end`` (the source's reason, or
+    'interrupted', 'time limit'), ``failed`` (the source failed), ``published`` and
+    ``dropped`` (the keypoint node's counts) and ``source_start_ns`` (the stamp of a file
+    source's first frame: frame ``i`` is stamped ``source_start_ns + i / fps``).
+    Returns the exit status: 0, 1 when the source failed, 2 for a node that cannot start."""
     import time
 
     import rclpy
@@ -79,9 +84,14 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
     if log_level:
         args += ['--log-level', log_level]
     context = Context()
-    rclpy.init(args=['--ros-args', *args] if args else None, context=context)
+    try:
+        rclpy.init(args=['--ros-args', *args] if args else None, context=context)
+        executor = make_executor(context=context)
+    except BaseException:
+        if writer is not None:
+            writer.close()
+        raise
     nodes: Dict[str, Any] = {}
-    executor = make_executor(context=context)
 
     def on_error(node: str, topic: str, exc: BaseException) -> None:
         target = nodes.get(node)
@@ -120,11 +130,20 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
         graph.flush()               # the frames still waiting for look-ahead
         for _ in range(5):          # let the last messages leave
             executor.spin_once(timeout_sec=0.05)
+        reason, error = getattr(source, 'source_end', None) or (
+            'time limit' if max_seconds and time.monotonic() - t0 > max_seconds
+            else 'stopped', None)
+        _fill_info(info, source, reason, error is not None)
         summary = getattr(source, 'summary', None)
-        if summary is not None:
-            source.get_logger().info(f'finished: {summary()}')
+        text = summary() if summary is not None else ''
+        if error is not None:
+            source.get_logger().error(f'source failed: {reason} ({text})')
+            return 1
+        if text:
+            source.get_logger().info(f'finished: {text}')
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
+        _fill_info(info, nodes.get('keypoints'), 'interrupted', False)
         return 0
     finally:
         for node in nodes.values():
@@ -136,6 +155,22 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
         context.try_shutdown()
         if writer is not None:
             writer.close()
+            for pattern in recorder.unmatched():
+                print(f'mocap run: warning: no topic matched --topics {pattern}',
+                      file=sys.stderr)
+
+
+def _fill_info(info: Optional[Dict[str, Any]], source: Any, end: str, failed: bool) -> None:
+    """How the run ended, for :func:`run`'s ``info``."""
+    if info is None:
+        return
+    info.update(end=end, failed=failed)
+    if source is not None:
+        info['published'] = int(getattr(source, 'published', 0))
+        diag = getattr(source, 'diag', None)
+        info['dropped'] = int(getattr(diag, 'dropped', 0)) if diag is not None else 0
+        start = getattr(getattr(source, 'source', None), 'start_ns', None)
+        info['source_start_ns'] = int(start) if start is not None else None
 
 
 def add_parser(sub) -> None:

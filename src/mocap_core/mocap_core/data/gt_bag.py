@@ -117,8 +117,10 @@ def read_groundtruth_bag(path: Union[str, os.PathLike]) -> Dict[str, Any]:
         ``stamps`` (list of int ns), ``poses`` (list of :class:`~mocap_core.pose.Pose` of
         ``/mocap/groundtruth/motion``, root in the camera's optical frame, m), ``camera``
         ((R_c (3, 3), t_c (3,)) the camera pose in the z-up world, ``x_world = R_c x_camera +
-        t_c``), ``keypoints`` ((F, 23, 3) u, v in pixels and confidence of the cloud's first
-        person, or None) and ``intrinsics`` (the last camera info, or None).
+        t_c``; the static camera of :func:`write_groundtruth_bag`; a rendered clip's bag has
+        one per frame, and this is the last), ``keypoints`` ((F, 23, 3) u, v in pixels and
+        confidence of the cloud's first person, or None) and ``intrinsics`` (the last camera
+        info, or None).
 
     Raises:
         ValueError: the bag has no camera pose or no ground-truth motion.

@@ -46,6 +46,8 @@ def read_bag(path: Path) -> Tuple[np.ndarray, object, np.ndarray]:
     joint positions (camera optical frame, m) of a ground-truth bag."""
     from mocap_core.data.gt_bag import read_groundtruth_bag
     b = read_groundtruth_bag(path)
+    if b['keypoints'] is None or b['intrinsics'] is None:
+        raise ValueError(f'{path}: no keypoints or no camera info')
     n = min(len(b['keypoints']), len(b['poses']))
     return b['keypoints'][:n], b['intrinsics'], np.stack([p.joint_positions()
                                                           for p in b['poses'][:n]])
