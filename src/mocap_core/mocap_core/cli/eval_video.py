@@ -31,6 +31,8 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
+from .. import topics as _T
+
 
 T_GT_CAMERA_POSE = '/mocap/groundtruth/camera_pose'
 
@@ -206,9 +208,8 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
 
 #: the topics a live run records (what :func:`_read_output` and the skating split read, and
 #: the camera info: the recorded bag can be processed again from its keypoints)
-LIVE_TOPICS = ('/mocap/keypoints2d', '/mocap/camera_info', '/mocap/camera/motion',
-               '/mocap/lifter/joints3d',
-               '/mocap/physics/joints3d', '/mocap/world/joints3d', '/mocap/physics/floor')
+LIVE_TOPICS = (_T.KEYPOINTS, _T.CAMERA_INFO, _T.CAMERA_MOTION, _T.LIFTER_JOINTS3D,
+               _T.PHYSICS_JOINTS3D, _T.WORLD_JOINTS3D, _T.PHYSICS_FLOOR)
 
 
 def _live_summary(out: Path) -> Dict:
@@ -314,7 +315,8 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     data = _read_output(bag)
     fps = float(gt['fps'])
     kp_stamps = data[T.KEYPOINTS][0]
-    live_info = _live_summary(out) if live or replay is not None else {}
+    streamed = live or replay is not None       # a live run's frames, live or replayed
+    live_info = _live_summary(out) if streamed else {}
     if live_info.get('source_start_ns') is not None:
         first = int(live_info['source_start_ns'])   # frame 0, kept or dropped
     elif start == 'video':
@@ -333,7 +335,7 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             roots[stage] = (j, _index(s, first, fps))   # all joints: the feet are scored
     score = score_clip(meta['clip'], meta, gt, lj if len(lj) else None,
                        _index(ls, first, fps), roots)
-    if live or replay is not None:
+    if streamed:
         # the share of the rendered frames that reached each stage (the rest were dropped
         # by the keypoint node, as a camera's frames are when the detector falls behind)
         n = max(int(meta.get('frames') or len(gt['joints_world'])), 1)
@@ -343,7 +345,7 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     if cm.exists():
         score.root.setdefault('camera', {}).update(json.loads(cm.read_text()))
     # live (and its replays): the live keypoint node's estimate
-    motion_bag = bag if live or replay is not None else out / 'input_bag'
+    motion_bag = bag if streamed else out / 'input_bag'
     if motion_bag.exists() and 'world' in roots and 'contacts' in gt:
         from ..render.evaluate import skating_by_camera_state
         groups = _camera_state_groups(motion_bag, first, fps, len(gt['contacts']))
