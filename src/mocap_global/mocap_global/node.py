@@ -88,6 +88,8 @@ from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
 
 from .model import TTA_MODES, with_tta
+from mocap_core.foot_plant import FootPlantConfig
+
 from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame, prepare_outputs
 from .weights import default_weights, load_weights
 
@@ -223,6 +225,31 @@ PARAMETERS = (
               min_value=0, read_only=True),
     ParamSpec('lock_height', 0.02, 'Height above the floor below which a contact point '
               'stands (foot_lock), m', min_value=0.0),
+    ParamSpec('foot_plant', True, 'With the vertical from the input: bend each leg (two-bone '
+              'inverse kinematics from the hip) so that the foot points the lifter says stand '
+              '(contacts_topic) stay where they landed; the root path stays GMR\'s and the '
+              'fusion\'s, what the leg cannot reach slides (mocap_core.foot_plant, '
+              'docs/global.md "Feet planted by the legs")', read_only=True),
+    ParamSpec('contacts_topic', topics.LIFTER_CONTACTS, 'Foot contact probabilities '
+              '(JointState: left_heel, left_toe, right_heel, right_toe) matched by stamp, for '
+              'foot_plant; a frame without them uses lock_height; empty = heights only',
+              read_only=True),
+    ParamSpec('bodies_contacts_topic', topics.bodies_topic('lifter', 'contacts'), 'The same '
+              'for every person (names prefixed body_<id>/), with bodies_motion_topic',
+              read_only=True),
+    ParamSpec('contact_threshold', 0.5, 'foot_plant: a contact probability at least this '
+              'high makes the point stand', min_value=0.0, max_value=1.0, read_only=True),
+    ParamSpec('foot_plant_max_correction', 0.35, 'foot_plant: largest horizontal '
+              'correction of a foot, m', min_value=0.0, read_only=True),
+    ParamSpec('foot_plant_reach', 1.05, 'foot_plant: the correction stops where the hip-'
+              'ankle distance would exceed this fraction of thigh plus shin (above 1 the leg '
+              'straightens and the rest slides)', min_value=0.0, read_only=True),
+    ParamSpec('foot_plant_release_s', 0.1, 'foot_plant: time constant with which a lifted '
+              'foot returns to the input\'s, s', min_value=0.0, read_only=True),
+    ParamSpec('foot_plant_double_stance_s', 0.2, 'foot_plant: while both feet stand, the '
+              'corrections leak away with this time constant, s (a root drifting under a '
+              'person who stands still is not followed by ever longer legs; 0 = never)',
+              min_value=0.0, read_only=True),
     ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
     ParamSpec('path_length', 3000, 'Poses kept in /mocap/world/path (0 = all)', min_value=0),
     ParamSpec('flush_after_s', 0.3, 'When no input arrives for this long, emit the frames '
@@ -331,6 +358,8 @@ class GMRNode(Node):
         self.camera_motion: Dict[int, Tuple[str, np.ndarray, Optional[np.ndarray]]] = {}
         self.camera_stamps: Deque[int] = collections.deque()
         self.floor: Optional[Tuple[int, np.ndarray, np.ndarray]] = None  # stamp, A, b
+        #: person id (None: the single-person input) -> stamp -> (4,) contact probabilities
+        self.contacts: Dict[Optional[int], Dict[int, np.ndarray]] = {}
         self.camera_frames: Dict[str, int] = {}
         self.diag = NodeDiagnostics(self, 'gmr', hardware_id=path.name)
         self.diag.set_value('model', f'GMR {cfg.layers}x{cfg.hidden} bi-GRU, '
@@ -359,6 +388,14 @@ class GMRNode(Node):
             self.create_subscription(TransformStamped, p['floor_topic'],
                                      guarded(self, self.on_floor, 'floor'),
                                      input_qos(STREAM_QOS, p['queue_depth']))
+        if p['foot_plant'] and p['contacts_topic']:
+            self.create_subscription(JointState, p['contacts_topic'],
+                                     guarded(self, self.on_contacts, 'contacts'),
+                                     input_qos(STREAM_QOS, p['queue_depth']))
+        if p['foot_plant'] and p['bodies_contacts_topic']:
+            self.create_subscription(JointState, p['bodies_contacts_topic'],
+                                     guarded(self, self.on_bodies_contacts, 'bodies contacts'),
+                                     input_qos(STREAM_QOS, p['queue_depth']))
         if self.camera_mode == 'auto' and p['camera_motion_topic']:
             self.diag.watch('camera_motion', self.create_subscription(
                 Odometry, p['camera_motion_topic'],
@@ -371,7 +408,7 @@ class GMRNode(Node):
             f"{p['motion_topic']}, look-ahead {p['lookahead']} frames "
             f"({p['lookahead'] / cfg.fps:.2f} s), camera mode {self.camera_mode}")
 
-    def _make_online(self, frame_id: str) -> OnlineGMR:
+    def _make_online(self, frame_id: str, pid: Optional[int] = None) -> OnlineGMR:
         p = self.p
         self.input_frame = frame_id
         fusion = None
@@ -413,7 +450,46 @@ class GMRNode(Node):
                          moving_lock_time_constant_s=(
                              0.0 if self.camera_mode == 'known'
                              else p['fusion_moving_lock_time_constant_s']),
-                         network_rate_hz=self.fps if p['fill_missing_frames'] else 0.0)
+                         network_rate_hz=self.fps if p['fill_missing_frames'] else 0.0,
+                         foot_plant=FootPlantConfig(
+                             lock_height=p['lock_height'],
+                             release_time_constant_s=p['foot_plant_release_s'],
+                             max_correction=p['foot_plant_max_correction'],
+                             reach=p['foot_plant_reach'],
+                             double_stance_time_constant_s=p['foot_plant_double_stance_s'])
+                         if p['foot_plant'] else None,
+                         contacts=self.contacts.setdefault(pid, {}),
+                         contact_threshold=p['contact_threshold'])
+
+    def _keep_contacts(self, pid: Optional[int], stamp: int, probs: np.ndarray) -> None:
+        """Keep one person's contact probabilities of a stamp (the last
+        ``MAX_CAMERA_FRAMES``; dicts keep their insertion order)."""
+        kept = self.contacts.setdefault(pid, {})
+        kept[stamp] = probs
+        while len(kept) > MAX_CAMERA_FRAMES:
+            del kept[next(iter(kept))]
+
+    def on_contacts(self, msg: JointState) -> None:
+        """The single-person input's foot contact probabilities (``contacts_topic``)."""
+        try:
+            probs = rc.msg_to_contacts(msg)
+        except rc.MessageError as exc:
+            self.diag.errors += 1
+            self.get_logger().warn(f'ignoring contacts: {exc}', throttle_duration_sec=5.0)
+            return
+        self._keep_contacts(None, rc.stamp_to_ns(msg.header.stamp), probs)
+
+    def on_bodies_contacts(self, msg: JointState) -> None:
+        """Every person's foot contact probabilities (``bodies_contacts_topic``)."""
+        try:
+            bodies = rc.msg_to_bodies_contacts(msg)
+        except rc.MessageError as exc:
+            self.diag.errors += 1
+            self.get_logger().warn(f'ignoring contacts: {exc}', throttle_duration_sec=5.0)
+            return
+        stamp = rc.stamp_to_ns(msg.header.stamp)
+        for pid, probs in bodies:
+            self._keep_contacts(int(pid), stamp, np.asarray(probs, dtype=float))
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera-motion estimate of each stamp (the last ``MAX_CAMERA_FRAMES``)."""
@@ -633,6 +709,7 @@ class GMRNode(Node):
             if person.online is not None and person.online.pending():
                 self._publish_combined([(pid, self._publish(pid, person,
                                                             person.online.flush()))])
+            self.contacts.pop(pid, None)
             self.main_id = min(self.persons) if self.persons else None
             self.bodies.remove(pid)
             self.get_logger().info(f'person {pid} gone: their topics are removed')
@@ -685,7 +762,7 @@ class GMRNode(Node):
                                    throttle_duration_sec=2.0)
             return None
         if person.online is None:
-            person.online = self._make_online(frame_id)
+            person.online = self._make_online(frame_id, pid)
         gap = (stamp - person.last_stamp) * 1e-9 if person.last_stamp >= 0 else 0.0
         person.last_stamp = stamp
         if pid is None or pid == self.main_id:
@@ -803,6 +880,13 @@ class GMRNode(Node):
             fusion = online.fusion
             self.diag.set_value('segments', online.segments)
             self.diag.set_value('filled_frames', online.filled_frames)
+            planter = online.planter
+            if planter is not None:
+                self.diag.set_value('foot_plant', (
+                    f"correction left {planter.last_correction['left']:.3f} m, right "
+                    f"{planter.last_correction['right']:.3f} m; contacts from the lifter in "
+                    f'{online.planted_with_contacts} frames, from heights in '
+                    f'{online.planted_by_height}; cut by the reach {planter.limited_frames}'))
             if fusion is not None:
                 self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
             if self.camera_mode == 'known':

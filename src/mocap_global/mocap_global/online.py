@@ -45,6 +45,17 @@ accumulation, the fusion and the foot lock like received frames, but are never r
 only the frames received come out, each with its own stamp, and the look-ahead stays
 ``lookahead`` periods in seconds.
 
+Foot planting (``foot_plant``, with a floor input; :mod:`mocap_core.foot_plant`): the root
+lock above moves the root, and only where it locks; a root that follows a fusion, or the
+root lock's own compromise when both feet stand, still lets a stance foot slide when the
+input's legs step shorter than the root travels (the lifter's stride is short in front and
+back views). Every emitted pose therefore has its legs bent, by two-bone inverse kinematics
+from the hips, so that the foot points that stand stay where they landed; the root, trunk and
+arms are left as they are. A point stands when the lifter's contact probability of that
+frame (``contacts``, matched by stamp) is at least ``contact_threshold``, or, without one,
+when it is lower than ``lock_height``. What the leg cannot reach slides (measured in
+docs/global.md, "Feet planted by the legs").
+
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
@@ -83,11 +94,12 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass, field
-from typing import Deque, List, Optional, Tuple
+from typing import Deque, List, Mapping, Optional, Tuple
 
 import numpy as np
 import torch
 
+from mocap_core.foot_plant import FootPlantConfig, FootPlanter
 from mocap_core.pose import Pose
 from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat,
                                   quat_from_two_vectors, quat_slerp, quat_to_matrix)
@@ -306,6 +318,13 @@ class OnlineGMR:
         network_rate_hz: > 0: gaps of 1.5 periods of this rate or more are filled with
             interpolated frames that are never returned (module docstring, the network's
             frame rate); 0: every frame is read as the next one.
+        foot_plant: with ``floor_input``, the settings of the legs' correction applied to
+            every emitted pose (:mod:`mocap_core.foot_plant`; module docstring, foot
+            planting); None: off.
+        contacts: stamp (ns) -> (4,) foot contact probabilities (left heel, left toe, right
+            heel, right toe; the lifter's), read when a frame is emitted: a point stands in
+            the foot planting when its probability is at least ``contact_threshold``. A frame
+            without an entry falls back to the height rule (``lock_height``).
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
@@ -315,7 +334,10 @@ class OnlineGMR:
                  chunk: int = 1, floor_input: bool = False, foot_lock: bool = False,
                  lock_height: float = 0.02, heading_smoothing: int = 0,
                  moving_lock_time_constant_s: float = 0.0,
-                 network_rate_hz: float = 0.0) -> None:
+                 network_rate_hz: float = 0.0,
+                 foot_plant: Optional[FootPlantConfig] = None,
+                 contacts: Optional[Mapping[int, np.ndarray]] = None,
+                 contact_threshold: float = 0.5) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -343,6 +365,13 @@ class OnlineGMR:
         if not (np.isfinite(network_rate_hz) and network_rate_hz >= 0):
             raise ValueError(f'network_rate_hz must be >= 0, got {network_rate_hz}')
         self.period_ns = int(round(1e9 / network_rate_hz)) if network_rate_hz > 0 else 0
+        self.planter = FootPlanter(foot_plant) if foot_plant is not None and floor_input \
+            else None
+        self.contacts = contacts
+        self.contact_threshold = float(contact_threshold)
+        #: emitted frames whose planting read the contacts (the rest: the height rule)
+        self.planted_with_contacts = 0
+        self.planted_by_height = 0
         #: frames filled in so far (run through the network, never returned)
         self.filled_frames = 0
         if self.cfg.root_input == 'up' and input_up is None:
@@ -380,6 +409,8 @@ class OnlineGMR:
         self._last_up = _EZ.copy()
         if self.fusion is not None:
             self.fusion.reset()
+        if getattr(self, 'planter', None) is not None:
+            self.planter.reset()
 
     def frames_needed(self) -> int:
         """Frames of a segment before the first output."""
@@ -684,8 +715,24 @@ class OnlineGMR:
         if self.floor_input:        # exact: a turn about z, the floors coincide (z = 0)
             R_wi = heading_rotation(yaw_of(R_wi))
             t_wi[2] = 0.0
-        return WorldFrame(self._stamps[pos], Pose(pose.skeleton, rot, T), lin, ang, k == 0,
-                          fused, held, R_wi, t_wi)
+        out_pose = Pose(pose.skeleton, rot, T)
+        if self.planter is not None:
+            out_pose = self._plant(out_pose, self._stamps[pos], dt)
+        return WorldFrame(self._stamps[pos], out_pose, lin, ang, k == 0, fused, held, R_wi,
+                          t_wi)
+
+    def _plant(self, pose: Pose, stamp_ns: int, dt: float) -> Pose:
+        """The emitted pose with its legs corrected (module docstring, foot planting)."""
+        probs = None if self.contacts is None else self.contacts.get(stamp_ns)
+        standing = None
+        if probs is not None and len(probs) == len(CONTACT_POINT_NAMES) \
+                and np.all(np.isfinite(probs)):
+            standing = {n: bool(v >= self.contact_threshold)
+                        for n, v in zip(CONTACT_POINT_NAMES, probs)}
+            self.planted_with_contacts += 1
+        else:
+            self.planted_by_height += 1
+        return self.planter.apply(pose, dt, standing)
 
 
 @torch.no_grad()

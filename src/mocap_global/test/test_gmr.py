@@ -986,3 +986,48 @@ def test_playback_speed_evaluation_measures_the_pace(monkeypatch):
     E.evaluate_speeds(_small_model(), [walk], ('none',), (1.0,))
     assert slow == pytest.approx(0.5 * np.linalg.norm(seen['c']['dT'], axis=1).mean(),
                                  rel=0.02)
+
+
+def test_foot_plant_keeps_the_feet_the_contacts_say_stand_under_a_fused_root():
+    """A static camera with a floor input, the fused root following the input root: the
+    input's feet slide with the root, the planted output's feet do not where the contacts
+    (matched by stamp) say they stand; a foot said to be lifted follows the input, and a
+    frame without contacts falls back to the heights."""
+    from mocap_core.foot_plant import FootPlantConfig
+    from mocap_global.online import InputAnchor
+
+    base = _poses(1)[0]
+    low = min(c[2] for c in base.contact_positions().values())
+    poses = [Pose(base.skeleton, base.rotations, base.root_position + [0.005 * i, 0.0, -low])
+             for i in range(40)]
+    stamps = [i * 33_333_333 for i in range(40)]
+    contacts = {s: np.array([1.0, 1.0, 0.0, 0.0]) for s in stamps[:-5]}   # left stands
+
+    def run(plant):
+        fusion = StaticCameraFusion(30.0, position_time_constant_s=1e-9,
+                                    input_up=np.array([0.0, 0.0, 1.0]))
+        online = OnlineGMR(_small_model(), lookahead=3, fusion=fusion, floor_input=True,
+                           foot_lock=True, foot_plant=plant, contacts=contacts,
+                           lock_height=-1.0)
+        frames = []
+        for s, p in zip(stamps, poses):
+            frames += online.push(s, p, InputAnchor(True, static=True))[0]
+        return frames + online.flush(), online
+
+    plain, _ = run(None)
+    planted, online = run(FootPlantConfig(lock_height=-1.0, max_correction=1.0, reach=2.0))
+
+    def feet(frames):
+        return np.array([[f.pose.contact_positions()[n] for n in CONTACT_POINT_NAMES]
+                         for f in frames])
+
+    fp, fq = feet(plain), feet(planted)
+    n = len(stamps) - 5
+    assert np.abs(fp[n - 1, :2, :2] - fp[0, :2, :2]).max() > 0.15     # the input slides
+    assert np.abs(fq[n - 1, :2, :2] - fq[0, :2, :2]).max() < 2e-3      # planted
+    np.testing.assert_allclose(fq[:, 2:], fp[:, 2:], atol=1e-9)        # right: as before
+    np.testing.assert_allclose([f.pose.root_position for f in planted],
+                               [f.pose.root_position for f in plain], atol=1e-12)
+    # the last frames have no contacts: heights (lock_height -1: nothing stands) release
+    assert online.planted_with_contacts == n and online.planted_by_height == 5
+    assert np.abs(fq[-1, :2] - fp[-1, :2]).max() < np.abs(fq[n - 1, :2] - fp[n - 1, :2]).max()
