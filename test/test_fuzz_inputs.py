@@ -230,9 +230,12 @@ def test_physics_and_gmr_survive_malformed_motion_and_contacts(pipeline, valid, 
     for k, (_name, bad) in enumerate(cases):
         injected.append(_stamped(_as_bodies(bad), t + k))
         graph.publish(topic, injected[-1])
-        if target == 'physics':
-            injected.append(_stamped(_as_bodies(_bad_contacts(contacts)[k % 4][1]), t + k))
-            graph.publish('/mocap/lifter/bodies/contacts', injected[-1])
+        # both stages read the lifter's contacts (the world stage for its foot planting)
+        injected.append(_stamped(_as_bodies(_bad_contacts(contacts)[k % 4][1]), t + k))
+        graph.publish('/mocap/lifter/bodies/contacts', injected[-1])
+        if target == 'gmr':
+            injected.append(_stamped(_bad_contacts(contacts)[k % 4][1], t + k))
+            graph.publish('/mocap/lifter/contacts', injected[-1])
     injected.append(_stamped(_as_bodies(motion), t - 500_000_000))    # backwards, dropped
     graph.publish(topic, injected[-1])
     unprefixed = _stamped(motion, t + len(cases))                     # no body_<id>/ prefix

@@ -471,25 +471,25 @@ class GMRNode(Node):
 
     def on_contacts(self, msg: JointState) -> None:
         """The single-person input's foot contact probabilities (``contacts_topic``)."""
-        try:
-            probs = rc.msg_to_contacts(msg)
-        except rc.MessageError as exc:
-            self.diag.errors += 1
-            self.get_logger().warn(f'ignoring contacts: {exc}', throttle_duration_sec=5.0)
-            return
-        self._keep_contacts(None, rc.stamp_to_ns(msg.header.stamp), probs)
+        self._read_contacts(msg, lambda m: [(None, rc.msg_to_contacts(m))])
 
     def on_bodies_contacts(self, msg: JointState) -> None:
         """Every person's foot contact probabilities (``bodies_contacts_topic``)."""
+        self._read_contacts(msg, rc.msg_to_bodies_contacts)
+
+    def _read_contacts(self, msg: JointState, parse) -> None:
+        """Keep the ``(person id, (4,) probabilities)`` pairs ``parse(msg)`` gives; a
+        malformed message is counted and dropped."""
         try:
-            bodies = rc.msg_to_bodies_contacts(msg)
+            bodies = parse(msg)
         except rc.MessageError as exc:
             self.diag.errors += 1
             self.get_logger().warn(f'ignoring contacts: {exc}', throttle_duration_sec=5.0)
             return
         stamp = rc.stamp_to_ns(msg.header.stamp)
         for pid, probs in bodies:
-            self._keep_contacts(int(pid), stamp, np.asarray(probs, dtype=float))
+            self._keep_contacts(None if pid is None else int(pid), stamp,
+                                np.asarray(probs, dtype=float))
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera-motion estimate of each stamp (the last ``MAX_CAMERA_FRAMES``)."""
