@@ -319,7 +319,8 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
     live_info = _live_summary(out) if streamed else {}
     if live_info.get('source_start_ns') is not None:
         first = int(live_info['source_start_ns'])   # frame 0, kept or dropped
-    elif start == 'video':
+    elif start == 'video' or streamed:
+        # (a live run recorded before its source's first stamp was kept: its first frame)
         first = int(kp_stamps.min()) if len(kp_stamps) else 0
     else:
         from ..data.gt_bag import DEFAULT_START_NS
