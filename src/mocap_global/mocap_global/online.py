@@ -409,7 +409,7 @@ class OnlineGMR:
         self._last_up = _EZ.copy()
         if self.fusion is not None:
             self.fusion.reset()
-        if getattr(self, 'planter', None) is not None:
+        if self.planter is not None:
             self.planter.reset()
 
     def frames_needed(self) -> int:
