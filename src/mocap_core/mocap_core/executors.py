@@ -24,12 +24,25 @@ An unknown value, or an rclpy without the events executor, falls back to
 ``rclpy.shutdown()``) ends it within ``step_s`` (the events executor's own ``spin()`` never
 sleeps in the rclpy this project pins: a core at 100 % while idle, measured), and an
 exception that escapes a callback is handed to ``on_error`` instead of ending the process.
+
+Stopping a process (:class:`StopSignals`, :func:`close_nodes`): rclpy's own signal handler
+shuts the context down and raises KeyboardInterrupt wherever the main thread is, which may be
+inside the C++ events executor dispatching a callback; the executor was then never shut down
+and the nodes were destroyed under it. Once in a while (a CI run on a busy machine) a node
+process did not end within 60 s of SIGINT. Node processes therefore take SIGINT / SIGTERM as a
+request (the spin loop ends at its next step), then tear down in order: the node's own threads,
+``remove_node``, ``executor.shutdown``, ``destroy_node``, the context. A teardown that still
+hangs is cut short after ``limit_s`` with every thread's stack on stderr (so the hang can be
+found) and exit status 0: everything received was processed and published by then.
 """
 from __future__ import annotations
 
+import faulthandler
 import os
+import signal
 import sys
-from typing import Any, Callable, Optional
+import threading
+from typing import Any, Callable, Iterable, Optional
 
 ENV = 'MOCAP_EXECUTOR'
 KINDS = ('events', 'single_threaded')
@@ -82,3 +95,94 @@ def spin_until(executor: Any, ok: Callable[[], bool],
             if on_error is None:
                 raise
             on_error(exc)
+
+
+class StopSignals:
+    """SIGINT and SIGTERM of a node process as a request to stop.
+
+    :meth:`install` (main thread only; elsewhere it does nothing) replaces the handlers; the
+    first signal sets :attr:`requested`, the spin loop's condition reads it and the process
+    ends cleanly; a third signal raises KeyboardInterrupt (give up waiting). Use with
+    ``rclpy.init(..., signal_handler_options=SignalHandlerOptions.NO)`` so that rclpy does not
+    shut the context down under a running callback (module docstring)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._old: dict = {}
+
+    @property
+    def requested(self) -> bool:
+        """Whether a stop signal arrived."""
+        return self.count > 0
+
+    def install(self) -> 'StopSignals':
+        if threading.current_thread() is threading.main_thread():
+            self._old = {s: signal.signal(s, self._on_signal) for s in self.SIGNALS}
+        return self
+
+    def restore(self) -> None:
+        """Put the previous handlers back."""
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old = {}
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.count += 1
+        if self.count >= 3:
+            raise KeyboardInterrupt
+
+
+def init_rclpy(args: Any = None, context: Any = None) -> StopSignals:
+    """``rclpy.init`` without rclpy's signal handlers, and :class:`StopSignals` installed."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    return StopSignals().install()
+
+
+def close_nodes(executor: Any, nodes: Iterable[Any], context: Any = None,
+                before: Iterable[Callable[[], None]] = (), limit_s: float = 20.0,
+                label: str = 'node') -> bool:
+    """Tear a node process down in order: ``before`` (e.g. the nodes' own threads), then per
+    node ``executor.remove_node`` and, after ``executor.shutdown``, ``destroy_node``, then the
+    context (None: the default one). Each step's exception is printed and the next goes on.
+    If it all takes more than ``limit_s`` s, every thread's stack is printed on stderr and the
+    process exits with status 0 (module docstring). Returns True when it finished in time."""
+    import rclpy
+
+    done = threading.Event()
+
+    def watchdog() -> None:
+        if done.wait(limit_s):
+            return
+        print(f'[{label}] shutting down took more than {limit_s:.0f} s: the threads are',
+              file=sys.stderr, flush=True)
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        print(f'[{label}] exiting without finishing the shutdown', file=sys.stderr, flush=True)
+        os._exit(0)
+
+    timer = threading.Thread(target=watchdog, name='shutdown-watchdog', daemon=True)
+    timer.start()
+    nodes = [n for n in nodes if n is not None]
+
+    def step(what: str, fn: Callable[[], Any]) -> None:
+        try:
+            fn()
+        except Exception as exc:  # noqa: BLE001 - a failing step never stops the teardown
+            print(f'[{label}] {what} failed during shutdown: {type(exc).__name__}: {exc}',
+                  file=sys.stderr)
+
+    for fn in before:
+        step('stopping', fn)
+    if executor is not None:
+        for node in nodes:
+            step('remove_node', lambda node=node: executor.remove_node(node))
+        step('executor.shutdown', lambda: executor.shutdown(timeout_sec=5.0))
+    for node in nodes:
+        step('destroy_node', node.destroy_node)
+    step('context shutdown', lambda: rclpy.try_shutdown(context=context))
+    done.set()
+    return True

@@ -96,14 +96,13 @@ def spin_node(make_node, args, name: str) -> int:
     a frame that fails never stops the node. Always destroys the node and shuts down."""
     import sys
 
-    import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    from .executors import make_executor, spin_until
+    from .executors import close_nodes, init_rclpy, make_executor, spin_until
     from .guard import record_failure
 
-    rclpy.init(args=args)
-    node = None
+    signals = init_rclpy(args)
+    node = executor = None
     try:
         try:
             node = make_node()
@@ -112,12 +111,11 @@ def spin_node(make_node, args, name: str) -> int:
             return 2
         executor = make_executor()
         executor.add_node(node)
-        spin_until(executor, rclpy.ok, lambda exc: record_failure(node, 'callback', exc))
+        spin_until(executor, lambda: not signals.requested and node.context.ok(),
+                   lambda exc: record_failure(node, 'callback', exc))
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
     finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        close_nodes(executor, [node], label=name)
+        signals.restore()

@@ -172,3 +172,75 @@ def test_a_node_process_answers_parameter_requests_with_either_executor(tmp_path
             if proc.poll() is None:
                 proc.kill()
     assert proc.returncode == 0
+
+
+TEARDOWN_SCRIPT = '''
+import sys, time
+from mocap_core.executors import close_nodes, init_rclpy, make_executor
+import rclpy
+
+signals = init_rclpy([])
+node = rclpy.create_node('teardown')
+executor = make_executor()
+executor.add_node(node)
+executor.spin_once(timeout_sec=0.05)
+order = []
+
+def hang():
+    order.append('hang')
+    print('tearing down', flush=True)
+    time.sleep(float(sys.argv[1]))
+
+close_nodes(executor, [node], before=[lambda: order.append('first'), hang],
+            limit_s=float(sys.argv[2]), label='teardown')
+print('closed', order, rclpy.ok(), flush=True)
+'''
+
+
+@pytest.mark.parametrize('hang_s, limit_s', [(0.0, 30.0), (120.0, 1.0)])
+def test_close_nodes_tears_down_in_order_and_never_hangs(tmp_path, hang_s, limit_s):
+    """The ordered teardown of a node process; a step that hangs is cut short after
+    ``limit_s`` with every thread's stack on stderr and exit status 0."""
+    script = tmp_path / 'teardown.py'
+    script.write_text(TEARDOWN_SCRIPT)
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, str(script), str(hang_s), str(limit_s)],
+                          capture_output=True, text=True, timeout=90)
+    assert proc.returncode == 0, proc.stderr
+    if hang_s == 0:
+        assert "closed ['first', 'hang'] False" in proc.stdout, proc.stdout + proc.stderr
+        assert 'shutting down took' not in proc.stderr
+    else:
+        assert 'tearing down' in proc.stdout and 'closed' not in proc.stdout
+        assert 'shutting down took more than 1 s' in proc.stderr, proc.stderr
+        assert 'in hang' in proc.stderr                     # the stack of the hanging step
+        assert time.monotonic() - t0 < 60
+
+
+SIGNAL_SCRIPT = '''
+import os, signal, sys
+from mocap_core.executors import StopSignals
+
+stop = StopSignals().install()
+os.kill(os.getpid(), signal.SIGINT)
+os.kill(os.getpid(), signal.SIGTERM)
+print('requested', stop.requested, stop.count, flush=True)
+try:
+    os.kill(os.getpid(), signal.SIGINT)
+except KeyboardInterrupt:
+    print('third gives up', flush=True)
+stop.restore()
+print('restored', signal.getsignal(signal.SIGINT) is signal.default_int_handler, flush=True)
+'''
+
+
+def test_stop_signals_request_a_stop_and_the_third_gives_up(tmp_path):
+    """SIGINT / SIGTERM set ``requested`` instead of raising inside the executor; the third
+    signal raises KeyboardInterrupt; ``restore`` puts Python's handler back."""
+    script = tmp_path / 'signals.py'
+    script.write_text(SIGNAL_SCRIPT)
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split('\n')[:3] == ['requested True 2', 'third gives up',
+                                           'restored True'], proc.stdout

@@ -308,8 +308,10 @@ def main(args: Optional[List[str]] = None) -> int:
     from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
 
-    rclpy.init(args=args)
-    node = None
+    from mocap_core.executors import close_nodes, init_rclpy
+
+    signals = init_rclpy(args)
+    node = executor = None
     try:
         try:
             node = KeypointsNode()
@@ -318,8 +320,11 @@ def main(args: Optional[List[str]] = None) -> int:
             return 2
         executor = make_executor()
         executor.add_node(node)
-        spin_until(executor, lambda: rclpy.ok() and not node.done,
+        spin_until(executor, lambda: not signals.requested and rclpy.ok() and not node.done,
                    lambda exc: record_failure(node, 'callback', exc))
+        if signals.requested:
+            node.get_logger().info(f'stopped: {node.summary()}')
+            return 0
         node._drain()
         reason, error = node.source_end or ('stopped', None)
         # Let the last messages leave before the publishers go away.
@@ -333,15 +338,13 @@ def main(args: Optional[List[str]] = None) -> int:
         node.get_logger().info(f'finished ({reason}): {node.summary()}')
         return 0
     except (KeyboardInterrupt, ExternalShutdownException):
-        if node is not None:  # the context is gone: no /rosout, plain stderr
+        if node is not None:  # the context may be gone: no /rosout, plain stderr
             print(f'[keypoints] stopped: {node.summary()}', file=sys.stderr)
         return 0
     finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        close_nodes(executor, [node], before=[node.shutdown] if node is not None else [],
+                    label='keypoints')
+        signals.restore()
 
 
 def _side_node(name: str, cli_args: Optional[List[str]]) -> Node:
@@ -361,8 +364,10 @@ def _side_node(name: str, cli_args: Optional[List[str]]) -> Node:
             continue
         keep.append(raw[i])
         i += 1
-    context = Context()
-    rclpy.init(args=keep, context=context)
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()  # signals are the main context's (mocap_core.executors.StopSignals)
+    rclpy.init(args=keep, context=context, signal_handler_options=SignalHandlerOptions.NO)
     return rclpy.create_node(name, context=context)
 
 class KeypointsNode(Node):

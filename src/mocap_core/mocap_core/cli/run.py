@@ -62,11 +62,10 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
     Returns the exit status: 0, 1 when the source failed, 2 for a node that cannot start."""
     import time
 
-    import rclpy
     from rclpy.context import Context
     from rclpy.executors import ExternalShutdownException
 
-    from ..executors import make_executor, spin_until
+    from ..executors import close_nodes, init_rclpy, make_executor, spin_until
     from ..guard import record_failure
     from ..inprocess import InProcessGraph
     from .process import _overrides
@@ -85,7 +84,7 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
         args += ['--log-level', log_level]
     context = Context()
     try:
-        rclpy.init(args=['--ros-args', *args] if args else None, context=context)
+        signals = init_rclpy(['--ros-args', *args] if args else None, context=context)
         executor = make_executor(context=context)
     except BaseException:
         if writer is not None:
@@ -121,9 +120,13 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
         source = nodes['keypoints']
         t0 = time.monotonic()
         spin_until(executor,
-                   lambda: (context.ok() and not getattr(source, 'done', False)
+                   lambda: (context.ok() and not signals.requested
+                            and not getattr(source, 'done', False)
                             and not (max_seconds and time.monotonic() - t0 > max_seconds)),
                    lambda exc: record_failure(source, 'callback', exc))
+        if signals.requested:
+            _fill_info(info, source, 'interrupted', False)
+            return 0
         drain = getattr(source, '_drain', None)
         if drain is not None:
             drain()
@@ -146,18 +149,18 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
         _fill_info(info, nodes.get('keypoints'), 'interrupted', False)
         return 0
     finally:
-        for node in nodes.values():
-            shutdown = getattr(node, 'shutdown', None)
-            if shutdown is not None:
-                shutdown()
-            executor.remove_node(node)
-            node.destroy_node()
-        context.try_shutdown()
-        if writer is not None:
-            writer.close()
-            for pattern in recorder.unmatched():
-                print(f'mocap run: warning: no topic matched --topics {pattern}',
-                      file=sys.stderr)
+        def close_writer() -> None:
+            if writer is not None:
+                writer.close()
+                for pattern in recorder.unmatched():
+                    print(f'mocap run: warning: no topic matched --topics {pattern}',
+                          file=sys.stderr)
+
+        stops = [node.shutdown for node in nodes.values()
+                 if callable(getattr(node, 'shutdown', None))]
+        close_nodes(executor, list(nodes.values()), context=context,
+                    before=[*stops, close_writer], label='mocap run')
+        signals.restore()
 
 
 def _fill_info(info: Optional[Dict[str, Any]], source: Any, end: str, failed: bool) -> None:
