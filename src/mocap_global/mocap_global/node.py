@@ -250,6 +250,9 @@ PARAMETERS = (
               'corrections leak away with this time constant, s (a root drifting under a '
               'person who stands still is not followed by ever longer legs; 0 = never)',
               min_value=0.0, read_only=True),
+    ParamSpec('foot_plant_double_stance_delay_s', 0.0, 'foot_plant: the leak starts once both '
+              'feet have stood this long, s (a walker\'s double support, about 0.1 s a step, '
+              'keeps its correction)', min_value=0.0, read_only=True),
     ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
     ParamSpec('path_length', 3000, 'Poses kept in /mocap/world/path (0 = all)', min_value=0),
     ParamSpec('flush_after_s', 0.3, 'When no input arrives for this long, emit the frames '
@@ -456,7 +459,8 @@ class GMRNode(Node):
                              release_time_constant_s=p['foot_plant_release_s'],
                              max_correction=p['foot_plant_max_correction'],
                              reach=p['foot_plant_reach'],
-                             double_stance_time_constant_s=p['foot_plant_double_stance_s'])
+                             double_stance_time_constant_s=p['foot_plant_double_stance_s'],
+                             double_stance_delay_s=p['foot_plant_double_stance_delay_s'])
                          if p['foot_plant'] else None,
                          contacts=self.contacts.setdefault(pid, {}),
                          contact_threshold=p['contact_threshold'])
