@@ -24,14 +24,21 @@ the stance foot to skate. :class:`FootPlanter` keeps the root and moves the legs
 - ``c`` is bounded by ``max_correction`` and by the leg's reach: the hip-ankle distance may
   not exceed ``reach`` times thigh plus shin (nor grow beyond it where it already does; above
   1 the leg straightens and the rest slides). What cannot be reached slides, as little as the
-  leg allows.
+  leg allows, unless the root follows:
+- With ``root_follow_time_constant_s`` > 0, what a standing leg cannot take up moves the whole
+  body instead (the mean over the standing legs that were cut), so that the foot stays: the
+  root is held back by a foot it cannot leave. That offset of the root returns to the input's
+  root with the time constant (the legs take the return up while they can). A root that
+  runs away from a planted foot by more than a leg can reach is more likely wrong than the
+  foot contact (measured in docs/global.md, "Feet planted by the legs").
 - The ankle is moved to ``ankle + (c, 0)`` by rotating the hip and the knee (analytic
   two-bone inverse kinematics, the knee kept in its bending plane turned with the leg); the
   foot keeps its orientation, so heel and toe move with the ankle. The ankle's height is the
   input's: the vertical (floor contact, no penetration) is left as it was.
 
-Only the hip, knee and ankle rotations of a corrected leg change; the root, the trunk, the
-arms and the skeleton are the input's. State is per person; :meth:`FootPlanter.reset` starts
+Only the hip, knee and ankle rotations of a corrected leg change, and with the root following,
+the root's horizontal position; the trunk's and arms' joint rotations and the skeleton are
+the input's. State is per person; :meth:`FootPlanter.reset` starts
 afresh (a new segment, a time jump).
 """
 
@@ -64,6 +71,7 @@ class FootPlantConfig:
     reach: float = 1.05                    # of thigh + shin, the hip-ankle distance allowed
     double_stance_time_constant_s: float = 0.2   # leak of the corrections while both stand, s
     double_stance_delay_s: float = 0.0     # both legs standing this long before the leak, s
+    root_follow_time_constant_s: float = 0.0   # > 0: the root moves by what legs cannot reach, s
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -158,6 +166,8 @@ class FootPlanter:
         #: frames in which a leg's correction was cut by its reach or max_correction
         self.limited_frames = 0
         self._both_standing_s = 0.0            # how long both legs have stood, s
+        #: the horizontal offset of the root (root_follow_time_constant_s > 0), m
+        self.root_offset = np.zeros(2)
 
     def apply(self, pose: Pose, dt: float, standing: Optional[Dict[str, bool]] = None) -> Pose:
         """The pose with each leg's correction applied. ``dt``: seconds since the previous
@@ -165,6 +175,12 @@ class FootPlanter:
         known from elsewhere (default: its height, ``lock_height``). Returns ``pose`` itself
         when nothing is corrected."""
         cfg = self.config
+        follow = cfg.root_follow_time_constant_s > 0
+        if follow:                  # the root offset returns to the input's root
+            self.root_offset = self.root_offset * math.exp(
+                -max(dt, 0.0) / cfg.root_follow_time_constant_s)
+            pose = Pose(pose.skeleton, pose.rotations,
+                        pose.root_position + np.array([*self.root_offset, 0.0]))
         contacts = pose.contact_positions()
         decay = math.exp(-max(dt, 0.0) / cfg.release_time_constant_s) \
             if cfg.release_time_constant_s > 0 else 0.0
@@ -181,6 +197,7 @@ class FootPlanter:
         positions: Optional[np.ndarray] = None
         G = None
         changed: Dict[int, np.ndarray] = {}       # joint -> its new local rotation (3, 3)
+        unreached = []                            # standing legs: the correction not made
         for leg, ((h, k, a), _) in LEGS.items():
             down, held, prev = downs[leg], helds[leg], self._standing[leg]
             c = self._correction[leg]
@@ -191,6 +208,7 @@ class FootPlanter:
             self._standing[leg] = down
             if positions is None:
                 positions = pose.joint_positions()
+            wanted = c
             limited = False
             norm = _norm(c)
             if norm > cfg.max_correction:
@@ -204,6 +222,8 @@ class FootPlanter:
             self._correction[leg] = c
             self.last_correction[leg] = _norm(c)
             self.limited_frames += int(limited)
+            if limited and held:
+                unreached.append(wanted - c)
             if self.last_correction[leg] < 1e-6:
                 continue
             if G is None:
@@ -217,9 +237,19 @@ class FootPlanter:
             changed[h] = G[PARENTS[h]].T @ R_hip
             changed[k] = R_hip.T @ R_knee
             changed[a] = R_knee.T @ G[a]                    # the foot keeps its orientation
+        root = pose.root_position
+        if follow and unreached:
+            # the whole body moves by what the standing legs could not take up, so their feet
+            # stay; the stored standing points move with it (they are where the feet are)
+            shift = np.mean(unreached, axis=0)
+            self.root_offset = self.root_offset + shift
+            root = root + np.array([shift[0], shift[1], 0.0])
+            for leg in LEGS:
+                self._standing[leg] = {n: p + shift for n, p in self._standing[leg].items()}
         if not changed:
-            return pose
+            return pose if root is pose.root_position else Pose(pose.skeleton, pose.rotations,
+                                                                root)
         rot = np.array(pose.rotations)
         joints = list(changed)
         rot[joints] = matrix_to_quat(np.stack([changed[j] for j in joints]))
-        return Pose(pose.skeleton, rot, pose.root_position)
+        return Pose(pose.skeleton, rot, root)

@@ -189,3 +189,36 @@ def test_a_short_double_support_keeps_its_correction_a_long_one_leaks():
         assert long.last_correction['left'] < 0.25             # 0.59 m of drift: leaked
     assert results[0.25] < 1e-6                 # the planted heel did not move at all
     assert results[0.0] > 0.01                  # without the delay it slid back
+
+
+def test_a_root_that_runs_away_from_a_planted_foot_is_held_back_and_returns():
+    """With ``root_follow_time_constant_s``, what the standing leg cannot reach moves the root
+    instead: the planted foot does not move at all, the root stays within the leg's reach of
+    it, the bones keep their lengths; once the foot lifts the root returns to the input's."""
+    tau = 0.5
+    planter = FootPlanter(FootPlantConfig(reach=1.0, max_correction=2.0,
+                                          double_stance_time_constant_s=0.0,
+                                          root_follow_time_constant_s=tau))
+    left_only = {'left_heel': True, 'left_toe': True, 'right_heel': False, 'right_toe': False}
+    inputs = [_standing_pose((0.05 * k, 0.0)) for k in range(30)]      # 1.45 m
+    out = [planter.apply(p, DT if k else 0.0, left_only) for k, p in enumerate(inputs)]
+    heel = np.array([_feet(q)[0] for q in out])
+    assert np.abs(heel[1:, :2] - heel[1, :2]).max() < 1e-6               # planted throughout
+    J = out[-1].joint_positions()
+    (h, k, a), _ = LEGS['left']
+    assert np.linalg.norm(J[a] - J[h]) <= np.linalg.norm(J[k] - J[h]) \
+        + np.linalg.norm(J[a] - J[k]) + 1e-9
+    behind = inputs[-1].root_position[0] - out[-1].root_position[0]
+    assert behind > 1.0                                   # held back by the foot
+    for q, p in zip(out, inputs):
+        np.testing.assert_allclose(_bones(q), _bones(p), atol=1e-9)
+        assert q.root_position[2] == pytest.approx(p.root_position[2])
+    lifted = {n: False for n in CONTACT_POINT_NAMES}
+    for _ in range(60):                                   # 2 s = 4 time constants
+        q = planter.apply(inputs[-1], DT, lifted)
+    assert inputs[-1].root_position[0] - q.root_position[0] < behind * np.exp(-3.5)
+    # without it the same foot slides (the test above) and the root is the input's
+    plain = FootPlanter(FootPlantConfig(reach=1.0, max_correction=2.0,
+                                        double_stance_time_constant_s=0.0))
+    q = [plain.apply(p, DT if k else 0.0, left_only) for k, p in enumerate(inputs)][-1]
+    np.testing.assert_allclose(q.root_position, inputs[-1].root_position)

@@ -256,6 +256,10 @@ PARAMETERS = (
     ParamSpec('foot_plant_double_stance_delay_s', 0.0, 'foot_plant: the leak starts once both '
               'feet have stood this long, s (a walker\'s double support, about 0.1 s a step, '
               'keeps its correction)', min_value=0.0, read_only=True),
+    ParamSpec('foot_plant_root_follow_s', 0.0, 'foot_plant: > 0: what a standing leg cannot '
+              'reach moves the root instead (the foot stays), an offset that returns to the '
+              'world root with this time constant, s; 0: the foot slides', min_value=0.0,
+              read_only=True),
     ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
     ParamSpec('path_length', 3000, 'Poses kept in /mocap/world/path (0 = all)', min_value=0),
     ParamSpec('flush_after_s', 0.3, 'When no input arrives for this long, emit the frames '
@@ -463,7 +467,8 @@ class GMRNode(Node):
                              max_correction=p['foot_plant_max_correction'],
                              reach=p['foot_plant_reach'],
                              double_stance_time_constant_s=p['foot_plant_double_stance_s'],
-                             double_stance_delay_s=p['foot_plant_double_stance_delay_s'])
+                             double_stance_delay_s=p['foot_plant_double_stance_delay_s'],
+                             root_follow_time_constant_s=p['foot_plant_root_follow_s'])
                          if p['foot_plant'] else None,
                          contacts=self.contacts.setdefault(pid, {}),
                          contact_threshold=p['contact_threshold'],
