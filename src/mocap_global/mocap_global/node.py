@@ -239,9 +239,6 @@ PARAMETERS = (
               read_only=True),
     ParamSpec('contact_threshold', 0.5, 'foot_plant: a contact probability at least this '
               'high makes the point stand', min_value=0.0, max_value=1.0, read_only=True),
-    ParamSpec('contact_release_threshold', 0.5, 'foot_plant: a standing point goes on '
-              'standing while its contact probability is at least this high (hysteresis below '
-              'contact_threshold)', min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('foot_plant_max_correction', 0.35, 'foot_plant: largest horizontal '
               'correction of a foot, m', min_value=0.0, read_only=True),
     ParamSpec('foot_plant_reach', 1.05, 'foot_plant: the correction stops where the hip-'
@@ -471,9 +468,7 @@ class GMRNode(Node):
                              root_follow_time_constant_s=p['foot_plant_root_follow_s'])
                          if p['foot_plant'] else None,
                          contacts=self.contacts.setdefault(pid, {}),
-                         contact_threshold=p['contact_threshold'],
-                         contact_release_threshold=min(p['contact_release_threshold'],
-                                                       p['contact_threshold']))
+                         contact_threshold=p['contact_threshold'])
 
     def _keep_contacts(self, pid: Optional[int], stamp: int, probs: np.ndarray) -> None:
         """Keep one person's contact probabilities of a stamp (the last

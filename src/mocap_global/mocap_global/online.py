@@ -94,7 +94,7 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass, field
-from typing import Deque, Dict, List, Mapping, Optional, Tuple
+from typing import Deque, List, Mapping, Optional, Tuple
 
 import numpy as np
 import torch
@@ -323,10 +323,8 @@ class OnlineGMR:
             planting); None: off.
         contacts: stamp (ns) -> (4,) foot contact probabilities (left heel, left toe, right
             heel, right toe; the lifter's), read when a frame is emitted: a point stands in
-            the foot planting when its probability is at least ``contact_threshold``, and
-            goes on standing while it is at least ``contact_release_threshold`` (hysteresis;
-            None: the same threshold). A frame without an entry falls back to the height
-            rule (``lock_height``).
+            the foot planting when its probability is at least ``contact_threshold``. A frame
+            without an entry falls back to the height rule (``lock_height``).
     """
 
     def __init__(self, model: GMR, lookahead: int = 15, window: Optional[int] = None,
@@ -339,8 +337,7 @@ class OnlineGMR:
                  network_rate_hz: float = 0.0,
                  foot_plant: Optional[FootPlantConfig] = None,
                  contacts: Optional[Mapping[int, np.ndarray]] = None,
-                 contact_threshold: float = 0.5,
-                 contact_release_threshold: Optional[float] = None) -> None:
+                 contact_threshold: float = 0.5) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -372,9 +369,6 @@ class OnlineGMR:
             else None
         self.contacts = contacts
         self.contact_threshold = float(contact_threshold)
-        self.contact_release_threshold = float(
-            contact_threshold if contact_release_threshold is None else contact_release_threshold)
-        self._contact_standing: Dict[str, bool] = {}    # the last planted frame's decision
         #: emitted frames whose planting read the contacts (the rest: the height rule)
         self.planted_with_contacts = 0
         self.planted_by_height = 0
@@ -417,7 +411,6 @@ class OnlineGMR:
             self.fusion.reset()
         if self.planter is not None:
             self.planter.reset()
-        self._contact_standing = {}
 
     def frames_needed(self) -> int:
         """Frames of a segment before the first output."""
@@ -734,14 +727,11 @@ class OnlineGMR:
         standing = None
         if probs is not None and len(probs) == len(CONTACT_POINT_NAMES) \
                 and np.all(np.isfinite(probs)):
-            was = self._contact_standing
-            standing = {n: bool(v >= (self.contact_release_threshold if was.get(n)
-                                      else self.contact_threshold))
+            standing = {n: bool(v >= self.contact_threshold)
                         for n, v in zip(CONTACT_POINT_NAMES, probs)}
             self.planted_with_contacts += 1
         else:
             self.planted_by_height += 1
-        self._contact_standing = standing or {}
         return self.planter.apply(pose, dt, standing)
 
 
