@@ -15,12 +15,11 @@ the stance foot to skate. :class:`FootPlanter` keeps the root and moves the legs
   once (differential, as the world stage's root lock). While no point of the leg stands, ``c``
   decays to zero with ``release_time_constant_s``: the swing foot returns smoothly to where
   the input has it.
-- While both legs have stood for longer than ``double_stance_delay_s``, both corrections leak
-  towards zero with ``double_stance_time_constant_s``: a body on two planted feet cannot
-  travel, so a root that moves away from both (the drift of a world path under a person who
-  stands still) is not followed by ever longer legs; the feet slide slowly back under it
-  instead. A walker's double support is short (about 0.1 s a step): with the delay it keeps
-  its correction, and its feet do not slide while both are down.
+- While both legs stand, both corrections leak towards zero with
+  ``double_stance_time_constant_s``: a body on two planted feet cannot travel, so a root that
+  moves away from both (the drift of a world path under a person who stands still) is not
+  followed by ever longer legs; the feet slide slowly back under it instead. A walker's
+  double support is short (about 0.1 s a step) and loses little of its correction.
 - ``c`` is bounded by ``max_correction`` and by the leg's reach: the hip-ankle distance may
   not exceed ``reach`` times thigh plus shin (nor grow beyond it where it already does; above
   1 the leg straightens and the rest slides). What cannot be reached slides, as little as the
@@ -70,7 +69,6 @@ class FootPlantConfig:
     max_correction: float = 0.35           # m, horizontal
     reach: float = 1.05                    # of thigh + shin, the hip-ankle distance allowed
     double_stance_time_constant_s: float = 0.2   # leak of the corrections while both stand, s
-    double_stance_delay_s: float = 0.0     # both legs standing this long before the leak, s
     root_follow_time_constant_s: float = 0.0   # > 0: the root moves by what legs cannot reach, s
 
 
@@ -165,7 +163,6 @@ class FootPlanter:
         self.last_correction = {leg: 0.0 for leg in LEGS}
         #: frames in which a leg's correction was cut by its reach or max_correction
         self.limited_frames = 0
-        self._both_standing_s = 0.0            # how long both legs have stood, s
         #: the horizontal offset of the root (root_follow_time_constant_s > 0), m
         self.root_offset = np.zeros(2)
 
@@ -179,8 +176,11 @@ class FootPlanter:
         if follow:                  # the root offset returns to the input's root
             self.root_offset = self.root_offset * math.exp(
                 -max(dt, 0.0) / cfg.root_follow_time_constant_s)
-            pose = Pose(pose.skeleton, pose.rotations,
-                        pose.root_position + np.array([*self.root_offset, 0.0]))
+            if _norm(self.root_offset) < 1e-9:
+                self.root_offset = np.zeros(2)
+            else:
+                pose = Pose(pose.skeleton, pose.rotations,
+                            pose.root_position + np.array([*self.root_offset, 0.0]))
         contacts = pose.contact_positions()
         decay = math.exp(-max(dt, 0.0) / cfg.release_time_constant_s) \
             if cfg.release_time_constant_s > 0 else 0.0
@@ -190,10 +190,7 @@ class FootPlanter:
                  for leg, (_, names) in LEGS.items()}
         helds = {leg: [n for n in downs[leg] if n in self._standing[leg]] for leg in LEGS}
         tau = cfg.double_stance_time_constant_s
-        both = all(helds.values())
-        self._both_standing_s = self._both_standing_s + max(dt, 0.0) if both else 0.0
-        leak = math.exp(-max(dt, 0.0) / tau) \
-            if tau > 0 and both and self._both_standing_s > cfg.double_stance_delay_s else 1.0
+        leak = math.exp(-max(dt, 0.0) / tau) if tau > 0 and all(helds.values()) else 1.0
         positions: Optional[np.ndarray] = None
         G = None
         changed: Dict[int, np.ndarray] = {}       # joint -> its new local rotation (3, 3)

@@ -228,8 +228,9 @@ PARAMETERS = (
     ParamSpec('foot_plant', True, 'With the vertical from the input: bend each leg (two-bone '
               'inverse kinematics from the hip) so that the foot points the lifter says stand '
               '(contacts_topic) stay where they landed; the root path stays GMR\'s and the '
-              'fusion\'s, what the leg cannot reach slides (mocap_core.foot_plant, '
-              'docs/global.md "Feet planted by the legs")', read_only=True),
+              'fusion\'s, what the leg cannot reach slides (or moves the root: '
+              'foot_plant_root_follow_s; mocap_core.foot_plant, docs/global.md "Feet planted '
+              'by the legs")', read_only=True),
     ParamSpec('contacts_topic', topics.LIFTER_CONTACTS, 'Foot contact probabilities '
               '(JointState: left_heel, left_toe, right_heel, right_toe) matched by stamp, for '
               'foot_plant; a frame without them uses lock_height; empty = heights only',
@@ -250,13 +251,11 @@ PARAMETERS = (
               'corrections leak away with this time constant, s (a root drifting under a '
               'person who stands still is not followed by ever longer legs; 0 = never)',
               min_value=0.0, read_only=True),
-    ParamSpec('foot_plant_double_stance_delay_s', 0.0, 'foot_plant: the leak starts once both '
-              'feet have stood this long, s (a walker\'s double support, about 0.1 s a step, '
-              'keeps its correction)', min_value=0.0, read_only=True),
     ParamSpec('foot_plant_root_follow_s', 0.0, 'foot_plant: > 0: what a standing leg cannot '
               'reach moves the root instead (the foot stays), an offset that returns to the '
-              'world root with this time constant, s; 0: the foot slides', min_value=0.0,
-              read_only=True),
+              'world root with this time constant, s; 0: the foot slides. Not with a known '
+              'camera pose (the root is measured there). Off: it zigzags a real walk\'s path '
+              '(docs/global.md)', min_value=0.0, read_only=True),
     ParamSpec('frame_id', 'world', 'frame_id of the outputs'),
     ParamSpec('path_length', 3000, 'Poses kept in /mocap/world/path (0 = all)', min_value=0),
     ParamSpec('flush_after_s', 0.3, 'When no input arrives for this long, emit the frames '
@@ -464,8 +463,10 @@ class GMRNode(Node):
                              max_correction=p['foot_plant_max_correction'],
                              reach=p['foot_plant_reach'],
                              double_stance_time_constant_s=p['foot_plant_double_stance_s'],
-                             double_stance_delay_s=p['foot_plant_double_stance_delay_s'],
-                             root_follow_time_constant_s=p['foot_plant_root_follow_s'])
+                             # a known camera pose measures the root: it is not moved
+                             root_follow_time_constant_s=(
+                                 0.0 if self.camera_mode == 'known'
+                                 else p['foot_plant_root_follow_s']))
                          if p['foot_plant'] else None,
                          contacts=self.contacts.setdefault(pid, {}),
                          contact_threshold=p['contact_threshold'])
@@ -895,7 +896,8 @@ class GMRNode(Node):
                     f"correction left {planter.last_correction['left']:.3f} m, right "
                     f"{planter.last_correction['right']:.3f} m; contacts from the lifter in "
                     f'{online.planted_with_contacts} frames, from heights in '
-                    f'{online.planted_by_height}; cut by the reach {planter.limited_frames}'))
+                    f'{online.planted_by_height}; cut by the reach {planter.limited_frames}; '
+                    f'root held back by {float(np.hypot(*planter.root_offset)):.3f} m'))
             if fusion is not None:
                 self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
             if self.camera_mode == 'known':
