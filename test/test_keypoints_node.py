@@ -256,6 +256,7 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
     from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 
     from mocap_core.camera import CameraIntrinsics
+    from mocap_core.executors import SHUTDOWN_HANG
     from mocap_core.ros_conversions import (bgr_to_compressed_image, camera_info_to_intrinsics,
                                             cloud_to_keypoints, intrinsics_to_camera_info,
                                             make_header, stamp_to_ns)
@@ -415,6 +416,7 @@ def test_topic_source_image_stamps_and_bad_images(processes, ros2_cmd, peer):
                                  f'{log.read_text()}') from None
         assert code == 0, f'{log.name}: exit code {code} after SIGINT:\n{log.read_text()}'
         assert 'Traceback' not in log.read_text()
+        assert SHUTDOWN_HANG not in log.read_text(), log.read_text()   # ended by itself
 
 
 def test_image_directory_with_corrupt_empty_and_odd_sized_files(processes, ros2_cmd, peer,

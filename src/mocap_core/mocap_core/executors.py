@@ -143,29 +143,24 @@ def init_rclpy(args: Any = None, context: Any = None) -> StopSignals:
     return StopSignals().install()
 
 
+SHUTDOWN_HANG = 'shutting down took more than'
+
+
 def close_nodes(executor: Any, nodes: Iterable[Any], context: Any = None,
                 before: Iterable[Callable[[], None]] = (), limit_s: float = 20.0,
-                label: str = 'node') -> bool:
-    """Tear a node process down in order: ``before`` (e.g. the nodes' own threads), then per
-    node ``executor.remove_node`` and, after ``executor.shutdown``, ``destroy_node``, then the
-    context (None: the default one). Each step's exception is printed and the next goes on.
-    If it all takes more than ``limit_s`` s, every thread's stack is printed on stderr and the
-    process exits with status 0 (module docstring). Returns True when it finished in time."""
+                label: str = 'node', hard_exit: bool = True) -> bool:
+    """Tear a node process down in order: ``before`` (e.g. the nodes' own threads and
+    writers, each bounded by its own waits), then per node ``executor.remove_node`` and,
+    after ``executor.shutdown``, ``destroy_node``, then the context (None: the default one).
+    Each step's exception is printed and the next goes on.
+
+    If the rclpy part takes more than ``limit_s`` s, a line with :data:`SHUTDOWN_HANG` and
+    every thread's stack are printed on stderr, and with ``hard_exit`` (a node process that
+    owns its interpreter) the process exits with status 0 (module docstring); without it (a
+    library call, e.g. :func:`mocap_core.cli.run.run` inside ``mocap eval``) the teardown just
+    goes on waiting. Returns True when it finished in time."""
     import rclpy
 
-    done = threading.Event()
-
-    def watchdog() -> None:
-        if done.wait(limit_s):
-            return
-        print(f'[{label}] shutting down took more than {limit_s:.0f} s: the threads are',
-              file=sys.stderr, flush=True)
-        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
-        print(f'[{label}] exiting without finishing the shutdown', file=sys.stderr, flush=True)
-        os._exit(0)
-
-    timer = threading.Thread(target=watchdog, name='shutdown-watchdog', daemon=True)
-    timer.start()
     nodes = [n for n in nodes if n is not None]
 
     def step(what: str, fn: Callable[[], Any]) -> None:
@@ -177,12 +172,37 @@ def close_nodes(executor: Any, nodes: Iterable[Any], context: Any = None,
 
     for fn in before:
         step('stopping', fn)
-    if executor is not None:
+    done = threading.Event()
+    late = threading.Event()
+
+    def watchdog() -> None:
+        if done.wait(limit_s):
+            return
+        late.set()
+        err = sys.__stderr__ if sys.__stderr__ is not None else sys.stderr
+        try:
+            for stream in (sys.stdout, sys.stderr):
+                stream.flush()
+            print(f'[{label}] {SHUTDOWN_HANG} {limit_s:.0f} s: the threads are', file=err,
+                  flush=True)
+            faulthandler.dump_traceback(file=err, all_threads=True)
+            if hard_exit:
+                print(f'[{label}] exiting without finishing the shutdown', file=err,
+                      flush=True)
+        except Exception:  # noqa: BLE001 - a stream without a file descriptor
+            pass
+        if hard_exit:
+            os._exit(0)
+
+    threading.Thread(target=watchdog, name='shutdown-watchdog', daemon=True).start()
+    try:
+        if executor is not None:
+            for node in nodes:
+                step('remove_node', lambda node=node: executor.remove_node(node))
+            step('executor.shutdown', lambda: executor.shutdown(timeout_sec=5.0))
         for node in nodes:
-            step('remove_node', lambda node=node: executor.remove_node(node))
-        step('executor.shutdown', lambda: executor.shutdown(timeout_sec=5.0))
-    for node in nodes:
-        step('destroy_node', node.destroy_node)
-    step('context shutdown', lambda: rclpy.try_shutdown(context=context))
-    done.set()
-    return True
+            step('destroy_node', node.destroy_node)
+        step('context shutdown', lambda: rclpy.try_shutdown(context=context))
+    finally:
+        done.set()
+    return not late.is_set()

@@ -117,5 +117,7 @@ def spin_node(make_node, args, name: str) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
     finally:
-        close_nodes(executor, [node], label=name)
-        signals.restore()
+        try:
+            close_nodes(executor, [node], label=name)
+        finally:
+            signals.restore()

@@ -342,9 +342,11 @@ def main(args: Optional[List[str]] = None) -> int:
             print(f'[keypoints] stopped: {node.summary()}', file=sys.stderr)
         return 0
     finally:
-        close_nodes(executor, [node], before=[node.shutdown] if node is not None else [],
-                    label='keypoints')
-        signals.restore()
+        try:
+            close_nodes(executor, [node], before=[node.shutdown] if node is not None else [],
+                        label='keypoints')
+        finally:
+            signals.restore()
 
 
 def _side_node(name: str, cli_args: Optional[List[str]]) -> Node:

@@ -83,10 +83,14 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
     if log_level:
         args += ['--log-level', log_level]
     context = Context()
+    signals = None
     try:
         signals = init_rclpy(['--ros-args', *args] if args else None, context=context)
         executor = make_executor(context=context)
     except BaseException:
+        if signals is not None:
+            signals.restore()
+        context.try_shutdown()
         if writer is not None:
             writer.close()
         raise
@@ -158,9 +162,12 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
 
         stops = [node.shutdown for node in nodes.values()
                  if callable(getattr(node, 'shutdown', None))]
-        close_nodes(executor, list(nodes.values()), context=context,
-                    before=[*stops, close_writer], label='mocap run')
-        signals.restore()
+        try:
+            # (a library call: a hang is reported, the caller's process is never ended)
+            close_nodes(executor, list(nodes.values()), context=context,
+                        before=[*stops, close_writer], label='mocap run', hard_exit=False)
+        finally:
+            signals.restore()
 
 
 def _fill_info(info: Optional[Dict[str, Any]], source: Any, end: str, failed: bool) -> None:
