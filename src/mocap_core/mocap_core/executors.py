@@ -31,9 +31,11 @@ inside the C++ events executor dispatching a callback; the executor was then nev
 and the nodes were destroyed under it. Once in a while (a CI run on a busy machine) a node
 process did not end within 60 s of SIGINT. Node processes therefore take SIGINT / SIGTERM as a
 request (the spin loop ends at its next step), then tear down in order: the node's own threads,
-``remove_node``, ``executor.shutdown``, ``destroy_node``, the context. A teardown that still
-hangs is cut short after ``limit_s`` with every thread's stack on stderr (so the hang can be
-found) and exit status 0: everything received was processed and published by then.
+``remove_node``, ``executor.shutdown``, ``destroy_node``, the context. If that rclpy part
+still hangs, every thread's stack goes to stderr after ``limit_s`` (so the hang can be found;
+the node tests fail on it), and a node process exits with status 0: everything received was
+processed and published by then. A library caller (``mocap run`` inside ``mocap eval``) is
+only told, never ended.
 """
 from __future__ import annotations
 
