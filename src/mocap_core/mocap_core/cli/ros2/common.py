@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 import time
 from typing import Any, Sequence
@@ -45,27 +44,33 @@ class RosSession:
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
+
+        from ...executors import init_rclpy
 
         self.rclpy = rclpy
-        self.stop = False
-        self.signals = 0
+        self._stopped = False
         self.context = Context()
         args = ['ros2', '--ros-args', *ros_args] if ros_args else ['ros2']
         try:
-            rclpy.init(args=args, context=self.context,
-                       signal_handler_options=SignalHandlerOptions.NO)
+            self._signals = init_rclpy(args, context=self.context)
         except Exception as exc:
             raise CliError(f'cannot start ROS: {exc}') from None
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: list[Any] = []
-        self._old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
 
-    def _on_signal(self, signum: int, frame: Any) -> None:
-        self.signals += 1
-        self.stop = True
-        if self.signals >= 3:  # third Ctrl-C: give up waiting for a clean end
-            raise KeyboardInterrupt
+    @property
+    def stop(self) -> bool:
+        """Whether to end: a stop signal arrived, or a loop set it."""
+        return self._stopped or self._signals.requested
+
+    @stop.setter
+    def stop(self, value: bool) -> None:
+        self._stopped = bool(value)
+
+    @property
+    def signals(self) -> int:
+        """Stop signals received so far."""
+        return self._signals.count
 
     def node(self, name: str) -> Any:
         """A new node (no parameter services) spun by this session's executor."""
@@ -107,8 +112,7 @@ class RosSession:
             self.rclpy.try_shutdown(context=self.context)
         except Exception:
             pass
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
+        self._signals.restore()
 
 
 def print_warnings(lines: Sequence[str]) -> None:
