@@ -71,6 +71,9 @@ import numpy as np
 from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
+#: side of the Lucas-Kanade window, working pixels
+TRACK_WINDOW = 21
+_LK = dict(winSize=(TRACK_WINDOW, TRACK_WINDOW), maxLevel=3)
 #: values of ``CameraMotionParams.moving_rotation`` (module docstring, ``moving``)
 MOVING_ROTATIONS: Tuple[str, ...] = ('plane', 'homography')
 
@@ -84,7 +87,16 @@ class CameraMotionParams:
     redetect_below: int = 150        # top the corners up when fewer are tracked
     feature_quality: float = 0.005   # goodFeaturesToTrack qualityLevel
     min_distance_px: float = 10.0    # between corners
+    turn_tolerance_deg: float = 2.0  # a plane's or the floor's turn may differ from the
+    turn_tolerance_per_frame_deg: float = 1.5   # pure turn by this plus this per frame of
+    #                                  baseline (a step's parallax; a walking camera: 10-15
+    #                                  deg over 25 frames); beyond, it is not taken
+    min_corner_ratio: float = 0.05   # smaller / larger eigenvalue of a new corner's window
+    #                                  (below: a straight edge, whose motion along itself the
+    #                                  tracker cannot see; 0: every corner)
     person_margin: float = 0.15      # the person's box grows by this fraction per side
+    person_hold_frames: int = 15     # frames without people that their last boxes stay
+    person_hold_growth: float = 0.05  # ... growing by this fraction per side and frame
     border_px: int = 4               # ignore corners this close to the image border
     max_width: int = 640             # frames wider than this are scaled down first
     static_flow_px: float = 0.25     # median background motion below this: static
@@ -109,14 +121,20 @@ class CameraMotionParams:
         bad = [n for n in ('max_features', 'min_features', 'state_window', 'max_width',
                            'reference_width', 'floor_min_points', 'floor_iterations')
                if getattr(self, n) < 1]
-        bad += [n for n in ('floor_max_distance', 'floor_max_speed') if not getattr(self, n) > 0]
+        bad += [n for n in ('floor_max_distance', 'floor_max_speed', 'turn_tolerance_deg')
+                if not getattr(self, n) > 0]
+        bad += [n for n in ('turn_tolerance_per_frame_deg',) if getattr(self, n) < 0]
         bad += [n for n in ('static_flow_px', 'parallax_px', 'parallax_rate_px', 'ransac_px',
                             'fb_error_px', 'parallax_min_age', 'parallax_max_age',
                             'min_distance_px', 'feature_quality') if not getattr(self, n) > 0]
         if self.moving_rotation not in MOVING_ROTATIONS:
             bad.append('moving_rotation')
+        if self.person_hold_frames < 0 or self.person_hold_growth < 0:
+            bad.append('person_hold_frames / person_hold_growth')
         if not 0 <= self.person_margin <= 2:
             bad.append('person_margin')
+        if not 0 <= self.min_corner_ratio < 1:
+            bad.append('min_corner_ratio')
         if self.min_features > self.max_features:
             bad.append('min_features > max_features')
         if bad:
@@ -171,6 +189,37 @@ def floor_points(bearings: np.ndarray, normal: np.ndarray, height: float,
     ok = den < -1.0 / max_distance          # distance = h / -den <= max_distance * h
     s = np.where(ok, -height / np.where(ok, den, -1.0), np.nan)
     return s[:, None] * b, ok
+
+
+def corner_ratio(grey: np.ndarray, points: np.ndarray, window: int = TRACK_WINDOW
+                 ) -> np.ndarray:
+    """How well each point's neighbourhood pins down its motion: the smaller over the larger
+    eigenvalue of the image's structure tensor (summed Sobel gradient products) over a
+    ``window`` x ``window`` square around it, (N,) in [0, 1]. Near 0 on a straight edge or in
+    a smooth gradient (the aperture problem: a shift along the edge changes nothing, so a
+    tracker slides along it), near 1 on a corner or in isotropic texture. ``grey``: (H, W)
+    uint8 image; ``points``: (N, 2) pixels (u, v); windows at the border are moved inside."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    h, w = grey.shape[:2]
+    r = window // 2
+    if len(pts) == 0 or h <= window or w <= window:
+        return np.ones(len(pts))
+    g = grey.astype(np.float32)
+    ix = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3)
+    iy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+    x = np.clip(np.round(pts[:, 0]).astype(int), r, w - r - 1)
+    y = np.clip(np.round(pts[:, 1]).astype(int), r, h - r - 1)
+
+    def window_sum(image: np.ndarray) -> np.ndarray:
+        s = cv2.integral(image.astype(np.float64))
+        return (s[y + r + 1, x + r + 1] - s[y - r, x + r + 1] - s[y + r + 1, x - r]
+                + s[y - r, x - r])
+
+    a, b, c = window_sum(ix * ix), window_sum(iy * iy), window_sum(ix * iy)
+    half = 0.5 * (a + b)
+    disc = np.sqrt(np.maximum(half * half - (a * b - c * c), 0.0))
+    large = half + disc
+    return np.where(large > 1e-9, (half - disc) / np.maximum(large, 1e-9), 0.0)
 
 
 def _cross_rows(c: np.ndarray) -> np.ndarray:
@@ -287,22 +336,16 @@ def fit_floor_motion(points: np.ndarray, pixels: np.ndarray, K: np.ndarray,
     return (R_cp.T, -R_cp.T @ np.asarray(tvec).ravel()), inl
 
 
-def person_mask(shape: Tuple[int, int], keypoints: Optional[np.ndarray], margin: float,
-                border: int, min_confidence: float = 0.2) -> np.ndarray:
-    """uint8 mask (H, W), 255 where background corners may be taken.
-
-    Args:
-        shape: (H, W) of the image.
-        keypoints: (P, J, 3) or (J, 3) u, v (pixels) and confidence per person, or None.
-        margin: each person's box of confident keypoints grows by this fraction of its size
-            on every side (hair, clothes and limbs beyond the joints).
-        border: pixels at the image border that are left out.
-    """
+def person_boxes(shape: Tuple[int, int], keypoints: Optional[np.ndarray], margin: float,
+                 min_confidence: float = 0.2) -> List[Tuple[int, int, int, int]]:
+    """The people's boxes (x0, y0, x1, y1) in pixels, clipped to the image (H, W) =
+    ``shape``: each person's confident keypoints (``keypoints``: (P, J, 3) or (J, 3), u, v,
+    confidence), grown by ``margin`` of the box's size on every side (hair, clothes and limbs
+    beyond the joints). A person with fewer than two confident keypoints has no box."""
     h, w = shape
-    mask = np.zeros((h, w), np.uint8)
-    mask[border:h - border, border:w - border] = 255
+    boxes: List[Tuple[int, int, int, int]] = []
     if keypoints is None:
-        return mask
+        return boxes
     kp = np.asarray(keypoints, dtype=np.float64)
     if kp.ndim == 2:
         kp = kp[None]
@@ -317,8 +360,25 @@ def person_mask(shape: Tuple[int, int], keypoints: Optional[np.ndarray], margin:
         x0, x1 = int(max(0, u0 - pad_u)), int(min(w, u1 + pad_u + 1))
         y0, y1 = int(max(0, v0 - pad_v - 0.1 * bh)), int(min(h, v1 + pad_v + 1))
         if x1 > x0 and y1 > y0:
-            mask[y0:y1, x0:x1] = 0
+            boxes.append((x0, y0, x1, y1))
+    return boxes
+
+
+def _mask(shape: Tuple[int, int], boxes: Sequence[Tuple[int, int, int, int]],
+          border: int) -> np.ndarray:
+    h, w = shape
+    mask = np.zeros((h, w), np.uint8)
+    mask[border:h - border, border:w - border] = 255
+    for x0, y0, x1, y1 in boxes:
+        mask[y0:y1, x0:x1] = 0
     return mask
+
+
+def person_mask(shape: Tuple[int, int], keypoints: Optional[np.ndarray], margin: float,
+                border: int, min_confidence: float = 0.2) -> np.ndarray:
+    """uint8 mask (H, W), 255 where background corners may be taken: the image without the
+    ``border`` pixels at its edge and without the people's boxes (:func:`person_boxes`)."""
+    return _mask(shape, person_boxes(shape, keypoints, margin, min_confidence), border)
 
 
 def fit_rotation(b_prev: np.ndarray, b_cur: np.ndarray) -> np.ndarray:
@@ -361,6 +421,9 @@ class CameraMotionEstimator:
         self.frames = 0
         self.unknown_frames = 0
         self.translation_frames = 0                 # moving frames with a measured step
+        self.implausible_turns = 0                  # plane / floor turns not taken
+        self._boxes: List[Tuple[int, int, int, int]] = []   # the people's last boxes
+        self._boxes_age = 0                         # frames since they were seen
 
     def reset(self) -> None:
         """Forget the tracks, the orientation and the position (a new video, a time jump);
@@ -375,6 +438,7 @@ class CameraMotionEstimator:
         self._v = np.zeros(3)
         self._history.clear()
         self._states.clear()
+        self._boxes, self._boxes_age = [], 0
 
     def set_floor(self, normal: np.ndarray, height: float,
                   stamp_s: Optional[float] = None) -> bool:
@@ -399,6 +463,12 @@ class CameraMotionEstimator:
                 R0 = R
         self._floor = (R0 @ (n / norm), float(height))
         return True
+
+    @property
+    def points(self) -> np.ndarray:
+        """(N, 2) the background corners tracked into the last frame, pixels of the full-size
+        frame (u, v)."""
+        return self._pts.reshape(-1, 2).astype(np.float64) / self._scale
 
     @property
     def has_floor(self) -> bool:
@@ -433,6 +503,8 @@ class CameraMotionEstimator:
                                       minDistance=p.min_distance_px * self._ref(grey),
                                       mask=mask, blockSize=5)
         new = np.zeros((0, 1, 2), np.float32) if new is None else new.astype(np.float32)
+        if p.min_corner_ratio > 0 and len(new):
+            new = new[corner_ratio(grey, new.reshape(-1, 2), TRACK_WINDOW) >= p.min_corner_ratio]
         if keep is not None and len(keep):
             return np.concatenate([keep.reshape(-1, 1, 2).astype(np.float32), new])
         return new
@@ -574,6 +646,20 @@ class CameraMotionEstimator:
             np.asarray(Rs[k]) @ near))))
         return np.asarray(Rs[best]).T
 
+    def _plausible(self, R0_new: np.ndarray, R0_ref: np.ndarray, frames: int) -> bool:
+        """Whether an orientation from a plane or the floor (``R0_new``) lies within what a
+        camera's step can make it differ from the pure turn of the same points
+        (``R0_ref``) over a baseline of ``frames`` frames: ``turn_tolerance_deg`` plus
+        ``turn_tolerance_per_frame_deg`` per frame. Counted in ``implausible_turns`` when
+        not."""
+        p = self.params
+        angle = np.degrees(np.linalg.norm(matrix_to_axis_angle(R0_ref.T @ R0_new)))
+        ok = bool(angle <= p.turn_tolerance_deg + p.turn_tolerance_per_frame_deg *
+                  max(int(frames), 1))
+        if not ok:
+            self.implausible_turns += 1
+        return ok
+
     def _normalised(self, pts: np.ndarray) -> np.ndarray:
         """(N, 2) pixels at the working size -> (N, 1, 2) float32 normalised image points."""
         b = self._bearings(pts)
@@ -596,7 +682,19 @@ class CameraMotionEstimator:
         if keypoints is not None:
             kp = np.array(keypoints, dtype=np.float64, copy=True)
             kp[..., :2] *= self._scale
-        mask = person_mask(grey.shape[:2], kp, p.person_margin, p.border_px)
+        boxes = person_boxes(grey.shape[:2], kp, p.person_margin)
+        if boxes:
+            self._boxes, self._boxes_age = boxes, 0
+        elif self._boxes and self._boxes_age < p.person_hold_frames:
+            # the detector missed the people: their last boxes, growing, stay masked (a
+            # body taken for background makes a standing camera seem to move)
+            self._boxes_age += 1
+            grow = p.person_hold_growth * self._boxes_age
+            hh, ww = grey.shape[:2]
+            boxes = [(max(0, int(x0 - grow * (x1 - x0))), max(0, int(y0 - grow * (y1 - y0))),
+                      min(ww, int(x1 + grow * (x1 - x0))), min(hh, int(y1 + grow * (y1 - y0))))
+                     for x0, y0, x1, y1 in self._boxes]
+        mask = _mask(grey.shape[:2], boxes, p.border_px)
         if self._prev is None or self._stamp is None or not stamp_s > self._stamp or \
                 self._prev.shape != grey.shape:
             if self._prev is not None:
@@ -614,9 +712,9 @@ class CameraMotionEstimator:
         nxt = prev_pts
         if len(prev_pts) >= p.min_features:
             nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev, grey, prev_pts, None,
-                                                  winSize=(21, 21), maxLevel=3)
+                                                  **_LK)
             back, st2, _ = cv2.calcOpticalFlowPyrLK(grey, self._prev, nxt, None,
-                                                    winSize=(21, 21), maxLevel=3)
+                                                    **_LK)
             fb = np.linalg.norm((back - prev_pts).reshape(-1, 2), axis=1)
             ok = (st.ravel() == 1) & (st2.ravel() == 1) & (fb < p.fb_error_px * ref)
             # corners that moved onto a person (or out of the image) are not background
@@ -659,16 +757,24 @@ class CameraMotionEstimator:
         if state == 'moving' and p.moving_rotation == 'plane' and not self.has_floor:
             # a translating camera: the best pure turn absorbs the parallax of the step, the
             # more the longer the baseline (a walking camera: 10-15 deg over 25 frames)
+            # (a decomposition of points that are not on one plane can turn by tens of
+            # degrees: a plane rotation further from the pure turn than a step's parallax
+            # can explain is not taken)
+            R_pure = R0_cur
             R_p = None
             if has.sum() >= p.min_features:
                 R_p = self._plane_rotation(self._origin[has], cur[has], ref, self._kf_plane)
-                if R_p is not None:
+                if R_p is not None and self._plausible(self._kf_R0 @ R_p, R_pure,
+                                                       self._kf_age):
                     self._kf_plane = R_p
                     R0_cur = self._kf_R0 @ R_p
+                else:
+                    R_p = None
             if R_p is None:
                 # no plane over the keyframe's baseline: one frame's, or its pure turn
                 R_1 = self._plane_rotation(prv, cur, ref)
-                R0_cur = self._R0 @ (R_1 if R_1 is not None else R_ff)
+                R0_cur = self._R0 @ (R_1 if R_1 is not None and self._plausible(
+                    self._R0 @ R_1, self._R0 @ R_ff, 1) else R_ff)
         step: Optional[np.ndarray] = None
         n_floor = n_inl = 0
         if state == 'static':
@@ -676,6 +782,8 @@ class CameraMotionEstimator:
         else:
             motion, n_floor, n_inl = self._floor_step(
                 prv, cur, fit_rotation(np.eye(3), self._R0.T @ R0_cur), dt, ref)
+            if motion is not None and not self._plausible(motion[0], R_ff, 1):
+                motion = None
             if motion is not None:
                 # the floor fixes the rotation too: far background alone confuses a turn
                 # with a sideways step less, but a scene of floor only misleads the
