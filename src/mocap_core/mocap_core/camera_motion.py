@@ -3,7 +3,22 @@
 The keypoint node sees the frames; the world stage needs to know whether the camera moves, and
 how it turns. :class:`CameraMotionEstimator` tracks corner features outside the people's boxes
 from frame to frame (OpenCV: ``goodFeaturesToTrack`` and pyramidal Lucas-Kanade with a
-forward-backward check) and explains their motion by a pure camera rotation:
+forward-backward check) and explains their motion by a pure camera rotation. Three checks
+keep what the tracker cannot see out of it (docs/global.md, "What the camera-motion estimate
+could not see"):
+
+* a new corner whose window is a straight edge or a smooth gradient (the smaller eigenvalue
+  of its structure tensor under ``min_corner_ratio`` of the larger, :func:`corner_ratio`) is
+  not tracked: the tracker slides along such an edge (a striped floor), and its flow is not
+  the camera's. A scene of such edges only is ``unknown``, not a wrong turn;
+* a person the detector missed stays masked with their last box, growing, for
+  ``person_hold_frames`` frames: a body taken for background makes a standing camera move;
+* a turn from a plane's homography or from the floor that differs from the pure turn of the
+  same points by more than a camera's step can explain (``turn_tolerance_deg`` plus
+  ``turn_tolerance_per_frame_deg`` per frame of baseline) is not taken (counted in
+  ``implausible_turns``).
+
+The rotation:
 
 * the matched pixels are turned into unit bearing vectors ``b = normalise(K^-1 [u, v, 1])``;
 * a homography fitted with RANSAC (``cv2.findHomography``) selects the inliers (a rotating
@@ -402,6 +417,9 @@ class CameraMotionEstimator:
         self._prev: Optional[np.ndarray] = None     # previous grey frame (working size)
         self._pts = np.zeros((0, 1, 2), np.float32)  # (N, 1, 2) tracked corners in it
         self._origin = np.zeros((0, 2))             # (N, 2) pixel at the keyframe (or NaN)
+        #: (N,) corners that pin their motion down (not on a straight edge): only they
+        #: measure turns and parallax; all of them say whether anything moves
+        self._strong = np.zeros(0, bool)
         self._kf_R0 = np.eye(3)                     # orientation at the keyframe
         self._kf_age = 0                            # frames since the keyframe
         # 'plane': the rotation last chosen from the keyframe (keeps the decomposition's branch)
@@ -503,8 +521,6 @@ class CameraMotionEstimator:
                                       minDistance=p.min_distance_px * self._ref(grey),
                                       mask=mask, blockSize=5)
         new = np.zeros((0, 1, 2), np.float32) if new is None else new.astype(np.float32)
-        if p.min_corner_ratio > 0 and len(new):
-            new = new[corner_ratio(grey, new.reshape(-1, 2), TRACK_WINDOW) >= p.min_corner_ratio]
         if keep is not None and len(keep):
             return np.concatenate([keep.reshape(-1, 1, 2).astype(np.float32), new])
         return new
@@ -576,6 +592,11 @@ class CameraMotionEstimator:
         n = len(pts) - len(keep)
         self._pts = pts.reshape(-1, 1, 2).astype(np.float32)
         self._origin = np.concatenate([self._origin, np.full((n, 2), np.nan)])
+        strong = np.ones(n, bool)
+        if self.params.min_corner_ratio > 0 and n:
+            strong = corner_ratio(grey, pts[len(keep):], TRACK_WINDOW) >= \
+                self.params.min_corner_ratio
+        self._strong = np.concatenate([self._strong, strong])
 
     def _new_keyframe(self, R0: np.ndarray) -> None:
         self._origin = self._pts.reshape(-1, 2).astype(np.float64).copy()
@@ -586,6 +607,7 @@ class CameraMotionEstimator:
     def _empty_tracks(self) -> None:
         self._pts = np.zeros((0, 1, 2), np.float32)
         self._origin = np.zeros((0, 2))
+        self._strong = np.zeros(0, bool)
 
     def _project(self, bearings: np.ndarray) -> np.ndarray:
         h = bearings @ self._Kw.T
@@ -728,21 +750,30 @@ class CameraMotionEstimator:
         self._kf_age += 1
         cur, prv = nxt.reshape(-1, 2)[ok].astype(np.float64), prev_pts.reshape(-1, 2)[ok]
         self._pts, self._origin = cur.reshape(-1, 1, 2).astype(np.float32), self._origin[ok]
+        self._strong = self._strong[ok]
+        strong = self._strong
         tracked = len(cur)
         if tracked < p.min_features:
             self._add_corners(grey, mask)
             self._new_keyframe(self._R0)
             return self._result('unknown', self._R0, dt, tracked=tracked)
         flow = float(np.median(np.linalg.norm(cur - prv, axis=1))) / ref
+        if flow >= p.static_flow_px and strong.sum() < p.min_features:
+            # something moves, but too few corners say how (a scene of straight edges)
+            if len(self._pts) < p.redetect_below:
+                self._add_corners(grey, mask)
+            self._new_keyframe(self._R0)
+            return self._result('unknown', self._R0, dt, tracked=tracked, flow_px=flow)
         inl = np.ones(tracked, bool)
         parallax, rate, R0_cur = flow, float('nan'), self._R0
         R_ff = np.eye(3)                   # the turn since the previous frame
         if flow >= p.static_flow_px:
-            R_ff, inl, parallax = self._rotation_between(prv, cur, ref)
+            R_ff, inl_s, parallax = self._rotation_between(prv[strong], cur[strong], ref)
+            inl[strong] = inl_s
             R0_cur = self._R0 @ R_ff
         # the long baseline since the keyframe: less drift, and a translation too slow to
         # show between two frames shows over many
-        has = inl & np.isfinite(self._origin[:, 0])
+        has = inl & np.isfinite(self._origin[:, 0]) & strong
         if has.sum() >= p.min_features:
             R_kf, kin, res_kf = self._rotation_between(self._origin[has], cur[has], ref)
             rate = res_kf / self._kf_age
@@ -772,7 +803,7 @@ class CameraMotionEstimator:
                     R_p = None
             if R_p is None:
                 # no plane over the keyframe's baseline: one frame's, or its pure turn
-                R_1 = self._plane_rotation(prv, cur, ref)
+                R_1 = self._plane_rotation(prv[strong], cur[strong], ref)
                 R0_cur = self._R0 @ (R_1 if R_1 is not None and self._plausible(
                     self._R0 @ R_1, self._R0 @ R_ff, 1) else R_ff)
         step: Optional[np.ndarray] = None
@@ -781,7 +812,7 @@ class CameraMotionEstimator:
             step = np.zeros(3)
         else:
             motion, n_floor, n_inl = self._floor_step(
-                prv, cur, fit_rotation(np.eye(3), self._R0.T @ R0_cur), dt, ref)
+                prv[strong], cur[strong], fit_rotation(np.eye(3), self._R0.T @ R0_cur), dt, ref)
             if motion is not None and not self._plausible(motion[0], R_ff, 1):
                 motion = None
             if motion is not None:
@@ -791,7 +822,7 @@ class CameraMotionEstimator:
                 R0_cur, step = self._R0 @ motion[0], motion[1]
                 self.translation_frames += 1
         # keep the inliers, top up, renew the keyframe when it is old or thinly tracked
-        self._pts, self._origin = self._pts[inl], self._origin[inl]
+        self._pts, self._origin, self._strong = self._pts[inl], self._origin[inl], strong[inl]
         if len(self._pts) < p.redetect_below:
             self._add_corners(grey, mask)
         if self._kf_age >= p.parallax_max_age or \
