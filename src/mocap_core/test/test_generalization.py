@@ -163,6 +163,14 @@ def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
     assert aggregate([big])['by_view']['front']['ra_mpjpe'] == pytest.approx(b['ra_mpjpe'])
     agg = aggregate([perfect, score_clip(meta['clip'], meta, gt, swapped, idx)])
     assert agg['clips'] == 2 and agg['by_view']['front']['frames'] == 2 * len(J)
+    # moving cameras by the rendered floor's texture (static cameras left out)
+    import dataclasses
+    from mocap_core.render.evaluate import report_markdown
+    pan = dataclasses.replace(perfect, camera='pan', floor='stripes')
+    floors = aggregate([pan, dataclasses.replace(perfect, camera='static', floor='checker')])
+    assert list(floors['moving_by_floor']) == ['stripes']
+    assert floors['moving_by_floor']['stripes']['clips'] == 1
+    assert "## Moving cameras by the floor's texture" in report_markdown(floors, 't', [])
     # the detector's own swaps: none as placed; every scored frame with its legs exchanged
     det = detector_swaps(gt)
     assert (det >= 0).sum() > len(J) // 2 and det.max() == 0

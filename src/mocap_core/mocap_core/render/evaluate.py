@@ -346,6 +346,9 @@ class ClipScore:
     #: of the MPJPE one per-clip angle, such as a camera pitch the 2D cannot show, explains)
     tilt_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     tilt_free_mpjpe: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: the rendered floor's texture kind (``render.scene``; what the camera-motion estimate
+    #: tracks), '' when unknown
+    floor: str = ''
 
     def summary(self) -> Dict[str, float]:
         s = self.swaps[self.swaps >= 0]
@@ -500,7 +503,8 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
                      np.asarray(gt['view'])[idx], swaps, mble, jit, jit_gt, root,
                      detector_swaps(gt), np.asarray(gt['view']), ra_mpjpe=ra,
                      orientation_deg=alignment_angle_deg(P, g), tilt_deg=tilt,
-                     tilt_free_mpjpe=tilt_free)
+                     tilt_free_mpjpe=tilt_free,
+                     floor=str((meta.get('appearance') or {}).get('floor', [''])[0]))
 
 
 # ------------------------------------------------------------------------------------------
@@ -582,8 +586,19 @@ def aggregate(scores: List[ClipScore]) -> dict:
                                                         'camera_rotation_error_deg_s',
                                                         'camera_state_static',
                                                         'camera_state_rotating',
-                                                        'camera_state_moving')}}
+                                                        'camera_state_moving',
+                                                        'camera_state_unknown')}}
                      for g, ps in sorted(groups.items())}
+    floors: Dict[str, List[dict]] = {}
+    for s, p in zip(scores, per):
+        if s.floor and s.camera != 'static':
+            floors.setdefault(s.floor, []).append(p)
+    out['moving_by_floor'] = {
+        g: {'clips': len(ps), **{k: _median([p.get(k, float('nan')) for p in ps])
+                                 for k in ('camera_rotation_error_deg_s', 'camera_drift_deg',
+                                           'camera_state_unknown', 'world_rte',
+                                           'world_skating_mm')}}
+        for g, ps in sorted(floors.items())}
     return out
 
 
@@ -684,8 +699,9 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                   'background (`mocap_core.camera_motion`), the share of frames in each '
                   'state and the median error of its frame-to-frame rotation.', '',
                   '| camera | clips | world RTE | world root error (mm) | WA-MPJPE100 / '
-                  'W-MPJPE100 (mm) | static | rotating | moving | rotation error (deg/s) |',
-                  '|---|---|---|---|---|---|---|---|---|']
+                  'W-MPJPE100 (mm) | static | rotating | moving | unknown | rotation error '
+                  '(deg/s) |',
+                  '|---|---|---|---|---|---|---|---|---|---|']
         for g, r in cams.items():
             lines.append(
                 f"| {g} | {r['clips']} | {_f(r.get('world_rte'))} % | "
@@ -693,8 +709,24 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                 f"{_f(r.get('world_wa_mpjpe100'), '{:.0f}')} / "
                 f"{_f(r.get('world_w_mpjpe100'), '{:.0f}')} | "
                 + ' | '.join(f"{_f(100 * r.get(f'camera_state_{k}', float('nan')), '{:.0f}')} %"
-                             for k in ('static', 'rotating', 'moving'))
+                             for k in ('static', 'rotating', 'moving', 'unknown'))
                 + f" | {_f(r.get('camera_rotation_error_deg_s'), '{:.2f}')} |")
+    floors = agg.get('moving_by_floor') or {}
+    if floors:
+        lines += ['', '## Moving cameras by the floor\'s texture (median over clips)', '',
+                  'What the camera-motion estimate can track: a floor of straight stripes or '
+                  'a smooth gradient has no corners (docs/global.md, "What the camera-motion '
+                  'estimate could not see"); its frames are `unknown` unless the walls have '
+                  'some. Rotation error over the frames with an estimate; drift: the '
+                  'orientation error at the end.', '',
+                  '| floor | clips | rotation error (deg/s) | drift (deg) | unknown | world RTE '
+                  '| world skating (mm/frame) |', '|---|---|---|---|---|---|---|']
+        for g, r in floors.items():
+            lines.append(
+                f"| {g} | {r['clips']} | {_f(r.get('camera_rotation_error_deg_s'), '{:.2f}')}"
+                f" | {_f(r.get('camera_drift_deg'))} | "
+                f"{_f(100 * r.get('camera_state_unknown', float('nan')), '{:.0f}')} % | "
+                f"{_f(r.get('world_rte'))} % | {_f(r.get('world_skating_mm'))} |")
     by_state = agg.get('world_skating_by_camera_state') or {}
     if by_state:
         lines += ['', '## World skating by the camera-motion estimate (pooled over frames)', '',
