@@ -127,6 +127,11 @@ class CameraMotionParams:
     floor_max_distance: float = 25.0  # floor points further than this many camera heights
     floor_iterations: int = 64       # RANSAC pairs tried per frame
     floor_max_speed: float = 5.0     # m/s: a faster step is rejected as a failure
+    plane_with_floor: bool = False    # 'plane' also once the floor is known (its step's guess)
+    plane_floor_max_angle_deg: float = 15.0   # with the floor: the plane must be it
+    floor_rotation: str = 'pnp'    # the floor step's rotation: 'given' (the plane / pure
+    #                                  turn; the step only is fitted) or 'pnp' (refined with
+    #                                  the step by solvePnP)
     moving_rotation: str = 'plane'   # rotation of a 'moving' frame without a floor:
     #                                  'homography' (the turn that best explains the flow)
     #                                  or 'plane' (the dominant plane's homography decomposed)
@@ -142,6 +147,8 @@ class CameraMotionParams:
         bad += [n for n in ('static_flow_px', 'parallax_px', 'parallax_rate_px', 'ransac_px',
                             'fb_error_px', 'parallax_min_age', 'parallax_max_age',
                             'min_distance_px', 'feature_quality') if not getattr(self, n) > 0]
+        if self.floor_rotation not in ('pnp', 'given'):
+            bad.append('floor_rotation')
         if self.moving_rotation not in MOVING_ROTATIONS:
             bad.append('moving_rotation')
         if self.person_hold_frames < 0 or self.person_hold_growth < 0:
@@ -298,7 +305,8 @@ def fit_floor_translation(points: np.ndarray, bearings: np.ndarray, threshold_ra
 
 def fit_floor_motion(points: np.ndarray, pixels: np.ndarray, K: np.ndarray,
                      R_guess: np.ndarray, threshold_px: float, iterations: int = 64,
-                     min_inliers: int = 15, rng: Optional[np.random.Generator] = None
+                     min_inliers: int = 15, rng: Optional[np.random.Generator] = None,
+                     refine_rotation: bool = True
                      ) -> Tuple[Optional[Tuple[np.ndarray, np.ndarray]], np.ndarray]:
     """The camera's rotation and displacement from floor points of the previous frame and
     where they are seen now (module docstring): the floor points are selected by
@@ -315,6 +323,8 @@ def fit_floor_motion(points: np.ndarray, pixels: np.ndarray, K: np.ndarray,
         threshold_px: reprojection error of an inlier, pixels.
         iterations: RANSAC pairs tried.
         min_inliers: fewer inliers: no answer.
+        refine_rotation: False: the rotation is ``R_guess`` and only the step is fitted
+            (:func:`fit_floor_translation` at the threshold itself, no PnP).
     Returns:
         ((R_rel (3, 3): current camera frame -> previous one, t (3,) m: the current camera
         centre in the previous camera frame) or None; inlier mask (N,)).
@@ -327,6 +337,10 @@ def fit_floor_motion(points: np.ndarray, pixels: np.ndarray, K: np.ndarray,
         return None, np.zeros(n, bool)
     R_guess = np.asarray(R_guess, dtype=np.float64)
     b = np.concatenate([u, np.ones((n, 1))], axis=1) @ np.linalg.inv(K).T
+    if not refine_rotation:
+        t0, inl = fit_floor_translation(X, b @ R_guess.T, threshold_px / K[0, 0],
+                                        iterations, min_inliers, rng)
+        return (None if t0 is None else (R_guess.copy(), t0)), inl
     t0, inl = fit_floor_translation(X, b @ R_guess.T, 3.0 * threshold_px / K[0, 0],
                                     iterations, min_inliers, rng)
     if t0 is None:
@@ -577,7 +591,8 @@ class CameraMotionEstimator:
         if on.sum() < p.floor_min_points:
             return None, int(on.sum()), 0
         motion, inl = fit_floor_motion(X[on], cur[on], self._Kw, R_ff, p.ransac_px * ref,
-                                       p.floor_iterations, p.floor_min_points, self._rng)
+                                       p.floor_iterations, p.floor_min_points, self._rng,
+                                       refine_rotation=p.floor_rotation == 'pnp')
         if motion is not None and dt > 0 and \
                 np.linalg.norm(motion[1]) > p.floor_max_speed * dt:
             motion = None
@@ -628,7 +643,8 @@ class CameraMotionEstimator:
         return R, inl, float(np.median(resid)) / ref
 
     def _plane_rotation(self, a: np.ndarray, b: np.ndarray, ref: float,
-                        previous: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+                        previous: Optional[np.ndarray] = None,
+                        floor_normal: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
         """The rotation taking frame-b bearings to frame-a bearings from matched pixels ``a``,
         ``b`` (N, 2) of a camera that turns *and* translates over a floor: the homography of
         the dominant plane (RANSAC) decomposed (``cv2.decomposeHomographyMat``), keeping the
@@ -662,6 +678,14 @@ class CameraMotionEstimator:
         if not idx:
             return None
         # H maps a to b: x_b ~ R x_a; we want b_a = R_rel b_b, i.e. R.T
+        if floor_normal is not None:
+            # the floor known (its normal in frame a): the solution whose plane is the floor,
+            # none when the dominant plane is not the floor
+            cos = [abs(float(np.ravel(normals[k]) @ floor_normal)) for k in idx]
+            k = int(np.argmax(cos))
+            if cos[k] < np.cos(np.radians(self.params.plane_floor_max_angle_deg)):
+                return None
+            return np.asarray(Rs[idx[k]]).T
         near = previous if previous is not None else \
             fit_rotation(self._bearings(a[inl]), self._bearings(b[inl]))
         best = min(idx, key=lambda k: float(np.linalg.norm(matrix_to_axis_angle(
@@ -785,7 +809,8 @@ class CameraMotionEstimator:
             state = 'rotating' if parallax < p.parallax_px else 'moving'
         if self._kf_age >= p.parallax_min_age and rate > p.parallax_rate_px:
             state = 'moving'
-        if state == 'moving' and p.moving_rotation == 'plane' and not self.has_floor:
+        if state == 'moving' and p.moving_rotation == 'plane' and \
+                (p.plane_with_floor or not self.has_floor):
             # a translating camera: the best pure turn absorbs the parallax of the step, the
             # more the longer the baseline (a walking camera: 10-15 deg over 25 frames)
             # (a decomposition of points that are not on one plane can turn by tens of
@@ -794,7 +819,9 @@ class CameraMotionEstimator:
             R_pure = R0_cur
             R_p = None
             if has.sum() >= p.min_features:
-                R_p = self._plane_rotation(self._origin[has], cur[has], ref, self._kf_plane)
+                R_p = self._plane_rotation(
+                    self._origin[has], cur[has], ref, self._kf_plane,
+                    None if not self.has_floor else self._kf_R0.T @ self._floor[0])
                 if R_p is not None and self._plausible(self._kf_R0 @ R_p, R_pure,
                                                        self._kf_age):
                     self._kf_plane = R_p
@@ -803,7 +830,9 @@ class CameraMotionEstimator:
                     R_p = None
             if R_p is None:
                 # no plane over the keyframe's baseline: one frame's, or its pure turn
-                R_1 = self._plane_rotation(prv[strong], cur[strong], ref)
+                R_1 = self._plane_rotation(
+                    prv[strong], cur[strong], ref,
+                    floor_normal=None if not self.has_floor else self._R0.T @ self._floor[0])
                 R0_cur = self._R0 @ (R_1 if R_1 is not None and self._plausible(
                     self._R0 @ R_1, self._R0 @ R_ff, 1) else R_ff)
         step: Optional[np.ndarray] = None
