@@ -207,6 +207,14 @@ def test_floor_motion_rejects_points_off_the_floor():
     assert inl[60:].all() and inl[:60].sum() <= 2
     # too few points: no answer
     assert fit_floor_motion(X[:5], px[:5], K, np.eye(3), 1.0)[0] is None
+    # the turn given (refine_rotation False): only the step is fitted, at that turn
+    given, inl = fit_floor_motion(X, px, K, R_true, 1.0, refine_rotation=False)
+    np.testing.assert_array_equal(given[0], R_true)
+    np.testing.assert_allclose(given[1], t_true, atol=1e-6)
+    assert inl[60:].all() and inl[:60].sum() <= 2
+    # ... and a wrong turn gives a wrong step or none, not a refined turn
+    off = fit_floor_motion(X, px, K, np.eye(3), 1.0, refine_rotation=False)[0]
+    assert off is None or np.allclose(off[0], np.eye(3))
 
 
 @pytest.mark.parametrize('pitch_deg', [25.0, 50.0])
@@ -322,7 +330,7 @@ def test_a_plane_turn_that_no_step_explains_is_not_taken(monkeypatch):
     estimate keeps the pure turn and counts it."""
     wild = axis_angle_to_matrix(np.array([0.0, np.radians(60.0), 0.0]))
     monkeypatch.setattr(CameraMotionEstimator, '_plane_rotation',
-                        lambda self, a, b, ref, previous=None: wild)
+                        lambda self, a, b, ref, previous=None, floor_normal=None: wild)
     est = CameraMotionEstimator(K)
     top, bottom = SCENE[:H // 2 + 200], SCENE[600:600 + H // 2 + 200]
     states, turns = [], []
@@ -334,3 +342,31 @@ def test_a_plane_turn_that_no_step_explains_is_not_taken(monkeypatch):
         turns.append(np.degrees(np.linalg.norm(matrix_to_axis_angle(e.rotation))))
     assert states.count('moving') >= 10, states
     assert est.implausible_turns >= 10 and max(turns) < 2.0, turns
+
+
+def test_with_the_floor_known_the_plane_turn_comes_from_the_floor_alone():
+    """Once the floor is known, a moving camera's plane turn is the homography solution whose
+    plane is the floor; when the dominant plane is a wall it gives none (the pure turn or the
+    floor step decide)."""
+    rng = np.random.default_rng(7)
+    est = CameraMotionEstimator(K)
+    R_rel = axis_angle_to_matrix(np.array([0.0, 0.03, 0.0]))     # current -> previous
+    t = np.array([0.05, 0.0, 0.4])                               # current centre, previous
+
+    def seen(X):                  # pixels of points X (previous frame) in both frames
+        a = X @ K.T
+        c = (X - t) @ R_rel
+        b = c @ K.T
+        return a[:, :2] / a[:, 2:], b[:, :2] / b[:, 2:]
+
+    floor = np.column_stack([rng.uniform(-2, 2, 200), np.full(200, 1.5),
+                             rng.uniform(3, 9, 200)])             # y = 1.5 m below the camera
+    wall = np.column_stack([rng.uniform(-3, 3, 200), rng.uniform(-2, 1, 200),
+                            np.full(200, 8.0)])                   # facing the camera
+    up = np.array([0.0, -1.0, 0.0])
+    a, b = seen(floor)
+    R = est._plane_rotation(a, b, 1.0, floor_normal=up)
+    assert R is not None
+    assert np.degrees(np.linalg.norm(matrix_to_axis_angle(R.T @ R_rel))) < 0.2
+    a, b = seen(wall)
+    assert est._plane_rotation(a, b, 1.0, floor_normal=up) is None
