@@ -39,7 +39,8 @@ Per frame the evidence gives a state:
   camera's position is unknown. Its rotation cannot be the best pure rotation then: a
   translating camera's flow over the floor takes the step for a turn (0.3-0.6 deg per frame
   on rendered walks). With ``moving_rotation`` 'plane' (the default) the rotation comes,
-  until the floor is known (below), from the dominant plane's homography decomposed
+  until the floor is known (below; with ``plane_with_floor`` also after it, keeping the
+  solution whose plane is the floor), from the dominant plane's homography decomposed
   (``cv2.decomposeHomographyMat``): of the solutions that keep the points in front of both
   cameras, the one whose rotation is nearest the best pure rotation. 'homography' keeps
   the pure rotation (docs/global.md);
@@ -127,11 +128,12 @@ class CameraMotionParams:
     floor_max_distance: float = 25.0  # floor points further than this many camera heights
     floor_iterations: int = 64       # RANSAC pairs tried per frame
     floor_max_speed: float = 5.0     # m/s: a faster step is rejected as a failure
-    plane_with_floor: bool = False    # 'plane' also once the floor is known (its step's guess)
-    plane_floor_max_angle_deg: float = 15.0   # with the floor: the plane must be it
-    floor_rotation: str = 'pnp'    # the floor step's rotation: 'given' (the plane / pure
-    #                                  turn; the step only is fitted) or 'pnp' (refined with
-    #                                  the step by solvePnP)
+    plane_with_floor: bool = False   # 'plane' also once the floor is known: the solution
+    plane_floor_max_angle_deg: float = 15.0   # whose normal is within this of the floor's
+    floor_rotation: str = 'pnp'      # the floor step's rotation: 'pnp' (refined with the
+    #                                  step by solvePnP) or 'given' (the plane's / the pure
+    #                                  turn; only the step is fitted). Both opt-in: better
+    #                                  camera estimates, not a better world path (docs/global.md)
     moving_rotation: str = 'plane'   # rotation of a 'moving' frame without a floor:
     #                                  'homography' (the turn that best explains the flow)
     #                                  or 'plane' (the dominant plane's homography decomposed)
