@@ -188,6 +188,8 @@ class CameraMotionEstimate:
     #: (3,) m/s: the camera's velocity in the current camera frame (zero when not known)
     linear_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
     translation_known: bool = False   # this frame's step was measured (or static)
+    #: plane or floor turns not taken so far (:meth:`CameraMotionEstimator._plausible`)
+    implausible_turns: int = 0
     floor_points: int = 0             # background points whose ray meets the floor
     floor_inliers: int = 0            # of them, consistent with the fitted step
     extra: dict = field(default_factory=dict)
@@ -578,7 +580,7 @@ class CameraMotionEstimator:
             state=state, frame_state=frame_state, orientation=matrix_to_quat(self._R0),
             angular_velocity=self._omega.copy(), rotation=R_rel, first=first,
             position=self._C.copy(), linear_velocity=self._v.copy(), translation_known=known,
-            **info)
+            implausible_turns=self.implausible_turns, **info)
 
     def _floor_step(self, prv: np.ndarray, cur: np.ndarray, R_ff: np.ndarray, dt: float,
                     ref: float) -> Tuple[Optional[Tuple[np.ndarray, np.ndarray]], int, int]:

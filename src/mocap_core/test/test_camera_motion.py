@@ -342,6 +342,7 @@ def test_a_plane_turn_that_no_step_explains_is_not_taken(monkeypatch):
         turns.append(np.degrees(np.linalg.norm(matrix_to_axis_angle(e.rotation))))
     assert states.count('moving') >= 10, states
     assert est.implausible_turns >= 10 and max(turns) < 2.0, turns
+    assert e.implausible_turns == est.implausible_turns       # reported with every estimate
 
 
 def test_with_the_floor_known_the_plane_turn_comes_from_the_floor_alone():

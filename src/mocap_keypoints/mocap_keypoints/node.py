@@ -463,6 +463,7 @@ class KeypointsNode(Node):
                                      guarded(self, self.on_bone_lengths, 'bone_lengths'),
                                      input_qos(LATCHED_QOS, 10))
         self.motion_states: Dict[str, int] = {}
+        self.implausible_turns = 0       # the estimator's refused plane / floor turns
         self.motion_stats = LatencyStats()
         self.pub_annotated = None
         self._annotated_node = None
@@ -881,6 +882,7 @@ class KeypointsNode(Node):
                 linear_velocity=cm.linear_velocity))
             self.translation_frames += int(cm.translation_known and cm.state == 'moving')
             self.motion_states[cm.state] = self.motion_states.get(cm.state, 0) + 1
+            self.implausible_turns = cm.implausible_turns
             self.motion_stats.add(res.camera_motion_s)
             self.diag.set_value('camera_motion', cm.state)
         if self.pub_annotated is not None and res.annotated is not None:
@@ -1027,6 +1029,7 @@ class KeypointsNode(Node):
             self.diag.set_value('camera_motion_frames', ', '.join(
                 f'{k} {v}' for k, v in sorted(self.motion_states.items())) or 'none yet')
             self.diag.set_value('camera_motion_failures', self.processor.camera_motion_failures)
+            self.diag.set_value('camera_turns_refused', self.implausible_turns)
             self.diag.set_value('camera_translation', (
                 f'measured over the floor in {self.translation_frames} moving frames'
                 if self.floors_received else
