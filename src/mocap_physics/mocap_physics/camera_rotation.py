@@ -1,4 +1,5 @@
-"""Physics in the frame of the first image: the camera's rotation taken out of the input.
+"""Physics in the frame of the first image: the camera's rotation (and, where measured, its
+translation) taken out of the input.
 
 With a camera that turns (a pan, a tilt, a hand-held or orbiting camera), a person standing
 still moves in the camera frame, and so do their feet: a physics stage that works in a floor
@@ -9,10 +10,17 @@ by that rotation, each incoming camera-frame pose is expressed in the optical fr
 first image (``<optical frame>_start``), which does not turn; the floor is estimated there and
 the simulation runs in the floor frame of the first image (``floor_start``).
 
-Conventions: ``R`` (3, 3) maps the current camera frame into the first one,
-``p_start = R p_camera`` (the translation of a camera that also moves is not taken out:
-the camera-motion estimate measures it only now and then, over the floor); quaternions are
-x, y, z, w. No ROS imports.
+A camera that also walks or drives (a following or orbiting camera) moves the person in that
+frame as well. With ``translation`` on, the camera's position since the first image, which the
+keypoint node measures over the floor where it can (``translation_known``), is taken out too:
+``p_start = R p_camera + C``, and the outputs are in ``floor_fixed``, a frame that stays where
+the world is as far as the estimate knows. A frame whose step was not measured coasts on the
+last measured velocity for ``coast_s`` (a camera moving steadily keeps moving), then holds
+(the camera is taken to stand); the estimate's own position does not advance in such frames,
+so the next measured step continues from the coasted position without a jump.
+
+Conventions: ``R`` (3, 3) maps the current camera frame into the first one, ``C`` (3,) m is
+the camera's position in the first camera frame; quaternions are x, y, z, w. No ROS imports.
 """
 
 from __future__ import annotations
@@ -31,72 +39,159 @@ from .floor import FloorFrame
 #: frame name of the outputs when the camera's rotation is taken out (the floor frame of the
 #: first image; ``floor`` is the floor frame under the current camera)
 START_FLOOR_FRAME = topics.FLOOR_START_FRAME
+#: frame name of the outputs when the camera's translation is taken out as well
+FIXED_FLOOR_FRAME = topics.FLOOR_FIXED_FRAME
 
 
 class CameraRotations:
-    """The camera's rotation since the first image, by stamp, as the keypoint node estimates
-    it (the newest ``max_frames`` stamps).
+    """The camera's rotation (and, with ``translation``, position) since the first image, by
+    stamp, as the keypoint node estimates it (the newest ``max_frames`` stamps).
 
-    :meth:`at` gives the rotation of a stamp; a stamp without an estimate of its own (lost,
-    late, or ``unknown``: the estimator could not tell) holds the newest estimate before it,
-    and before any estimate the camera is taken to be where it was at the first image
-    (identity). A stamp more than ``restart_s`` before the newest one restarts the buffer (a
-    bag played again: the estimate starts again from its own first image)."""
+    :meth:`at` gives the rotation of a stamp, :meth:`pose_at` the rotation and position; a
+    stamp without an estimate of its own (lost, late, or ``unknown``: the estimator could not
+    tell) holds the newest estimate before it, and before any estimate the camera is taken to
+    be where it was at the first image (identity). A stamp more than ``restart_s`` before the
+    newest one restarts the buffer (a bag played again: the estimate starts again from its
+    own first image).
 
-    def __init__(self, max_frames: int = 600, restart_s: float = 1.0) -> None:
+    Translation (``translation=True``; module docstring): estimates must be added in stamp
+    order. A measured position (``position`` not None: the estimator's position, which
+    advances only by measured steps) moves the camera by the estimator's step since its last
+    measured position; a frame without one moves it by the last measured velocity for
+    ``coast_s`` after the last measurement, then not at all; a static frame stops it. An
+    ``unknown`` frame is then stored too (the rotation held, the position coasted), as not
+    the stamp's own estimate."""
+
+    def __init__(self, max_frames: int = 600, restart_s: float = 1.0,
+                 translation: bool = False, coast_s: float = 0.5) -> None:
         self.max_frames = int(max_frames)
         self.restart_ns = int(restart_s * 1e9)
-        self._by_stamp: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
+        self.translation = bool(translation)
+        self.coast_ns = int(max(coast_s, 0.0) * 1e9)
+        #: stamp -> (R (3, 3), C (3,), the stamp's own estimate)
+        self._by_stamp: 'collections.OrderedDict[int, Tuple[np.ndarray, np.ndarray, bool]]' = \
+            collections.OrderedDict()
+        #: frames whose camera position was measured / coasted / held (translation only)
+        self.measured_frames = 0
+        self.coasted_frames = 0
+        self.held_frames = 0
+        self._reset_translation()
+
+    def _reset_translation(self) -> None:
+        self._C = np.zeros(3)                 # the camera's position taken out, first frame
+        self._v = np.zeros(3)                 # its last measured velocity, m/s, first frame
+        self._estimator_C = np.zeros(3)       # the estimator's last measured position
+        self._last_ns: Optional[int] = None
+        self._measured_ns: Optional[int] = None
 
     def __len__(self) -> int:
         return len(self._by_stamp)
 
-    def add(self, stamp_ns: int, state: str, rotation: np.ndarray) -> bool:
+    def add(self, stamp_ns: int, state: str, rotation: np.ndarray,
+            position: Optional[np.ndarray] = None) -> bool:
         """Store the estimate of ``stamp_ns`` (``state`` of
-        :func:`mocap_core.ros_conversions.odometry_to_camera_motion`; ``rotation`` (3, 3)).
-        Returns False when it is not kept (``unknown``, or not a finite rotation)."""
+        :func:`mocap_core.ros_conversions.odometry_to_camera_motion`; ``rotation`` (3, 3);
+        ``position`` (3,) m in the first camera frame where the step was measured, of
+        :func:`mocap_core.ros_conversions.odometry_to_camera_position`). Returns False when
+        it is not kept as the stamp's own estimate (``unknown``, or not a finite
+        rotation)."""
         R = np.asarray(rotation, dtype=float)
-        if state == 'unknown' or R.shape != (3, 3) or not np.all(np.isfinite(R)) \
-                or not np.allclose(R @ R.T, np.eye(3), atol=1e-4):
-            return False
         stamp = int(stamp_ns)
         if self._by_stamp and next(reversed(self._by_stamp)) - stamp > self.restart_ns:
             self._by_stamp.clear()
-        self._by_stamp[stamp] = R
+            self._reset_translation()
+        ok = not (state == 'unknown' or R.shape != (3, 3) or not np.all(np.isfinite(R))
+                  or not np.allclose(R @ R.T, np.eye(3), atol=1e-4))
+        if not self.translation:
+            if ok:
+                self._store(stamp, R, np.zeros(3), True)
+            return ok
+        if self._last_ns is not None and stamp <= self._last_ns:
+            return False                      # not in stamp order: nothing to add
+        C = self._advance(stamp, state, position)
+        if ok:
+            self._store(stamp, R, C, True)
+        else:
+            held = self._newest_before(stamp)
+            self._store(stamp, held[0] if held is not None else np.eye(3), C, False)
+        return ok
+
+    def _advance(self, stamp: int, state: str, position: Optional[np.ndarray]) -> np.ndarray:
+        """The camera position of ``stamp`` (translation bookkeeping, class docstring)."""
+        dt = 0.0 if self._last_ns is None else (stamp - self._last_ns) * 1e-9
+        self._last_ns = stamp
+        pos = None if position is None else np.asarray(position, dtype=float)
+        if pos is not None and pos.shape == (3,) and np.all(np.isfinite(pos)):
+            step = pos - self._estimator_C
+            self._estimator_C = pos
+            self._C = self._C + step
+            self._v = np.zeros(3) if state == 'static' or dt <= 0 else step / dt
+            self._measured_ns = stamp
+            self.measured_frames += 1
+        elif state != 'static' and self._measured_ns is not None \
+                and stamp - self._measured_ns <= self.coast_ns and np.any(self._v):
+            self._C = self._C + self._v * dt
+            self.coasted_frames += 1
+        else:
+            self._v = np.zeros(3)
+            self.held_frames += 1
+        return self._C.copy()
+
+    def _store(self, stamp: int, R: np.ndarray, C: np.ndarray, own: bool) -> None:
+        self._by_stamp[stamp] = (R, C, own)
         while len(self._by_stamp) > self.max_frames:
             self._by_stamp.popitem(last=False)
-        return True
+
+    def _newest_before(self, stamp: int):
+        before = next((s for s in reversed(self._by_stamp) if s < stamp), None)
+        return None if before is None else self._by_stamp[before]
 
     def at(self, stamp_ns: int) -> Tuple[np.ndarray, bool]:
         """(R (3, 3), whether it is the stamp's own estimate) for ``stamp_ns``."""
+        R, _, own = self.pose_at(stamp_ns)
+        return R, own
+
+    def pose_at(self, stamp_ns: int) -> Tuple[np.ndarray, np.ndarray, bool]:
+        """(R (3, 3), C (3,) m (zero without ``translation``), whether it is the stamp's own
+        estimate) for ``stamp_ns``."""
         stamp = int(stamp_ns)
-        R = self._by_stamp.get(stamp)
-        if R is not None:
-            return R, True
-        before = next((s for s in reversed(self._by_stamp) if s < stamp), None)
+        entry = self._by_stamp.get(stamp)
+        if entry is not None:
+            return entry
+        before = self._newest_before(stamp)
         if before is not None:
-            return self._by_stamp[before], False
-        return np.eye(3), False
+            return before[0], before[1], False
+        return np.eye(3), np.zeros(3), False
 
 
-def rotate_pose(pose: Pose, rotation: np.ndarray) -> Pose:
-    """``pose`` (camera frame) in the first image's camera frame: root position ``R p`` and
-    root orientation ``R q`` (the other joints' rotations are local and unchanged)."""
+def rotate_pose(pose: Pose, rotation: np.ndarray,
+                translation: Optional[np.ndarray] = None) -> Pose:
+    """``pose`` (camera frame) in the first image's camera frame: root position ``R p + C``
+    (``translation`` C (3,) m, the camera's position there; None = 0) and root orientation
+    ``R q`` (the other joints' rotations are local and unchanged)."""
     R = np.asarray(rotation, dtype=float)
     rot = np.array(pose.rotations, dtype=float)
     rot[0] = quat_multiply(matrix_to_quat(R), rot[0])
-    return Pose(pose.skeleton, rot, R @ np.asarray(pose.root_position, dtype=float))
+    root = R @ np.asarray(pose.root_position, dtype=float)
+    if translation is not None:
+        root = root + np.asarray(translation, dtype=float)
+    return Pose(pose.skeleton, rot, root)
 
 
 def floor_in_camera(floor: FloorFrame, rotation: Optional[np.ndarray],
-                    source_frame: Optional[str] = None) -> FloorFrame:
+                    source_frame: Optional[str] = None,
+                    translation: Optional[np.ndarray] = None) -> FloorFrame:
     """The floor frame of the first image (``p_floor = A p_start + t``) seen from the
-    current camera (``p_start = R p_camera``): ``p_floor = (A R) p_camera + t``. None
-    ``rotation``: ``floor`` itself."""
+    current camera (``p_start = R p_camera + C``, ``translation`` C, None = 0):
+    ``p_floor = (A R) p_camera + (A C + t)``. None ``rotation``: ``floor`` itself."""
     if rotation is None:
         return floor
-    return FloorFrame(floor.rotation @ np.asarray(rotation, dtype=float), floor.translation,
+    t = floor.translation
+    if translation is not None:
+        t = t + floor.rotation @ np.asarray(translation, dtype=float)
+    return FloorFrame(floor.rotation @ np.asarray(rotation, dtype=float), t,
                       source_frame or floor.source_frame)
 
 
-__all__ = ['CameraRotations', 'rotate_pose', 'floor_in_camera', 'START_FLOOR_FRAME']
+__all__ = ['CameraRotations', 'rotate_pose', 'floor_in_camera', 'START_FLOOR_FRAME',
+           'FIXED_FLOOR_FRAME']

@@ -22,7 +22,10 @@ Subscribes:
     (:mod:`mocap_physics.camera_rotation`), so that a turning camera does not move the feet;
     the outputs are then in ``floor_start``, the floor frame of the first image, and the
     floor message stays the floor seen from each frame's camera. A frame without its own
-    estimate holds the newest one before it (counted).
+    estimate holds the newest one before it (counted). With ``camera_translation`` as well,
+    the camera's position, which the keypoint node measures over this node's floor, is
+    taken out too (a following or orbiting camera; frames without a measured step coast on
+    the last velocity for ``camera_translation_coast_s``): outputs in ``floor_fixed``.
 
 Publishes, stamped with the input's stamp, in the floor frame (z up, floor z = 0):
   * ``/mocap/physics/motion``, ``/joints3d``, ``/joint_states`` (``effort`` = joint torques of
@@ -105,7 +108,8 @@ from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bodies,
                                         motion_to_pose, msg_to_bodies_contacts,
                                         msg_to_contacts, odometry_to_camera_motion,
-                                        pose_marker_specs, stamp_to_ns, wrench_to_msg)
+                                        odometry_to_camera_position, pose_marker_specs,
+                                        stamp_to_ns, wrench_to_msg)
 from mocap_core.rotations import quat_to_matrix
 
 from .cycle_params import PhysicsParams
@@ -113,7 +117,8 @@ from .floor import FloorFrame, FloorTracker, FloorTrackerParams
 from .foot import TEMPLATE_FLAT_FOOT_PITCH_DEG, contact_positions
 from .markers import floor_transform_msg, friction_cone_spec
 from .model import revolute_efforts
-from .camera_rotation import START_FLOOR_FRAME, CameraRotations, floor_in_camera, rotate_pose
+from .camera_rotation import (FIXED_FLOOR_FRAME, START_FLOOR_FRAME, CameraRotations,
+                              floor_in_camera, rotate_pose)
 from .online import FloorSource, Notice, OnlinePhysics, PhysicsFrame
 
 _D = PhysicsParams()
@@ -133,6 +138,14 @@ PARAMETERS = (
               'floor frame of the first image (frame_id floor_start); the floor message stays '
               'the floor in the current camera frame. Only with floor_source estimate or '
               'camera_params', read_only=True),
+    ParamSpec('camera_translation', False, 'With derotate_camera: take the camera\'s '
+              'position since the first image out as well, where the keypoint node measured it '
+              'over the floor (a following or orbiting camera), so that a foot that stands in '
+              'the world stands in the outputs: frame_id floor_fixed', read_only=True),
+    ParamSpec('camera_translation_coast_s', 0.5, 'camera_translation: a frame whose camera step '
+              'was not measured moves the camera by its last measured velocity for this long '
+              'after the last measurement, then not at all', min_value=0.0, max_value=10.0,
+              read_only=True),
     ParamSpec('contacts_wait_s', 0.05, 'Longest wait (wall clock) of a motion frame for the '
               'contacts with its stamp', min_value=0.0, max_value=5.0),
     ParamSpec('contacts_max_age_s', 0.1, 'Otherwise use the newest older contacts if at most '
@@ -329,9 +342,12 @@ class PhysicsNode(Node):
         # the camera's rotation taken out of the input (derotate_camera)
         self.derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
             and bool(p['camera_motion_topic'])
-        self.rotations = CameraRotations()
-        #: the rotation each input stamp was turned by (for the floor message), newest last
-        self.used_rotations: Dict[int, np.ndarray] = {}
+        self.detranslate = self.derotate and bool(p['camera_translation'])
+        self.rotations = CameraRotations(translation=self.detranslate,
+                                         coast_s=p['camera_translation_coast_s'])
+        #: the rotation and camera position each input stamp was moved by (for the floor
+        #: message), newest last
+        self.used_rotations: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
         self.rotation_held_frames = 0
         self.rotation_own_frames = 0
         contacts_topic = p['contacts_topic']
@@ -390,8 +406,12 @@ class PhysicsNode(Node):
         elif p['derotate_camera']:
             self.get_logger().warn('derotate_camera needs floor_source estimate or '
                                    'camera_params and a camera_motion_topic: off')
+        if p['camera_translation'] and not self.derotate:
+            self.get_logger().warn('camera_translation needs derotate_camera: off')
         self.diag.set_value('camera_rotation', 'taken out (outputs in the first image\'s '
                             'floor frame)' if self.derotate else 'off')
+        self.diag.set_value('camera_translation', 'taken out where measured (outputs in '
+                            'floor_fixed)' if self.detranslate else 'off')
         self.diag.watch('motion', self.pub_motion)
         # frames whose contacts are late go after at most contacts_wait_s plus half of it
         # (each tick of a timer is a turn of the executor, which costs CPU even when idle)
@@ -408,7 +428,8 @@ class PhysicsNode(Node):
         p = self.p
         return OnlinePhysics(
             self.params, self._floor_source(),
-            frame_id=p['frame_id'] or (START_FLOOR_FRAME if self.derotate else ''),
+            frame_id=p['frame_id'] or (FIXED_FLOOR_FRAME if self.detranslate else
+                                       START_FLOOR_FRAME if self.derotate else ''),
             contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
             contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
                                if contacts_topic else None),
@@ -566,7 +587,8 @@ class PhysicsNode(Node):
         except MessageError as exc:
             self._problem('camera_motion', f'ignoring camera motion: {exc}')
             return
-        self.rotations.add(stamp_to_ns(msg.header.stamp), state, quat_to_matrix(q))
+        position = odometry_to_camera_position(msg) if self.detranslate else None
+        self.rotations.add(stamp_to_ns(msg.header.stamp), state, quat_to_matrix(q), position)
 
     def _derotated(self, stamp: int, pose):
         """The input pose in the first image's camera frame (derotate_camera; else as
@@ -575,19 +597,19 @@ class PhysicsNode(Node):
         if not self.derotate:
             return pose
         if stamp in self.used_rotations:       # another person of the same frame
-            R = self.used_rotations[stamp]
+            R, C = self.used_rotations[stamp]
         else:
-            R, own = self.rotations.at(stamp)
+            R, C, own = self.rotations.pose_at(stamp)
             if own:
                 self.rotation_own_frames += 1
             else:
                 self.rotation_held_frames += 1
                 self._warn_limited('rotation_held', 'no camera-motion estimate for this '
                                    'frame: the last rotation is held', 10.0)
-            self.used_rotations[stamp] = R
+            self.used_rotations[stamp] = (R, C)
             while len(self.used_rotations) > 600:
                 del self.used_rotations[next(iter(self.used_rotations))]
-        return rotate_pose(pose, R)
+        return rotate_pose(pose, R, C if self.detranslate else None)
 
     def on_timer(self) -> None:
         """Frames whose contacts did not come in time go now."""
@@ -655,10 +677,12 @@ class PhysicsNode(Node):
             # first, so that a frame's floor is known when its motion arrives; the floor in
             # the current camera frame (derotate_camera: the first image's floor turned back
             # by the rotation this frame was turned by)
+            used = self.used_rotations.get(frame.stamp_ns) if self.derotate else None
             publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
                 make_header(frame.stamp_ns, frame.input_frame),
-                floor_in_camera(frame.floor, self.used_rotations.get(frame.stamp_ns)
-                                if self.derotate else None), frame.frame_id))
+                floor_in_camera(frame.floor, None if used is None else used[0],
+                                translation=None if used is None or not self.detranslate
+                                else used[1]), frame.frame_id))
         self.pub_motion.publish(cdr.pose_to_motion(pose, header))
         publish_if_heard(self.pub_joints,
                          lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
@@ -717,6 +741,10 @@ class PhysicsNode(Node):
         if self.derotate:
             d.set_value('camera_rotation_frames', f'{self.rotation_own_frames} with their own '
                         f'estimate, {self.rotation_held_frames} held')
+        if self.detranslate:
+            r = self.rotations
+            d.set_value('camera_translation_frames', f'{r.measured_frames} measured, '
+                        f'{r.coasted_frames} coasted, {r.held_frames} held')
         d.set_value('residual_bound_reached_substeps', st.residual_saturations)
         d.set_value('sliding_substeps', st.sliding_substeps)
         floor = online.floor

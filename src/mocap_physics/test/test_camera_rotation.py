@@ -55,10 +55,54 @@ def test_a_rotated_pose_and_the_floor_seen_from_the_current_camera():
     assert floor_in_camera(floor, None) is floor
 
 
-def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame'):
+def test_translation_measured_coasted_and_held():
+    """The camera's position: measured steps are summed, a frame without a measurement
+    coasts on the last velocity for coast_s and then holds, a measurement after a gap
+    continues from the coasted position (no jump), a static frame stops the coasting."""
+    dt = 100_000_000                                       # 10 frames/s
+    cams = CameraRotations(translation=True, coast_s=0.25)
+    eye = np.eye(3)
+    # the estimator's own position: 0.1 m per frame along x while measured
+    assert cams.add(0, 'static', eye, np.zeros(3))
+    assert cams.add(dt, 'moving', eye, np.array([0.1, 0, 0]))
+    assert cams.add(2 * dt, 'moving', eye, np.array([0.2, 0, 0]))
+    assert np.allclose(cams.pose_at(2 * dt)[1], [0.2, 0, 0])
+    # three frames without a step: two coast (0.25 s), the third holds
+    assert cams.add(3 * dt, 'moving', eye, None)
+    assert not cams.add(4 * dt, 'unknown', np.full((3, 3), np.nan), None)  # stored, not own
+    assert cams.add(5 * dt, 'moving', eye, None)
+    C = [cams.pose_at(k * dt)[1][0] for k in (3, 4, 5)]
+    assert np.allclose(C, [0.3, 0.4, 0.4])
+    R, _, own = cams.pose_at(4 * dt)
+    assert not own and np.allclose(R, eye)                   # the unknown frame's rotation held
+    # measured again: the estimator's position advanced only by this step (0.2 -> 0.3)
+    assert cams.add(6 * dt, 'moving', eye, np.array([0.3, 0, 0]))
+    assert np.allclose(cams.pose_at(6 * dt)[1], [0.5, 0, 0])
+    assert cams.add(7 * dt, 'static', eye, np.array([0.3, 0, 0]))
+    assert cams.add(8 * dt, 'moving', eye, None)             # no velocity after a static frame
+    assert np.allclose(cams.pose_at(8 * dt)[1], [0.5, 0, 0])
+    assert (cams.measured_frames, cams.coasted_frames, cams.held_frames) == (5, 2, 2)
+    # out of order: ignored; a bag played again: starts afresh
+    assert not cams.add(7 * dt, 'moving', eye, np.array([9.0, 0, 0]))
+    assert cams.add(8 * dt - 2_000_000_000, 'static', eye, np.zeros(3)) and len(cams) == 1
+    assert np.allclose(cams.pose_at(8 * dt - 2_000_000_000)[1], 0)
+
+
+def test_the_floor_seen_from_a_moved_camera():
+    floor = FloorFrame.from_camera_height_pitch(1.5, 0.2)      # in the first image's frame
+    R, C = _rot([0.1, 1.0, 0.0], 0.3), np.array([0.4, -0.1, 1.2])
+    seen = floor_in_camera(floor, R, translation=C)
+    p = np.random.default_rng(1).normal(size=(5, 3))            # points in the current camera
+    assert np.allclose(seen.transform_points(p), floor.transform_points(p @ R.T + C))
+
+
+def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame',
+         positions=None):
     """Drive a physics node in process (as ``mocap process`` does) with camera-frame poses,
     their contacts and the camera-motion estimate (rotations since the first image, None =
-    no estimate published); returns the output frames and the published floors."""
+    no estimate published; ``positions``: the camera's measured positions in the first
+    camera frame, None entries unmeasured); returns the output frames and the published
+    floors."""
     import rclpy
     from rclpy.parameter import Parameter
 
@@ -83,9 +127,11 @@ def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame'):
         for i, (pose, c) in enumerate(zip(poses, contacts)):
             stamp = 1_000_000_000 + i * 33_333_333
             if rotations is not None:
+                pos = None if positions is None else positions[i]
                 graph.publish(topics.CAMERA_MOTION, camera_motion_to_odometry(
-                    'rotating', matrix_to_quat(rotations[i]), np.array([0.0, 0.3, 0.0]),
-                    make_header(stamp, frame + '_start'), frame))
+                    'rotating' if positions is None else 'moving',
+                    matrix_to_quat(rotations[i]), np.array([0.0, 0.3, 0.0]),
+                    make_header(stamp, frame + '_start'), frame, position=pos))
             graph.publish(topics.LIFTER_CONTACTS, contacts_to_msg(c, make_header(stamp, frame)))
             graph.publish(topics.LIFTER_MOTION, pose_to_motion(pose, make_header(stamp, frame)))
             graph.flush()
@@ -155,3 +201,48 @@ def test_without_an_estimate_the_first_image_is_held(panning):
     ref, _, _ = _run({}, static[:20], contacts[:20], None)
     assert np.abs(_feet(der) - _feet(ref)).max() < 1e-6
     assert node.rotation_held_frames == 20 and node.rotation_own_frames == 0
+
+
+def test_a_walking_camera_taken_out_gives_the_static_cameras_physics(panning):
+    """A camera that walks sideways along the floor (1 m/s) while it turns: with
+    camera_translation its measured position is taken out too, and the physics is the
+    static camera's (frame ``floor_fixed``), also where a few steps were not measured
+    (coasted on the last velocity); its floor message is the floor seen from each moved
+    camera. Derotated only, the feet move with the camera."""
+    static, _, turns, contacts, up = panning
+    n = len(static)
+    side = np.cross(up, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    C = [side * (i / 30.0) for i in range(n)]              # first camera frame, m
+    # the current camera sees p_current = Q^T (p_first - C)
+    walked = [Pose(p.skeleton, rotate_pose(p, Q.T).rotations, Q.T @ (p.root_position - c))
+              for p, Q, c in zip(static, turns, C)]
+    # the keypoint node's position does not advance in unmeasured frames: 20 and 21 missed
+    est, offset = [], np.zeros(3)
+    for i in range(n):
+        if i in (20, 21):
+            est.append(None)
+            offset = offset + (C[i] - C[i - 1])
+        else:
+            est.append(C[i] - offset)
+    ref, ref_floors, _ = _run({}, static, contacts, None)
+    fix, fix_floors, node = _run({'derotate_camera': True, 'camera_translation': True},
+                                 walked, contacts, turns, positions=est)
+    der, _, _ = _run({'derotate_camera': True}, walked, contacts, turns, positions=est)
+    assert {f.frame_id for f in fix} == {'floor_fixed'}
+    assert np.abs(_feet(fix) - _feet(ref)).max() < 1e-6
+    assert np.abs(_feet(der) - _feet(ref)).max() > 0.5
+    r = node.rotations
+    assert (r.measured_frames, r.coasted_frames, r.held_frames) == (n - 2, 2, 0)
+    # the floor seen from each moved camera: a point on the floor under the first camera,
+    # seen from the current one, stays on the published floor
+    from mocap_core.ros_conversions import transform_stamped_to_arrays
+    from mocap_core.rotations import quat_to_matrix
+    assert len(fix_floors) == len(ref_floors) == n
+    for msg, ref_msg, Q, c in zip(fix_floors[::10], ref_floors[::10], turns[::10], C[::10]):
+        q, b = transform_stamped_to_arrays(msg)
+        A = quat_to_matrix(q)                               # p_camera = A p_floor + b
+        ref_q, ref_b = transform_stamped_to_arrays(ref_msg)
+        on_floor = quat_to_matrix(ref_q) @ np.array([0.3, -0.2, 0.0]) + ref_b  # first camera
+        in_current = Q.T @ (on_floor - c)
+        assert abs((A.T @ (in_current - b))[2]) < 1e-6
