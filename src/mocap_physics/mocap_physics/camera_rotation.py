@@ -193,5 +193,33 @@ def floor_in_camera(floor: FloorFrame, rotation: Optional[np.ndarray],
                       source_frame or floor.source_frame)
 
 
-__all__ = ['CameraRotations', 'rotate_pose', 'floor_in_camera', 'START_FLOOR_FRAME',
-           'FIXED_FLOOR_FRAME']
+def camera_step_on_floor(previous: Tuple[np.ndarray, np.ndarray],
+                         current: Tuple[np.ndarray, np.ndarray],
+                         floor: FloorFrame) -> Tuple[np.ndarray, np.ndarray]:
+    """How the world moved in the floor frame of the camera between two frames: a turn about
+    the floor's z and a shift along it, ``p_floor_now = rotation p_floor_before +
+    translation`` for a point fixed in the world.
+
+    ``previous`` and ``current``: the camera's (R (3, 3), C (3,) m) of the two frames, the
+    camera frame into the first image's camera frame (``p_first = R p_camera + C``);
+    ``floor``: the floor in the camera frame (``p_floor = A p_camera + t``), taken to be
+    the same in both frames (the floor frame rides with the camera, its height and tilt
+    being re-estimated by the floor tracker). The camera's tilt change and vertical step
+    are left out (the floor tracker follows those); the rest of the camera's rotation, its
+    turn about the floor's normal, and its horizontal step are what move the world past
+    the camera. Returns (rotation (3, 3) about z, translation (3,) with z = 0)."""
+    R0, C0 = (np.asarray(x, dtype=float) for x in previous)
+    R1, C1 = (np.asarray(x, dtype=float) for x in current)
+    A, t = floor.rotation, floor.translation
+    # p_cam_now = R1^T (R0 p_cam_before + C0 - C1), in the floor frame
+    M = A @ R1.T @ R0 @ A.T
+    yaw = np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])
+    c, s = np.cos(yaw), np.sin(yaw)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    shift = A @ (R1.T @ (C0 - C1)) + t - Rz @ t
+    shift[2] = 0.0
+    return Rz, shift
+
+
+__all__ = ['CameraRotations', 'camera_step_on_floor', 'rotate_pose', 'floor_in_camera',
+           'START_FLOOR_FRAME', 'FIXED_FLOOR_FRAME']

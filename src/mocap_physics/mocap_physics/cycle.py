@@ -196,14 +196,18 @@ class PhysicsCycle:
         if self.wbid is not None:
             self.wbid.reset()
 
-    def change_frame(self, rotation: np.ndarray, translation: np.ndarray) -> None:
+    def change_frame(self, rotation: np.ndarray, translation: np.ndarray,
+                     carry: Optional[bool] = None) -> None:
         """Re-express the state in a new floor frame: ``p_new = rotation p_old +
-        translation`` (e.g. a refined floor estimate). Only the root placement in q changes
-        (Pinocchio's free-flyer velocity is in the root's own frame); the pose is lifted out
-        of the new floor if needed. A small change (at most :data:`SMALL_FRAME_CHANGE_DEG`
-        and :data:`SMALL_FRAME_CHANGE_M`: a step of a floor being blended in) carries the
-        foot-stick anchors over (their floor points moved by the change) and keeps the
-        solvers' memory of the last forces; a larger one drops both."""
+        translation`` (e.g. a refined floor estimate, or the camera's motion between two
+        frames). Only the root placement in q changes (Pinocchio's free-flyer velocity is
+        in the root's own frame); the pose is lifted out of the new floor if needed. A small
+        change (at most :data:`SMALL_FRAME_CHANGE_DEG` and :data:`SMALL_FRAME_CHANGE_M`: a
+        step of a floor being blended in) carries the foot-stick anchors over (their floor
+        points moved by the change) and keeps the solvers' memory of the last forces; a
+        larger one drops both. ``carry`` True / False decides that whatever the size (a
+        turn about z and a shift along the floor that the world made, such as a camera's
+        motion, keeps the feet where they stand)."""
         R = np.asarray(rotation, dtype=float)
         t = np.asarray(translation, dtype=float).reshape(3)
         M = pin.SE3(R, t)
@@ -217,7 +221,9 @@ class PhysicsCycle:
         if self._target_prev is not None:
             self._target_prev = moved(self._target_prev)
         angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
-        if angle <= SMALL_FRAME_CHANGE_DEG and np.linalg.norm(t) <= SMALL_FRAME_CHANGE_M:
+        if carry is None:
+            carry = angle <= SMALL_FRAME_CHANGE_DEG and np.linalg.norm(t) <= SMALL_FRAME_CHANGE_M
+        if carry:
             self._anchor = self._anchor @ R[:2, :2].T + t[:2]
             self._root_offset = R[:2, :2] @ self._root_offset     # a horizontal vector
         else:

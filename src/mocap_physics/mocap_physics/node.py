@@ -138,6 +138,12 @@ PARAMETERS = (
               'floor frame of the first image (frame_id floor_start); the floor message stays '
               'the floor in the current camera frame. Only with floor_source estimate or '
               'camera_params', read_only=True),
+    ParamSpec('carry_with_camera', False, 'Carry the simulated body, its stance feet and its '
+              'last target with the camera\'s motion between frames (camera_motion_topic: the '
+              'turn about the floor\'s normal and, where the keypoint node measured it over the '
+              'floor, the step along it), so that a foot that stands in the world keeps '
+              'standing while the camera turns or walks; the outputs stay in the camera\'s '
+              'floor frame (frame_id floor). Not with derotate_camera', read_only=True),
     ParamSpec('camera_translation', False, 'With derotate_camera: take the camera\'s '
               'position since the first image out as well, where the keypoint node measured it '
               'over the floor (a following or orbiting camera), so that a foot that stands in '
@@ -343,7 +349,9 @@ class PhysicsNode(Node):
         self.derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
             and bool(p['camera_motion_topic'])
         self.detranslate = self.derotate and bool(p['camera_translation'])
-        self.rotations = CameraRotations(translation=self.detranslate,
+        self.carry = bool(p['carry_with_camera']) and not self.derotate \
+            and p['floor_source'] != 'input' and bool(p['camera_motion_topic'])
+        self.rotations = CameraRotations(translation=self.detranslate or self.carry,
                                          coast_s=p['camera_translation_coast_s'])
         #: the rotation and camera position each input stamp was moved by (for the floor
         #: message), newest last
@@ -399,7 +407,7 @@ class PhysicsNode(Node):
             self.create_subscription(
                 JointState, p['bodies_contacts_topic'],
                 guarded(self, self.on_bodies_contacts, 'bodies contacts'), qos)
-        if self.derotate:
+        if self.derotate or self.carry:
             self.diag.watch('camera_motion', self.create_subscription(
                 Odometry, p['camera_motion_topic'],
                 guarded(self, self.on_camera_motion, 'camera motion'), qos))
@@ -408,6 +416,11 @@ class PhysicsNode(Node):
                                    'camera_params and a camera_motion_topic: off')
         if p['camera_translation'] and not self.derotate:
             self.get_logger().warn('camera_translation needs derotate_camera: off')
+        if p['carry_with_camera'] and not self.carry:
+            self.get_logger().warn('carry_with_camera needs floor_source estimate or '
+                                   'camera_params, a camera_motion_topic and derotate_camera '
+                                   'off: off')
+        self.diag.set_value('carry_with_camera', 'on' if self.carry else 'off')
         self.diag.set_value('camera_rotation', 'taken out (outputs in the first image\'s '
                             'floor frame)' if self.derotate else 'off')
         self.diag.set_value('camera_translation', 'taken out where measured (outputs in '
@@ -545,7 +558,8 @@ class PhysicsNode(Node):
             accepted, frames = online.admit(stamp)
             if accepted:
                 frames = frames + online.add_motion(stamp, self._derotated(stamp, pose),
-                                                    msg.header.frame_id)
+                                                    msg.header.frame_id,
+                                                    camera=self._camera(stamp))
             released.append((pid, frames))
         self._publish_people(released)
         timeout = int(self.p['person_timeout_s'] * 1e9)
@@ -578,7 +592,7 @@ class PhysicsNode(Node):
             self._problem('motion', f'dropping a motion message: {exc}')
             return
         self._publish(self.online.add_motion(stamp, self._derotated(stamp, pose),
-                                             msg.header.frame_id))
+                                             msg.header.frame_id, camera=self._camera(stamp)))
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera's rotation since the first image of each stamp."""
@@ -587,15 +601,25 @@ class PhysicsNode(Node):
         except MessageError as exc:
             self._problem('camera_motion', f'ignoring camera motion: {exc}')
             return
-        position = odometry_to_camera_position(msg) if self.detranslate else None
+        position = odometry_to_camera_position(msg) if self.rotations.translation else None
         self.rotations.add(stamp_to_ns(msg.header.stamp), state, quat_to_matrix(q), position)
 
     def _derotated(self, stamp: int, pose):
         """The input pose in the first image's camera frame (derotate_camera; else as
-        is). A stamp without its own camera estimate holds the newest one before it
-        (counted)."""
+        is)."""
         if not self.derotate:
             return pose
+        R, C = self._camera_at(stamp)
+        return rotate_pose(pose, R, C if self.detranslate else None)
+
+    def _camera(self, stamp: int):
+        """The camera's pose (R, C) of ``stamp`` for carry_with_camera, else None."""
+        return self._camera_at(stamp) if self.carry else None
+
+    def _camera_at(self, stamp: int):
+        """(R (3, 3), C (3,)): the camera's pose of ``stamp``, the same for every person of
+        a frame. A stamp without its own camera estimate holds the newest one before it
+        (counted)."""
         if stamp in self.used_rotations:       # another person of the same frame
             R, C = self.used_rotations[stamp]
         else:
@@ -609,7 +633,7 @@ class PhysicsNode(Node):
             self.used_rotations[stamp] = (R, C)
             while len(self.used_rotations) > 600:
                 del self.used_rotations[next(iter(self.used_rotations))]
-        return rotate_pose(pose, R, C if self.detranslate else None)
+        return R, C
 
     def on_timer(self) -> None:
         """Frames whose contacts did not come in time go now."""
@@ -738,10 +762,12 @@ class PhysicsNode(Node):
         d.set_value('friction_cone_violations', st.cone_violations)
         d.set_value('stick_failures', st.stick_failures)
         d.set_value('dynamics', self.params.dynamics)
-        if self.derotate:
+        if self.derotate or self.carry:
             d.set_value('camera_rotation_frames', f'{self.rotation_own_frames} with their own '
                         f'estimate, {self.rotation_held_frames} held')
-        if self.detranslate:
+        if self.carry:
+            d.set_value('carried_frames', online.camera_steps)
+        if self.rotations.translation:
             r = self.rotations
             d.set_value('camera_translation_frames', f'{r.measured_frames} measured, '
                         f'{r.coasted_frames} coasted, {r.held_frames} held')

@@ -21,7 +21,14 @@ physics-corrected frames in a floor frame (z up, floor z = 0), one person:
    :class:`~.floor.FloorTracker` fitted to the feet. When the tracker replaces its frame,
    the simulated state is re-expressed in the new one (``PhysicsCycle.change_frame`` with
    ``T_new T_old^-1``).
-4. **Cycle**: the target, mapped into the floor frame, goes through
+4. **Camera motion** (optional, per frame: the camera's pose since the first image, as
+   :class:`~.camera_rotation.CameraRotations` gives it): where the frame before had one
+   too, the simulated state (body, stance anchors, the last target) is carried by the turn
+   about the floor's normal and the shift along it that the camera's motion made the world
+   take in the floor frame (:func:`~.camera_rotation.camera_step_on_floor`,
+   ``PhysicsCycle.change_frame``): the floor frame rides with the camera, and a foot that
+   stands in the world keeps standing.
+5. **Cycle**: the target, mapped into the floor frame, goes through
    :meth:`~.cycle.PhysicsCycle.step` with the time ``stamp_ns * 1e-9`` s.
 
 What the node logs or counts comes out as :class:`Notice` objects (passed to ``report``) in
@@ -42,6 +49,7 @@ from mocap_core.skeleton import Skeleton
 
 from .cycle import InvalidInput, PhysicsCycle
 from .cycle_params import PhysicsParams
+from .camera_rotation import camera_step_on_floor
 from .floor import FloorFrame, FloorTracker
 from .foot import FLAT_FOOT_UPDATE_DEG, FlatFootEstimator
 from .model import SkeletonError
@@ -52,6 +60,8 @@ DEFAULT_INPUT_FRAME = 'camera_optical_frame'
 #: Contacts messages kept for matching (the oldest are forgotten first).
 MAX_CONTACTS = 256
 
+#: a camera's pose: (R (3, 3), C (3,) m), its frame into the first image's camera frame
+CameraPose = Tuple[np.ndarray, np.ndarray]
 FloorSource = Union[None, FloorFrame, FloorTracker]
 
 
@@ -140,8 +150,14 @@ class OnlinePhysics:
         self._clock = clock
         #: restart threshold of :meth:`admit`, ns
         self.restart_after_ns = max(self.params.max_frame_gap, 1.0) * 1e9
-        #: motion frames waiting for their contacts: (stamp ns, pose, frame_id, arrival)
-        self.pending: Deque[Tuple[int, Pose, str, float]] = collections.deque()
+        #: motion frames waiting for their contacts: (stamp ns, pose, frame_id, arrival,
+        #: camera pose or None)
+        self.pending: Deque[Tuple[int, Pose, str, float, Optional[CameraPose]]] = \
+            collections.deque()
+        #: the camera pose of the last frame stepped (step 4 of the module docstring)
+        self._last_camera: Optional[CameraPose] = None
+        #: frames whose state the camera's motion carried
+        self.camera_steps = 0
         #: contact probabilities (4,) by stamp (ns), oldest first
         self.contacts: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
         self.last_stamp = -1
@@ -196,14 +212,16 @@ class OnlinePhysics:
             return False, frames
         return True, frames
 
-    def add_motion(self, stamp_ns: int, pose: Pose, frame_id: str = '') -> List[PhysicsFrame]:
-        """Queue a target pose (input frame ``frame_id``) and return the frames that can go
-        now (earlier ones included). Runs :meth:`admit` first (a no-op when the caller
-        already admitted this stamp)."""
+    def add_motion(self, stamp_ns: int, pose: Pose, frame_id: str = '',
+                   camera: Optional[CameraPose] = None) -> List[PhysicsFrame]:
+        """Queue a target pose (input frame ``frame_id``; ``camera``: the camera's pose of
+        this frame, module docstring 4) and return the frames that can go now (earlier ones
+        included). Runs :meth:`admit` first (a no-op when the caller already admitted this
+        stamp)."""
         accepted, frames = self.admit(stamp_ns)
         if not accepted:
             return frames
-        self.pending.append((int(stamp_ns), pose, frame_id, self._clock()))
+        self.pending.append((int(stamp_ns), pose, frame_id, self._clock(), camera))
         return frames + self.process()
 
     def _contacts_for(self, stamp: int, waited: float) -> Tuple[bool, Optional[np.ndarray]]:
@@ -228,13 +246,13 @@ class OnlinePhysics:
         ``wait=False`` every waiting frame, with the contacts that are there."""
         frames: List[PhysicsFrame] = []
         while self.pending:
-            stamp, pose, frame_id, t_in = self.pending[0]
+            stamp, pose, frame_id, t_in, camera = self.pending[0]
             waited = self._clock() - t_in if wait else float('inf')
             ready, probs = self._contacts_for(stamp, waited)
             if not ready:
                 break
             self.pending.popleft()
-            out = self.step(stamp, pose, frame_id, probs)
+            out = self.step(stamp, pose, frame_id, probs, camera=camera)
             if out is not None:
                 frames.append(out)
         return frames
@@ -295,7 +313,8 @@ class OnlinePhysics:
 
     def step(self, stamp_ns: int, pose: Pose, frame_id: str = '',
              probabilities: Optional[np.ndarray] = None,
-             time_s: Optional[float] = None) -> Optional[PhysicsFrame]:
+             time_s: Optional[float] = None,
+             camera: Optional[CameraPose] = None) -> Optional[PhysicsFrame]:
         """Run one frame now (module docstring, 3-4), without the ordering and waiting of
         :meth:`add_motion`.
 
@@ -305,6 +324,9 @@ class OnlinePhysics:
             probabilities: (4,) contact probabilities (``CONTACT_POINT_NAMES`` order) or None.
             time_s: the cycle's time for this frame, s (default ``stamp_ns * 1e-9``; offline
                 callers with exact float times pass them here).
+            camera: the camera's pose of this frame (R (3, 3), C (3,) m: its frame into the
+                first image's camera frame, ``p_first = R p_camera + C``), or None (module
+                docstring, 4).
 
         Returns:
             The frame, or None when it was dropped (reported as a Notice).
@@ -316,6 +338,12 @@ class OnlinePhysics:
         if self.tracker is not None and not self._update_floor(pose, probabilities):
             return None
         if self.floor is not None:
+            if camera is not None and self._last_camera is not None and \
+                    self.last_stamp >= 0 and int(stamp_ns) > self.last_stamp:
+                R, t = camera_step_on_floor(self._last_camera, camera, self.floor)
+                self.cycle.change_frame(R, t, carry=True)
+                self.camera_steps += 1
+            self._last_camera = camera
             pose = self.floor.transform_pose(pose)
             out_frame = self.frame_id or 'floor'
         else:
