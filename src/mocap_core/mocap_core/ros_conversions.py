@@ -691,6 +691,18 @@ def odometry_to_camera_motion(msg: Odometry) -> Tuple[str, np.ndarray, np.ndarra
     return state, q / np.linalg.norm(q), w
 
 
+def camera_pose_from_msg(msg) -> Tuple[int, np.ndarray, np.ndarray]:
+    """A known camera pose (nav_msgs/Odometry or geometry_msgs/PoseStamped) -> (stamp ns,
+    position (3,) m, orientation (4,) x, y, z, w), unchecked
+    (:class:`mocap_core.camera_pose.KnownCameraPoses` checks them)."""
+    if isinstance(msg, Odometry):
+        p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    else:
+        p, o = msg.pose.position, msg.pose.orientation
+    return (stamp_to_ns(msg.header.stamp), np.array([p.x, p.y, p.z], dtype=float),
+            np.array([o.x, o.y, o.z, o.w], dtype=float))
+
+
 def odometry_to_camera_position(msg: Odometry) -> Optional[np.ndarray]:
     """The camera's position (3,) m in the first camera frame from a message of
     :func:`camera_motion_to_odometry`, or None where it was not measured (pose position

@@ -78,6 +78,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
+from mocap_core.camera_pose import KnownCameraPoses
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.tf import TfBroadcaster
@@ -85,7 +86,7 @@ from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import deserialised_unless, guarded
 from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
 from mocap_core.qos import STREAM_QOS, input_qos
-from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
+from mocap_core.rotations import quat_to_matrix
 
 from .model import TTA_MODES, with_tta
 from mocap_core.foot_plant import FootPlantConfig
@@ -267,9 +268,6 @@ PARAMETERS = (
 
 #: Camera-motion estimates and camera poses kept for matching by stamp (10 s at 30 fps).
 MAX_CAMERA_FRAMES = 300
-#: A camera body frame (REP-103: x forward, y left, z up) -> its optical frame (x right,
-#: y down, z forward): ``R_world_optical = R_world_body @ BODY_TO_OPTICAL``.
-BODY_TO_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 def parse_up(text: str) -> Optional[np.ndarray]:
@@ -348,16 +346,13 @@ class GMRNode(Node):
                              f"{p['camera_mode']!r}")
         self.camera_mode = 'static' if p['static_camera'] else p['camera_mode']
         self.output_frame = p['frame_id']
-        self.camera_poses: Deque[Tuple[int, np.ndarray, np.ndarray]] = collections.deque(
-            maxlen=MAX_CAMERA_FRAMES)
         self.camera_pose_missing = 0
+        if p['camera_pose_topic'] and p['camera_pose_type'] not in ('odometry', 'pose'):
+            raise ValueError(f"camera_pose_type must be odometry or pose, got "
+                             f"{p['camera_pose_type']!r}")
+        self.camera_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
+                                             p['camera_pose_convention'], MAX_CAMERA_FRAMES)
         if p['camera_pose_topic']:
-            if p['camera_pose_type'] not in ('odometry', 'pose'):
-                raise ValueError(f"camera_pose_type must be odometry or pose, got "
-                                 f"{p['camera_pose_type']!r}")
-            if p['camera_pose_convention'] not in ('optical', 'body'):
-                raise ValueError(f"camera_pose_convention must be optical or body, got "
-                                 f"{p['camera_pose_convention']!r}")
             self.camera_mode = 'known'
         #: stamp -> (state, R0 (3, 3), camera position (3,) m in the first camera frame or
         #: None where not measured)
@@ -519,49 +514,21 @@ class GMRNode(Node):
 
     def on_camera_pose(self, msg) -> None:
         """Keep the camera's optical-frame pose in the world (``camera_pose_topic``)."""
-        if isinstance(msg, Odometry):
-            t, q = rc.odometry_to_root(msg)
-        else:
-            p, o = msg.pose.position, msg.pose.orientation
-            t, q = np.array([p.x, p.y, p.z]), np.array([o.x, o.y, o.z, o.w])
-        n = float(np.linalg.norm(q))
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q)) and n > 0.5):
+        stamp, t, q = rc.camera_pose_from_msg(msg)
+        status = self.camera_poses.add(stamp, t, q)
+        if status == 'invalid':
             self.diag.errors += 1
             self.get_logger().warn('ignoring camera pose: not finite', throttle_duration_sec=5.0)
             return
-        stamp = rc.stamp_to_ns(msg.header.stamp)
-        if self.camera_poses and stamp <= self.camera_poses[-1][0]:
-            if self.camera_poses[0][0] - stamp > 0 or stamp < self.camera_poses[-1][0] - 10**9:
-                self.camera_poses.clear()          # the poses start again (a bag restarted)
-            else:
-                return                             # an old or repeated pose: ignored
-        R = quat_to_matrix(q / n)
-        if self.p['camera_pose_convention'] == 'body':
-            R = R @ BODY_TO_OPTICAL
-        if msg.header.frame_id and self.output_frame != msg.header.frame_id:
+        if status != 'old' and msg.header.frame_id and \
+                self.output_frame != msg.header.frame_id:
             self.output_frame = msg.header.frame_id
             self.get_logger().info(f"known camera pose: outputs in '{self.output_frame}'")
-        self.camera_poses.append((stamp, R, t))
 
     def camera_pose_at(self, stamp: int) -> Optional[Tuple[np.ndarray, np.ndarray]]:
-        """The camera's optical frame in the world at ``stamp`` (rotation, position),
-        interpolated between the poses around it, or the nearest pose within
-        ``camera_pose_max_age_s``; None when there is none."""
-        poses = self.camera_poses
-        if not poses:
-            return None
-        max_age = self.p['camera_pose_max_age_s'] * 1e9
-        after = next((i for i, (s, _, _) in enumerate(poses) if s >= stamp), None)
-        if after is not None and after > 0:
-            (s0, R0, t0), (s1, R1, t1) = poses[after - 1], poses[after]
-            if s1 - s0 <= 2 * max_age:
-                a = (stamp - s0) / max(s1 - s0, 1)
-                return (R0 @ axis_angle_to_matrix(a * matrix_to_axis_angle(R0.T @ R1)),
-                        t0 + a * (t1 - t0))
-        near = min(poses, key=lambda e: abs(e[0] - stamp))
-        if abs(near[0] - stamp) <= max_age:
-            return near[1], near[2]
-        return None
+        """The camera's optical frame in the world at ``stamp`` (rotation, position)
+        (:class:`mocap_core.camera_pose.KnownCameraPoses`); None when there is none."""
+        return self.camera_poses.at(stamp)
 
     def _known_anchor(self, stamp: int, on_floor: bool) -> InputAnchor:
         """The input frame in the world from the known camera pose (and the physics floor

@@ -90,7 +90,7 @@ import sys
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, TransformStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, PointCloud2
@@ -100,6 +100,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
+from mocap_core.camera_pose import KnownCameraPoses
 from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, deserialised_unless, guarded
@@ -109,6 +110,7 @@ from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bod
                                         motion_to_pose, msg_to_bodies_contacts,
                                         msg_to_contacts, odometry_to_camera_motion,
                                         odometry_to_camera_position, pose_marker_specs,
+                                        camera_pose_from_msg,
                                         stamp_to_ns, wrench_to_msg)
 from mocap_core.rotations import quat_to_matrix
 
@@ -144,6 +146,18 @@ PARAMETERS = (
               'floor, the step along it), so that a foot that stands in the world keeps '
               'standing while the camera turns or walks; the outputs stay in the camera\'s '
               'floor frame (frame_id floor). Not with derotate_camera', read_only=True),
+    ParamSpec('camera_pose_topic', '', 'carry_with_camera: the camera\'s known pose in a world '
+              'frame (a robot\'s odom or map pose of its camera) instead of the keypoint '
+              'node\'s estimate; empty = the estimate', read_only=True),
+    ParamSpec('camera_pose_type', 'odometry', "Message type on camera_pose_topic: 'odometry' "
+              "(nav_msgs/Odometry) or 'pose' (geometry_msgs/PoseStamped)", read_only=True,
+              additional_constraints='odometry or pose'),
+    ParamSpec('camera_pose_convention', 'optical', "Which frame the camera pose is of: "
+              "'optical' (x right, y down, z forward) or 'body' (REP-103 camera link: x "
+              "forward, y left, z up)", read_only=True,
+              additional_constraints='optical or body'),
+    ParamSpec('camera_pose_max_age_s', 0.1, 'A camera pose further than this from a frame\'s '
+              'stamp does not serve it (the frame is not carried)', min_value=0.0),
     ParamSpec('camera_translation', False, 'With derotate_camera: take the camera\'s '
               'position since the first image out as well, where the keypoint node measured it '
               'over the floor (a following or orbiting camera), so that a foot that stands in '
@@ -350,7 +364,17 @@ class PhysicsNode(Node):
             and bool(p['camera_motion_topic'])
         self.detranslate = self.derotate and bool(p['camera_translation'])
         self.carry = bool(p['carry_with_camera']) and not self.derotate \
-            and p['floor_source'] != 'input' and bool(p['camera_motion_topic'])
+            and p['floor_source'] != 'input' \
+            and bool(p['camera_motion_topic'] or p['camera_pose_topic'])
+        #: the known camera pose (camera_pose_topic), for carry_with_camera
+        self.known_poses: Optional[KnownCameraPoses] = None
+        self.camera_pose_missing = 0
+        if self.carry and p['camera_pose_topic']:
+            if p['camera_pose_type'] not in ('odometry', 'pose'):
+                raise ValueError(f"camera_pose_type must be odometry or pose, got "
+                                 f"{p['camera_pose_type']!r}")
+            self.known_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
+                                                p['camera_pose_convention'])
         self.rotations = CameraRotations(translation=self.detranslate or self.carry,
                                          coast_s=p['camera_translation_coast_s'])
         #: the rotation and camera position each input stamp was moved by (for the floor
@@ -407,7 +431,12 @@ class PhysicsNode(Node):
             self.create_subscription(
                 JointState, p['bodies_contacts_topic'],
                 guarded(self, self.on_bodies_contacts, 'bodies contacts'), qos)
-        if self.derotate or self.carry:
+        if self.known_poses is not None:
+            self.diag.watch('camera_pose', self.create_subscription(
+                Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped,
+                p['camera_pose_topic'], guarded(self, self.on_camera_pose, 'camera pose'),
+                qos))
+        elif self.derotate or self.carry:
             self.diag.watch('camera_motion', self.create_subscription(
                 Odometry, p['camera_motion_topic'],
                 guarded(self, self.on_camera_motion, 'camera motion'), qos))
@@ -612,9 +641,24 @@ class PhysicsNode(Node):
         R, C = self._camera_at(stamp)
         return rotate_pose(pose, R, C if self.detranslate else None)
 
+    def on_camera_pose(self, msg) -> None:
+        """Keep the camera's known pose (camera_pose_topic)."""
+        if self.known_poses.add(*camera_pose_from_msg(msg)) == 'invalid':
+            self._problem('camera_pose', 'ignoring camera pose: not finite')
+
     def _camera(self, stamp: int):
-        """The camera's pose (R, C) of ``stamp`` for carry_with_camera, else None."""
-        return self._camera_at(stamp) if self.carry else None
+        """The camera's pose (R, C) of ``stamp`` for carry_with_camera, else None (also
+        where the known pose has none near ``stamp``: the frame is not carried, counted)."""
+        if not self.carry:
+            return None
+        if self.known_poses is None:
+            return self._camera_at(stamp)
+        pose = self.known_poses.at(stamp)
+        if pose is None:
+            self.camera_pose_missing += 1
+            self._warn_limited('camera_pose_missing', 'no known camera pose near this frame: '
+                               'the frame is not carried', 10.0)
+        return pose
 
     def _camera_at(self, stamp: int):
         """(R (3, 3), C (3,)): the camera's pose of ``stamp``, the same for every person of
@@ -767,6 +811,8 @@ class PhysicsNode(Node):
                         f'estimate, {self.rotation_held_frames} held')
         if self.carry:
             d.set_value('carried_frames', online.camera_steps)
+        if self.known_poses is not None:
+            d.set_value('camera_pose_missing_frames', self.camera_pose_missing)
         if self.rotations.translation:
             r = self.rotations
             d.set_value('camera_translation_frames', f'{r.measured_frames} measured, '

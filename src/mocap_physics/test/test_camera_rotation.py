@@ -97,12 +97,13 @@ def test_the_floor_seen_from_a_moved_camera():
 
 
 def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame',
-         positions=None):
+         positions=None, known=None):
     """Drive a physics node in process (as ``mocap process`` does) with camera-frame poses,
     their contacts and the camera-motion estimate (rotations since the first image, None =
     no estimate published; ``positions``: the camera's measured positions in the first
-    camera frame, None entries unmeasured); returns the output frames and the published
-    floors."""
+    camera frame, None entries unmeasured; ``known``: (R, t) known camera poses published
+    as PoseStamped on /robot/camera, None entries not published); returns the output
+    frames and the published floors."""
     import rclpy
     from rclpy.parameter import Parameter
 
@@ -132,6 +133,15 @@ def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame',
                     'rotating' if positions is None else 'moving',
                     matrix_to_quat(rotations[i]), np.array([0.0, 0.3, 0.0]),
                     make_header(stamp, frame + '_start'), frame, position=pos))
+            if known is not None and known[i] is not None:
+                from geometry_msgs.msg import PoseStamped
+                msg = PoseStamped(header=make_header(stamp, 'odom'))
+                R, t = known[i]
+                msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = map(float, t)
+                o = matrix_to_quat(R)
+                (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+                 msg.pose.orientation.w) = map(float, o)
+                graph.publish('/robot/camera', msg)
             graph.publish(topics.LIFTER_CONTACTS, contacts_to_msg(c, make_header(stamp, frame)))
             graph.publish(topics.LIFTER_MOTION, pose_to_motion(pose, make_header(stamp, frame)))
             graph.flush()
@@ -292,3 +302,24 @@ def test_carried_with_a_moving_camera_the_feet_stand_as_for_a_static_one(panning
     # 0.4 rad/s, 0.9 mm at 0.1 rad/s)
     assert np.abs(back(car) - ref_feet).max() < (0.005 if motion == 'pan' else 1e-6)
     assert np.abs(back(raw) - ref_feet).max() > 0.05
+
+
+def test_carried_with_a_known_camera_pose(panning):
+    """carry_with_camera with camera_pose_topic: the node carries every frame that has a
+    known pose near it by that pose (output frame ``floor``; the estimate is not needed),
+    counts the frames without one and does not carry them; the output differs from the
+    same input without carrying."""
+    static, panned, turns, contacts, _ = panning
+    n = len(static)
+    world = [(Q, np.array([0.5, 0.0, 1.4])) for Q in turns]    # a pan on a tripod
+    kwargs = {'carry_with_camera': True, 'camera_pose_topic': '/robot/camera',
+              'camera_pose_type': 'pose'}
+    car, _, node = _run(kwargs, panned, contacts, None, known=world)
+    assert len(car) == n and {f.frame_id for f in car} == {'floor'}
+    assert node.online.camera_steps == n - 1 and node.camera_pose_missing == 0
+    part, _, node = _run(kwargs, panned, contacts, None,
+                         known=world[:30] + [None] * (n - 30))
+    assert len(part) == n and node.camera_pose_missing == n - 30 - 3   # 0.1 s still served
+    assert node.online.camera_steps == 30 + 3 - 1
+    raw, _, _ = _run({}, panned, contacts, None)
+    assert np.abs(_feet(car) - _feet(raw)).max() > 0.05
