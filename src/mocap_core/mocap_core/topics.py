@@ -24,10 +24,6 @@ START_FRAME_SUFFIX = '_start'
 #: frame of the physics outputs with ``derotate_camera``: the floor frame of the first image,
 #: which does not turn with the camera (``floor`` turns with it)
 FLOOR_START_FRAME = 'floor' + START_FRAME_SUFFIX
-#: frame of the physics outputs with ``derotate_camera`` and ``camera_translation``: the
-#: floor frame of the first image, with the camera's measured translation taken out too, so
-#: that it stays where the world is (as far as the camera-motion estimate knows)
-FLOOR_FIXED_FRAME = 'floor_fixed'
 
 # every node
 DIAGNOSTICS = '/diagnostics'

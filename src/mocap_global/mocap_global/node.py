@@ -574,8 +574,6 @@ class GMRNode(Node):
                 state += ' (translation measured)'
         self.camera_frames[state] = self.camera_frames.get(state, 0) + 1
         self.diag.set_value('camera_motion', state)
-        if on_floor and self.input_frame == topics.FLOOR_FIXED_FRAME:
-            return self._fixed_anchor(cm, state, position)
         if on_floor and self.input_frame.endswith(topics.START_FRAME_SUFFIX):
             return self._derotated_anchor(cm, state, position)
         fusable = ('static', 'rotating') if self.p['fuse_rotating'] else ('static',)
@@ -614,24 +612,6 @@ class GMRNode(Node):
         A_start = (at[1] if at is not None else cm[1]) @ A
         return InputAnchor(True, np.eye(3), A_start.T @ position,
                            static=standing and state == 'static',
-                           translating=state.startswith('moving'))
-
-    def _fixed_anchor(self, cm, state: str, position: Optional[np.ndarray]) -> InputAnchor:
-        """The anchor of a floor input from which the physics stage took the camera's
-        rotation and measured translation out (``camera_translation``; frame
-        ``floor_fixed``): that frame stays where the world is wherever the camera's motion
-        was known, so static frames, frames whose camera step was measured and (with
-        ``fuse_rotating``) turning ones are fixed with the identity (the physics output
-        moved rigidly); other frames (the physics stage coasted or held the camera) and
-        frames without an estimate are GMR's, and the fusion aligns itself again
-        afterwards."""
-        if cm is None:
-            return InputAnchor(False)
-        fixed = state == 'static' or position is not None or \
-            (state == 'rotating' and self.p['fuse_rotating'])
-        if not fixed:
-            return InputAnchor(False)
-        return InputAnchor(True, np.eye(3), np.zeros(3), static=state == 'static',
                            translating=state.startswith('moving'))
 
     @property

@@ -289,37 +289,3 @@ def test_a_turning_camera_taken_out_by_physics_is_fused_as_a_static_one(graph_no
                                atol=1e-6)
     np.testing.assert_allclose(T[:, 2], T_in[:, 2], atol=1e-6)
 
-
-def test_a_walking_camera_taken_out_by_physics_is_fused_where_measured(graph_node):
-    """The physics stage took the camera's rotation and measured translation out
-    (``camera_translation``: input frame ``floor_fixed``): frames whose camera step was
-    measured are fixed with the identity (the output follows the input rigidly), frames
-    without a measurement are GMR's and the fusion aligns itself again after them."""
-    from mocap_core import ros_conversions as rc
-    from mocap_core import topics
-
-    graph, node, out = graph_node(fusion_position_time_constant_s=1e-6,
-                                  fusion_orientation_time_constant_s=1e-6)
-    n, gap = 60, range(20, 30)
-    poses = [Pose(p.skeleton, p.rotations, p.root_position - [0, 0, 0.1])
-             for p in _poses(n, seed=4)]
-    for i, p in enumerate(poses):
-        graph.publish(topics.CAMERA_MOTION, rc.camera_motion_to_odometry(
-            'moving', np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3),
-            rc.make_header(i * DT_NS, 'cam_start'), 'cam',
-            position=None if i in gap else np.array([0.03 * i, 0.0, 0.0])))
-        graph.publish('/in/motion', rc.pose_to_motion(p, rc.make_header(i * DT_NS,
-                                                                        'floor_fixed')))
-    graph.flush()
-    v = _values(node)
-    odom = [m for t, m in out if t == topics.WORLD_ODOM]
-    assert len(odom) == n
-    assert v['unfused_frames'] == str(len(gap))
-    assert v['camera_motion_frames'] == f'moving {len(gap)}, moving (translation measured) ' \
-                                        f'{n - len(gap)}'
-    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
-    T_in = np.stack([p.root_position for p in poses])
-    # before the gap the output is the input moved rigidly
-    d, d_in = np.diff(T[:20], axis=0), np.diff(T_in[:20], axis=0)
-    np.testing.assert_allclose(np.linalg.norm(d, axis=1), np.linalg.norm(d_in, axis=1),
-                               atol=1e-3)

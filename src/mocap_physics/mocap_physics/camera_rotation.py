@@ -1,5 +1,6 @@
-"""Physics in the frame of the first image: the camera's rotation (and, where measured, its
-translation) taken out of the input.
+"""Physics with a moving camera: the camera's rotation taken out of the input
+(``derotate_camera``), or the simulated state carried with the camera's motion
+(``carry_with_camera``).
 
 With a camera that turns (a pan, a tilt, a hand-held or orbiting camera), a person standing
 still moves in the camera frame, and so do their feet: a physics stage that works in a floor
@@ -10,14 +11,13 @@ by that rotation, each incoming camera-frame pose is expressed in the optical fr
 first image (``<optical frame>_start``), which does not turn; the floor is estimated there and
 the simulation runs in the floor frame of the first image (``floor_start``).
 
-A camera that also walks or drives (a following or orbiting camera) moves the person in that
-frame as well. With ``translation`` on, the camera's position since the first image, which the
-keypoint node measures over the floor where it can (``translation_known``), is taken out too:
-``p_start = R p_camera + C``, and the outputs are in ``floor_fixed``, a frame that stays where
-the world is as far as the estimate knows. A frame whose step was not measured coasts on the
-last measured velocity for ``coast_s`` (a camera moving steadily keeps moving), then holds
-(the camera is taken to stand); the estimate's own position does not advance in such frames,
-so the next measured step continues from the coasted position without a jump.
+The camera's translation is not taken out here: a floor fixed to the first image over a long
+path carries every drift of the estimate in height and tilt (measured: the floor under the
+person 2x further off on the rendered walkers). ``carry_with_camera`` instead keeps the floor
+frame riding with the camera and carries the simulated state by the camera's motion between
+frames (:func:`camera_step_on_floor`); :class:`CameraRotations` keeps the camera's position for
+it (``translation``): where the keypoint node measured the step over the floor, else coasted
+on the last velocity for ``coast_s``, then held.
 
 Conventions: ``R`` (3, 3) maps the current camera frame into the first one, ``C`` (3,) m is
 the camera's position in the first camera frame; quaternions are x, y, z, w. No ROS imports.
@@ -39,8 +39,6 @@ from .floor import FloorFrame
 #: frame name of the outputs when the camera's rotation is taken out (the floor frame of the
 #: first image; ``floor`` is the floor frame under the current camera)
 START_FLOOR_FRAME = topics.FLOOR_START_FRAME
-#: frame name of the outputs when the camera's translation is taken out as well
-FIXED_FLOOR_FRAME = topics.FLOOR_FIXED_FRAME
 
 
 class CameraRotations:
@@ -164,32 +162,23 @@ class CameraRotations:
         return np.eye(3), np.zeros(3), False
 
 
-def rotate_pose(pose: Pose, rotation: np.ndarray,
-                translation: Optional[np.ndarray] = None) -> Pose:
-    """``pose`` (camera frame) in the first image's camera frame: root position ``R p + C``
-    (``translation`` C (3,) m, the camera's position there; None = 0) and root orientation
-    ``R q`` (the other joints' rotations are local and unchanged)."""
+def rotate_pose(pose: Pose, rotation: np.ndarray) -> Pose:
+    """``pose`` (camera frame) in the first image's camera frame: root position ``R p`` and
+    root orientation ``R q`` (the other joints' rotations are local and unchanged)."""
     R = np.asarray(rotation, dtype=float)
     rot = np.array(pose.rotations, dtype=float)
     rot[0] = quat_multiply(matrix_to_quat(R), rot[0])
-    root = R @ np.asarray(pose.root_position, dtype=float)
-    if translation is not None:
-        root = root + np.asarray(translation, dtype=float)
-    return Pose(pose.skeleton, rot, root)
+    return Pose(pose.skeleton, rot, R @ np.asarray(pose.root_position, dtype=float))
 
 
 def floor_in_camera(floor: FloorFrame, rotation: Optional[np.ndarray],
-                    source_frame: Optional[str] = None,
-                    translation: Optional[np.ndarray] = None) -> FloorFrame:
+                    source_frame: Optional[str] = None) -> FloorFrame:
     """The floor frame of the first image (``p_floor = A p_start + t``) seen from the
-    current camera (``p_start = R p_camera + C``, ``translation`` C, None = 0):
-    ``p_floor = (A R) p_camera + (A C + t)``. None ``rotation``: ``floor`` itself."""
+    current camera (``p_start = R p_camera``): ``p_floor = (A R) p_camera + t``. None
+    ``rotation``: ``floor`` itself."""
     if rotation is None:
         return floor
-    t = floor.translation
-    if translation is not None:
-        t = t + floor.rotation @ np.asarray(translation, dtype=float)
-    return FloorFrame(floor.rotation @ np.asarray(rotation, dtype=float), t,
+    return FloorFrame(floor.rotation @ np.asarray(rotation, dtype=float), floor.translation,
                       source_frame or floor.source_frame)
 
 
@@ -222,4 +211,4 @@ def camera_step_on_floor(previous: Tuple[np.ndarray, np.ndarray],
 
 
 __all__ = ['CameraRotations', 'camera_step_on_floor', 'rotate_pose', 'floor_in_camera',
-           'START_FLOOR_FRAME', 'FIXED_FLOOR_FRAME']
+           'START_FLOOR_FRAME']

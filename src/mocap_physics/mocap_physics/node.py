@@ -22,10 +22,12 @@ Subscribes:
     (:mod:`mocap_physics.camera_rotation`), so that a turning camera does not move the feet;
     the outputs are then in ``floor_start``, the floor frame of the first image, and the
     floor message stays the floor seen from each frame's camera. A frame without its own
-    estimate holds the newest one before it (counted). With ``camera_translation`` as well,
-    the camera's position, which the keypoint node measures over this node's floor, is
-    taken out too (a following or orbiting camera; frames without a measured step coast on
-    the last velocity for ``camera_translation_coast_s``): outputs in ``floor_fixed``.
+    estimate holds the newest one before it (counted). With ``carry_with_camera`` instead,
+    the outputs stay in the camera's floor frame and the simulated state is carried with
+    the camera's motion from frame to frame: its turn about the floor's normal and its step
+    along the floor where the keypoint node measured it (frames without a measured step
+    coast on the last velocity for ``camera_translation_coast_s``), or a known camera pose
+    (``camera_pose_topic``).
 
 Publishes, stamped with the input's stamp, in the floor frame (z up, floor z = 0):
   * ``/mocap/physics/motion``, ``/joints3d``, ``/joint_states`` (``effort`` = joint torques of
@@ -119,8 +121,7 @@ from .floor import FloorFrame, FloorTracker, FloorTrackerParams
 from .foot import TEMPLATE_FLAT_FOOT_PITCH_DEG, contact_positions
 from .markers import floor_transform_msg, friction_cone_spec
 from .model import revolute_efforts
-from .camera_rotation import (FIXED_FLOOR_FRAME, START_FLOOR_FRAME, CameraRotations,
-                              floor_in_camera, rotate_pose)
+from .camera_rotation import START_FLOOR_FRAME, CameraRotations, floor_in_camera, rotate_pose
 from .online import FloorSource, Notice, OnlinePhysics, PhysicsFrame
 
 _D = PhysicsParams()
@@ -158,11 +159,7 @@ PARAMETERS = (
               additional_constraints='optical or body'),
     ParamSpec('camera_pose_max_age_s', 0.1, 'A camera pose further than this from a frame\'s '
               'stamp does not serve it (the frame is not carried)', min_value=0.0),
-    ParamSpec('camera_translation', False, 'With derotate_camera: take the camera\'s '
-              'position since the first image out as well, where the keypoint node measured it '
-              'over the floor (a following or orbiting camera), so that a foot that stands in '
-              'the world stands in the outputs: frame_id floor_fixed', read_only=True),
-    ParamSpec('camera_translation_coast_s', 0.5, 'camera_translation: a frame whose camera step '
+    ParamSpec('camera_translation_coast_s', 0.5, 'carry_with_camera: a frame whose camera step '
               'was not measured moves the camera by its last measured velocity for this long '
               'after the last measurement, then not at all', min_value=0.0, max_value=10.0,
               read_only=True),
@@ -362,7 +359,6 @@ class PhysicsNode(Node):
         # the camera's rotation taken out of the input (derotate_camera)
         self.derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
             and bool(p['camera_motion_topic'])
-        self.detranslate = self.derotate and bool(p['camera_translation'])
         self.carry = bool(p['carry_with_camera']) and not self.derotate \
             and p['floor_source'] != 'input' \
             and bool(p['camera_motion_topic'] or p['camera_pose_topic'])
@@ -375,7 +371,7 @@ class PhysicsNode(Node):
                                  f"{p['camera_pose_type']!r}")
             self.known_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
                                                 p['camera_pose_convention'])
-        self.rotations = CameraRotations(translation=self.detranslate or self.carry,
+        self.rotations = CameraRotations(translation=self.carry,
                                          coast_s=p['camera_translation_coast_s'])
         #: the rotation and camera position each input stamp was moved by (for the floor
         #: message), newest last
@@ -443,8 +439,6 @@ class PhysicsNode(Node):
         elif p['derotate_camera']:
             self.get_logger().warn('derotate_camera needs floor_source estimate or '
                                    'camera_params and a camera_motion_topic: off')
-        if p['camera_translation'] and not self.derotate:
-            self.get_logger().warn('camera_translation needs derotate_camera: off')
         if p['carry_with_camera'] and not self.carry:
             self.get_logger().warn('carry_with_camera needs floor_source estimate or '
                                    'camera_params, a camera_motion_topic and derotate_camera '
@@ -452,8 +446,6 @@ class PhysicsNode(Node):
         self.diag.set_value('carry_with_camera', 'on' if self.carry else 'off')
         self.diag.set_value('camera_rotation', 'taken out (outputs in the first image\'s '
                             'floor frame)' if self.derotate else 'off')
-        self.diag.set_value('camera_translation', 'taken out where measured (outputs in '
-                            'floor_fixed)' if self.detranslate else 'off')
         self.diag.watch('motion', self.pub_motion)
         # frames whose contacts are late go after at most contacts_wait_s plus half of it
         # (each tick of a timer is a turn of the executor, which costs CPU even when idle)
@@ -470,8 +462,7 @@ class PhysicsNode(Node):
         p = self.p
         return OnlinePhysics(
             self.params, self._floor_source(),
-            frame_id=p['frame_id'] or (FIXED_FLOOR_FRAME if self.detranslate else
-                                       START_FLOOR_FRAME if self.derotate else ''),
+            frame_id=p['frame_id'] or (START_FLOOR_FRAME if self.derotate else ''),
             contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
             contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
                                if contacts_topic else None),
@@ -638,8 +629,7 @@ class PhysicsNode(Node):
         is)."""
         if not self.derotate:
             return pose
-        R, C = self._camera_at(stamp)
-        return rotate_pose(pose, R, C if self.detranslate else None)
+        return rotate_pose(pose, self._camera_at(stamp)[0])
 
     def on_camera_pose(self, msg) -> None:
         """Keep the camera's known pose (camera_pose_topic)."""
@@ -748,9 +738,8 @@ class PhysicsNode(Node):
             used = self.used_rotations.get(frame.stamp_ns) if self.derotate else None
             publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
                 make_header(frame.stamp_ns, frame.input_frame),
-                floor_in_camera(frame.floor, None if used is None else used[0],
-                                translation=None if used is None or not self.detranslate
-                                else used[1]), frame.frame_id))
+                floor_in_camera(frame.floor, None if used is None else used[0]),
+                frame.frame_id))
         self.pub_motion.publish(cdr.pose_to_motion(pose, header))
         publish_if_heard(self.pub_joints,
                          lambda: cdr.positions_to_cloud(pose.joint_positions(), header))

@@ -88,14 +88,6 @@ def test_translation_measured_coasted_and_held():
     assert np.allclose(cams.pose_at(8 * dt - 2_000_000_000)[1], 0)
 
 
-def test_the_floor_seen_from_a_moved_camera():
-    floor = FloorFrame.from_camera_height_pitch(1.5, 0.2)      # in the first image's frame
-    R, C = _rot([0.1, 1.0, 0.0], 0.3), np.array([0.4, -0.1, 1.2])
-    seen = floor_in_camera(floor, R, translation=C)
-    p = np.random.default_rng(1).normal(size=(5, 3))            # points in the current camera
-    assert np.allclose(seen.transform_points(p), floor.transform_points(p @ R.T + C))
-
-
 def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame',
          positions=None, known=None):
     """Drive a physics node in process (as ``mocap process`` does) with camera-frame poses,
@@ -211,51 +203,6 @@ def test_without_an_estimate_the_first_image_is_held(panning):
     ref, _, _ = _run({}, static[:20], contacts[:20], None)
     assert np.abs(_feet(der) - _feet(ref)).max() < 1e-6
     assert node.rotation_held_frames == 20 and node.rotation_own_frames == 0
-
-
-def test_a_walking_camera_taken_out_gives_the_static_cameras_physics(panning):
-    """A camera that walks sideways along the floor (1 m/s) while it turns: with
-    camera_translation its measured position is taken out too, and the physics is the
-    static camera's (frame ``floor_fixed``), also where a few steps were not measured
-    (coasted on the last velocity); its floor message is the floor seen from each moved
-    camera. Derotated only, the feet move with the camera."""
-    static, _, turns, contacts, up = panning
-    n = len(static)
-    side = np.cross(up, [0.0, 0.0, 1.0])
-    side /= np.linalg.norm(side)
-    C = [side * (i / 30.0) for i in range(n)]              # first camera frame, m
-    # the current camera sees p_current = Q^T (p_first - C)
-    walked = [Pose(p.skeleton, rotate_pose(p, Q.T).rotations, Q.T @ (p.root_position - c))
-              for p, Q, c in zip(static, turns, C)]
-    # the keypoint node's position does not advance in unmeasured frames: 20 and 21 missed
-    est, offset = [], np.zeros(3)
-    for i in range(n):
-        if i in (20, 21):
-            est.append(None)
-            offset = offset + (C[i] - C[i - 1])
-        else:
-            est.append(C[i] - offset)
-    ref, ref_floors, _ = _run({}, static, contacts, None)
-    fix, fix_floors, node = _run({'derotate_camera': True, 'camera_translation': True},
-                                 walked, contacts, turns, positions=est)
-    der, _, _ = _run({'derotate_camera': True}, walked, contacts, turns, positions=est)
-    assert {f.frame_id for f in fix} == {'floor_fixed'}
-    assert np.abs(_feet(fix) - _feet(ref)).max() < 1e-6
-    assert np.abs(_feet(der) - _feet(ref)).max() > 0.5
-    r = node.rotations
-    assert (r.measured_frames, r.coasted_frames, r.held_frames) == (n - 2, 2, 0)
-    # the floor seen from each moved camera: a point on the floor under the first camera,
-    # seen from the current one, stays on the published floor
-    from mocap_core.ros_conversions import transform_stamped_to_arrays
-    from mocap_core.rotations import quat_to_matrix
-    assert len(fix_floors) == len(ref_floors) == n
-    for msg, ref_msg, Q, c in zip(fix_floors[::10], ref_floors[::10], turns[::10], C[::10]):
-        q, b = transform_stamped_to_arrays(msg)
-        A = quat_to_matrix(q)                               # p_camera = A p_floor + b
-        ref_q, ref_b = transform_stamped_to_arrays(ref_msg)
-        on_floor = quat_to_matrix(ref_q) @ np.array([0.3, -0.2, 0.0]) + ref_b  # first camera
-        in_current = Q.T @ (on_floor - c)
-        assert abs((A.T @ (in_current - b))[2]) < 1e-6
 
 
 @pytest.mark.parametrize('motion', ['pan', 'walk'])
