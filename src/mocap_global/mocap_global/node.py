@@ -541,9 +541,9 @@ class GMRNode(Node):
         self.diag.set_value('camera_pose', 'ok')
         R_wc, t_wc = pose
         if not on_floor:
-            return InputAnchor(True, R_wc, t_wc)
+            return InputAnchor(True, R_wc, t_wc, known=True)
         _, A, b = self.floor
-        return InputAnchor(True, R_wc @ A, R_wc @ b + t_wc)
+        return InputAnchor(True, R_wc @ A, R_wc @ b + t_wc, known=True)
 
     def on_floor(self, msg: TransformStamped) -> None:
         """The physics floor in the camera frame: ``p_camera = A p_floor + b``."""

@@ -144,13 +144,17 @@ class InputAnchor:
     the frame before (no estimate noise in it): fused with the static time constants of
     :class:`StaticCameraFusion`. ``translating``: the camera walks or drives (its position
     measured over the floor); such frames follow the fused root even with
-    ``moving_lock_time_constant_s``."""
+    ``moving_lock_time_constant_s``. ``known``: the map comes from a known camera pose
+    (no estimate noise in it, however the camera moves): with a floor input (the physics
+    output, already filtered) fused with the static time constants and never locked to
+    GMR's feet, so that the world output is the input moved by the known map."""
 
     fixed: bool
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     static: bool = False
     translating: bool = False
+    known: bool = False
 
     def apply(self, R_in: np.ndarray, T_in: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """An input root pose (R (3, 3), T (3,)) in the fixed frame."""
@@ -163,11 +167,11 @@ def _anchor_between(a: Optional[InputAnchor], b: Optional[InputAnchor], t: float
     ``b``: interpolated (rotation by slerp, translation linearly) when both are fixed anchors
     of the same kind, else ``a``'s."""
     if a is None or b is None or not (a.fixed and b.fixed) or a.static != b.static \
-            or a.translating != b.translating:
+            or a.translating != b.translating or a.known != b.known:
         return a
     q = quat_slerp(matrix_to_quat(a.rotation), matrix_to_quat(b.rotation), t)
     return InputAnchor(True, quat_to_matrix(q), (1.0 - t) * a.translation + t * b.translation,
-                       static=a.static, translating=a.translating)
+                       static=a.static, translating=a.translating, known=a.known)
 
 
 class StaticCameraFusion:
@@ -640,7 +644,7 @@ class OnlineGMR:
         # no anchors: a camera declared static; a known camera pose moves. Only a floor
         # input (the physics output, already filtered) is taken as it is: a camera-frame
         # root carries the lifter's depth noise
-        static = self.floor_input and (anchor.static if anchor is not None
+        static = self.floor_input and (anchor.static or anchor.known if anchor is not None
                                        else not self.fusion.known_world)
         return self.fusion.step(R, T, R_in, T_in, up, first=first, static=static)
 
@@ -684,7 +688,8 @@ class OnlineGMR:
         if self.floor_input:
             R, T = self._on_floor(self._heading_offset(R, out, pos), T, pose)
             anchor = self._anchors_in[pos]
-            turning = anchor is not None and not anchor.static and not anchor.translating
+            turning = anchor is not None and not (anchor.static or anchor.translating
+                                                  or anchor.known)
             if self.foot_lock and fused and turning and self.moving_lock_time_constant_s > 0:
                 # a turning camera's fused root carries the noise of the estimate of its
                 # motion: the feet stay locked (steps follow the fused root while no point

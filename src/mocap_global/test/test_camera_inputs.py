@@ -221,8 +221,7 @@ def test_a_known_camera_pose_with_the_physics_floor_input(graph_node):
     from mocap_core.data.synth2d import look_at
 
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
-                                  fusion_position_time_constant_s=1e-6,
-                                  fusion_orientation_time_constant_s=1e-6)
+                                  fusion_static_position_time_constant_s=1e-6)
     world = _poses(40)
     t_wc = np.array([-2.0, 3.0, 1.4])
     R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T          # optical -> world
