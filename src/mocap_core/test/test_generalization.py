@@ -13,7 +13,7 @@ from mocap_core.data.detector_placement import (DetectorPlacement, fit_detector_
 from mocap_core.data.strict_split import family_of, strict_assignment
 from mocap_core.data.synth2d import keypoints_3d, look_at
 from mocap_core.render.evaluate import (aggregate, detector_swaps, foot_scores, motion_group,
-                                         score_clip)
+                                         score_clip, skating_in_world)
 from mocap_core.skeleton import JOINT_INDEX, JOINT_MIRROR, KEYPOINT_NAMES, NUM_KEYPOINTS
 
 REPO = Path(__file__).resolve().parents[3]
@@ -214,6 +214,39 @@ def test_foot_scores_against_the_stage_floor(walk):
     assert foot_scores(slid[kept], kept, contacts, 30.0)['skating_mm'] == \
         pytest.approx(10.0, abs=1e-6)
     assert np.isnan(foot_scores(W, idx, np.zeros_like(contacts), 30.0)['skating_mm'])
+
+
+def test_skating_in_the_world_with_a_floor_frame_riding_with_the_camera(walk):
+    """A camera that walks 2 cm per frame along x: a left foot that stands in the world
+    moves 2 cm per frame in the camera's floor frame (its own-frame skating says 20 mm) and
+    scores 0 in the world; a foot held still in the floor frame scores 20 mm in the world."""
+    from mocap_core.rotations import matrix_to_quat
+    fk = walk.fk()
+    n = 60
+    feet = [JOINT_INDEX[k] for k in ('left_ankle', 'left_toe')]
+    W = fk.positions[:n].copy()
+    W[:, feet] = W[0, feet]                            # the left foot stands in the world
+    idx = np.arange(n)
+    C = np.stack([0.02 * idx, np.full(n, -3.0), np.full(n, 1.5)], axis=1)   # camera centre
+    R = look_at(C[0], C[0] + np.array([0.0, 1.0, -0.3]))   # p_camera = R (p_world - c)
+    shift = C * np.array([1.0, 1.0, 0.0])              # the floor frame rides with the camera
+    in_floor = W - shift[:, None]
+    quats = np.repeat(matrix_to_quat(R)[None], n, axis=0)
+    trans = np.repeat((R @ np.array([0.0, 0.0, -1.5]))[None], n, axis=0)
+    gt = {'camera_R': np.repeat(R[None], n, axis=0), 'camera_position': C, 'fps': 30.0,
+          'contacts': np.zeros((n, 4), dtype=bool)}
+    gt['contacts'][:, :2] = True                       # left heel and toe in contact
+    assert foot_scores(in_floor, idx, gt['contacts'], 30.0)['skating_mm'] == \
+        pytest.approx(20.0, abs=1e-6)
+    assert skating_in_world(in_floor, idx, quats, trans, idx, gt)['skating_world_mm'] == \
+        pytest.approx(0.0, abs=1e-6)
+    held = W.copy()
+    held[:, feet] = in_floor[0, feet]                  # still in the floor frame
+    assert skating_in_world(held, idx, quats, trans, idx, gt)['skating_world_mm'] == \
+        pytest.approx(20.0, abs=1e-6)
+    # frames without a floor message are left out: none left to score
+    assert np.isnan(skating_in_world(in_floor, idx, quats[:1], trans[:1], idx[:1],
+                                     gt)['skating_world_mm'])
 
 
 def test_stage_change_from_the_lifter_is_paired_by_frame():

@@ -358,6 +358,10 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
         from ..render.evaluate import floor_errors
         score.root['physics'].update(floor_errors(fv[:, :4], fv[:, 4:], _index(fs, first, fps),
                                                   gt))
+        if 'physics' in roots and 'contacts' in gt:
+            from ..render.evaluate import skating_in_world
+            score.root['physics'].update(skating_in_world(
+                *roots['physics'], fv[:, :4], fv[:, 4:], _index(fs, first, fps), gt))
     return score
 
 
