@@ -92,6 +92,7 @@ from .model import TTA_MODES, with_tta
 from mocap_core.foot_plant import FootPlantConfig
 
 from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame, prepare_outputs
+from .se3 import heading_rotation
 from .weights import default_weights, load_weights
 
 @dataclass
@@ -542,8 +543,17 @@ class GMRNode(Node):
         R_wc, t_wc = pose
         if not on_floor:
             return InputAnchor(True, R_wc, t_wc, known=True)
+        # one floor for all outputs: the physics floor is the world's z = 0 (the world frame
+        # of the pose has z up, REP-103), so the known pose gives the floor frame's heading
+        # and its position along the floor; the vertical and tilt stay the physics' (an
+        # estimated floor a few degrees off would otherwise tilt the world output and lift
+        # its feet off z = 0)
         _, A, b = self.floor
-        return InputAnchor(True, R_wc @ A, R_wc @ b + t_wc, known=True)
+        M = R_wc @ A
+        origin = R_wc @ b + t_wc
+        return InputAnchor(True, heading_rotation(float(np.arctan2(M[1, 0] - M[0, 1],
+                                                                   M[0, 0] + M[1, 1]))),
+                           np.array([origin[0], origin[1], 0.0]), known=True)
 
     def on_floor(self, msg: TransformStamped) -> None:
         """The physics floor in the camera frame: ``p_camera = A p_floor + b``."""
