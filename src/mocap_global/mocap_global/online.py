@@ -388,6 +388,8 @@ class OnlineGMR:
         self.nonfinite_outputs = 0
         #: Frames not fused because their anchor said the camera translates (or is unknown).
         self.unanchored_frames = 0
+        #: a frame with a known camera pose was fused in this segment (``_fuse``)
+        self._known_placed = False
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -634,6 +636,8 @@ class OnlineGMR:
               up: np.ndarray, first: bool) -> Tuple[np.ndarray, np.ndarray, bool]:
         """The fusion step of one frame (module docstring: static camera, camera motion)."""
         R_in, T_in = quat_to_matrix(pose.rotations[0]), np.asarray(pose.root_position, float)
+        if first:
+            self._known_placed = False
         if anchor is not None:
             if not anchor.fixed:
                 self.unanchored_frames += 1
@@ -641,6 +645,12 @@ class OnlineGMR:
                     self.fusion.realign()
                 return R, T, False
             R_in, T_in = anchor.apply(R_in, T_in)
+            if anchor.known and not self._known_placed:
+                # the segment's first frame with a known pose (the ones before it, without
+                # one, are GMR's from an arbitrary origin): it is placed where the pose says,
+                # not pulled there over the next frames
+                first = True
+                self._known_placed = True
         # no anchors: a camera declared static; a known camera pose moves. Only a floor
         # input (the physics output, already filtered) is taken as it is: a camera-frame
         # root carries the lifter's depth noise

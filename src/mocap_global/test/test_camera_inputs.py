@@ -288,3 +288,75 @@ def test_a_turning_camera_taken_out_by_physics_is_fused_as_a_static_one(graph_no
                                atol=1e-6)
     np.testing.assert_allclose(T[:, 2], T_in[:, 2], atol=1e-6)
 
+
+
+def test_a_known_camera_pose_keeps_the_physics_floor_level(graph_node):
+    """With a physics floor 5 degrees off the truth, a known camera pose gives the floor
+    frame's heading and position along the floor, not its tilt: the world output's root
+    orientation is the input's turned about z (one floor for all outputs), and the root
+    height is the input's."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+    from mocap_core.data.synth2d import look_at
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor')
+    world = _poses(30)
+    t_wc = np.array([-2.0, 3.0, 1.4])
+    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T
+    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
+    x = f / np.linalg.norm(f)
+    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
+    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
+    # the estimated floor frame: the true one tilted by 5 degrees about its x axis
+    R_wf = R_wf @ axis_angle_to_matrix(np.array([np.radians(5.0), 0.0, 0.0]))
+    A, b = R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
+    inputs = []
+    for i, p in enumerate(world):
+        graph.publish('/robot/camera', rc.root_to_odometry(
+            t_wc, matrix_to_quat(R_wc), rc.make_header(i * DT_NS, 'odom'),
+            'camera_optical_frame'))
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(R_wf.T @ quat_to_matrix(p.rotations[0]))
+        inputs.append(Pose(p.skeleton, rot, R_wf.T @ (p.root_position - t_wf)))
+        graph.publish('/floor', rc.transform_stamped(
+            rc.make_header(i * DT_NS, 'camera_optical_frame'), 'floor', A, b))
+        graph.publish('/in/motion', rc.pose_to_motion(inputs[-1],
+                                                      rc.make_header(i * DT_NS, 'floor')))
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == 30
+    for m, p in list(zip(odom, inputs))[1:]:
+        T, q = rc.odometry_to_root(m)
+        turn = quat_to_matrix(q) @ quat_to_matrix(p.rotations[0]).T
+        assert turn[2, 2] > 1 - 1e-6                  # a turn about z only
+        assert T[2] == pytest.approx(p.root_position[2], abs=1e-6)
+
+
+def test_the_first_frame_with_a_known_pose_is_placed_not_pulled(graph_node):
+    """Frames before the first known camera pose are GMR's, from its own origin; the first
+    frame with a pose is placed where the pose puts it (not pulled there over the next
+    frames, which the default time constants would make a 2-3 m slide of the feet)."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+    from mocap_core.data.synth2d import look_at
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera')
+    world = [Pose(p.skeleton, p.rotations, p.root_position + [4.0, -2.0, 0.0])
+             for p in _poses(20)]
+    t_wc = np.array([-2.0, 3.0, 1.4])
+    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T
+    seen = _in_camera(world, R_wc, t_wc)
+    for i, p in enumerate(seen):
+        if i >= 3:
+            graph.publish('/robot/camera', rc.root_to_odometry(
+                t_wc, matrix_to_quat(R_wc), rc.make_header(i * DT_NS, 'odom'),
+                'camera_optical_frame'))
+        graph.publish('/in/motion', rc.pose_to_motion(
+            p, rc.make_header(i * DT_NS, 'camera_optical_frame')))
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == 20
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
+    np.testing.assert_allclose(T[3], world[3].root_position, atol=1e-6)
+    assert np.linalg.norm(T[2] - world[2].root_position) > 1.0     # GMR's own origin before
+    assert np.linalg.norm(np.diff(T[3:], axis=0), axis=1).max() < 0.1
