@@ -142,14 +142,16 @@ PARAMETERS = (
               'the floor in the current camera frame. Only with floor_source estimate or '
               'camera_params', read_only=True),
     ParamSpec('carry_with_camera', False, 'Carry the simulated body, its stance feet and its '
-              'last target with the camera\'s motion between frames (camera_motion_topic: the '
-              'turn about the floor\'s normal and, where the keypoint node measured it over the '
-              'floor, the step along it), so that a foot that stands in the world keeps '
-              'standing while the camera turns or walks; the outputs stay in the camera\'s '
-              'floor frame (frame_id floor). Not with derotate_camera', read_only=True),
-    ParamSpec('camera_pose_topic', '', 'carry_with_camera: the camera\'s known pose in a world '
-              'frame (a robot\'s odom or map pose of its camera) instead of the keypoint '
-              'node\'s estimate; empty = the estimate', read_only=True),
+              'last target with the camera\'s motion between frames as the keypoint node '
+              'estimates it (camera_motion_topic: the turn about the floor\'s normal and, where '
+              'measured over the floor, the step along it), so that a foot that stands in the '
+              'world keeps standing while the camera turns or walks; the outputs stay in the '
+              'camera\'s floor frame (frame_id floor). Not with derotate_camera. Off by '
+              'default: the estimate\'s steps are too rough (docs/physics.md)', read_only=True),
+    ParamSpec('camera_pose_topic', '', 'The camera\'s known pose in a world frame (a robot\'s '
+              'odom or map pose of its camera): the simulated body is carried with it as with '
+              'carry_with_camera, whatever that says (not with derotate_camera); empty = none',
+              read_only=True),
     ParamSpec('camera_pose_type', 'odometry', "Message type on camera_pose_topic: 'odometry' "
               "(nav_msgs/Odometry) or 'pose' (geometry_msgs/PoseStamped)", read_only=True,
               additional_constraints='odometry or pose'),
@@ -359,9 +361,9 @@ class PhysicsNode(Node):
         # the camera's rotation taken out of the input (derotate_camera)
         self.derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
             and bool(p['camera_motion_topic'])
-        self.carry = bool(p['carry_with_camera']) and not self.derotate \
-            and p['floor_source'] != 'input' \
-            and bool(p['camera_motion_topic'] or p['camera_pose_topic'])
+        self.carry = not self.derotate and p['floor_source'] != 'input' and (
+            bool(p['camera_pose_topic']) or
+            (bool(p['carry_with_camera']) and bool(p['camera_motion_topic'])))
         #: the known camera pose (camera_pose_topic), for carry_with_camera
         self.known_poses: Optional[KnownCameraPoses] = None
         self.camera_pose_missing = 0
@@ -439,11 +441,13 @@ class PhysicsNode(Node):
         elif p['derotate_camera']:
             self.get_logger().warn('derotate_camera needs floor_source estimate or '
                                    'camera_params and a camera_motion_topic: off')
-        if p['carry_with_camera'] and not self.carry:
-            self.get_logger().warn('carry_with_camera needs floor_source estimate or '
-                                   'camera_params, a camera_motion_topic and derotate_camera '
-                                   'off: off')
-        self.diag.set_value('carry_with_camera', 'on' if self.carry else 'off')
+        if (p['carry_with_camera'] or p['camera_pose_topic']) and not self.carry:
+            self.get_logger().warn('carrying the body with the camera needs floor_source '
+                                   'estimate or camera_params, a camera_motion_topic or '
+                                   'camera_pose_topic, and derotate_camera off: off')
+        self.diag.set_value('carry_with_camera', 'off' if not self.carry else
+                            'with the known camera pose' if self.known_poses is not None
+                            else 'with the camera-motion estimate')
         self.diag.set_value('camera_rotation', 'taken out (outputs in the first image\'s '
                             'floor frame)' if self.derotate else 'off')
         self.diag.watch('motion', self.pub_motion)

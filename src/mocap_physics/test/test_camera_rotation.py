@@ -252,15 +252,14 @@ def test_carried_with_a_moving_camera_the_feet_stand_as_for_a_static_one(panning
 
 
 def test_carried_with_a_known_camera_pose(panning):
-    """carry_with_camera with camera_pose_topic: the node carries every frame that has a
+    """camera_pose_topic (carry_with_camera not needed): the node carries every frame that has a
     known pose near it by that pose (output frame ``floor``; the estimate is not needed),
     counts the frames without one and does not carry them; the output differs from the
     same input without carrying."""
     static, panned, turns, contacts, _ = panning
     n = len(static)
     world = [(Q, np.array([0.5, 0.0, 1.4])) for Q in turns]    # a pan on a tripod
-    kwargs = {'carry_with_camera': True, 'camera_pose_topic': '/robot/camera',
-              'camera_pose_type': 'pose'}
+    kwargs = {'camera_pose_topic': '/robot/camera', 'camera_pose_type': 'pose'}
     car, _, node = _run(kwargs, panned, contacts, None, known=world)
     assert len(car) == n and {f.frame_id for f in car} == {'floor'}
     assert node.online.camera_steps == n - 1 and node.camera_pose_missing == 0
