@@ -53,7 +53,8 @@ def _run(frames, info, with_gmr=False):
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
     by_topic = {}
-    graph = InProcessGraph(record=lambda t, m, q: by_topic.setdefault(t, []).append(m))
+    graph = InProcessGraph(record=lambda t, m, q: (by_topic.setdefault(t, []).append(m),
+                                                   by_topic.setdefault('order', []).append(t)))
     nodes = [graph.add(LifterNode(context=context)),
              graph.add(PhysicsNode(context=context))]
     if with_gmr:
@@ -117,6 +118,12 @@ def test_two_people_through_every_stage(two_people):
     worlds = both[topics.bodies_topic('world', 'motion')]
     assert sorted({pid for m in worlds for pid, _ in motion_to_bodies(m)}) == [1, 2]
     assert len(worlds) == FRAMES
+    # each frame's physics floor goes out before the combined motion that the world stage
+    # follows (it places the frame on that floor: a frame without one is GMR's alone)
+    order = [t for t in both['order']
+             if t in (topics.PHYSICS_FLOOR, topics.bodies_topic('physics', 'motion'))]
+    assert len(order) == 2 * FRAMES
+    assert order[::2] == [topics.PHYSICS_FLOOR] * FRAMES
 
 
 def test_mocap_process_and_bvh_export_of_two_people(two_people, tmp_path):

@@ -380,6 +380,8 @@ class PhysicsNode(Node):
         self.used_rotations: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
         self.rotation_held_frames = 0
         self.rotation_own_frames = 0
+        #: the stamp whose floor was published last (:meth:`_publish_floor`)
+        self._floor_stamp = -1
         contacts_topic = p['contacts_topic']
         self.online = self._make_online(contacts_topic)
         # several people (the combined input): one OnlinePhysics per id
@@ -706,8 +708,13 @@ class PhysicsNode(Node):
         of a stamp in one combined message (the world stage then runs its network once for
         all of them), then each person's own topics and the main person's."""
         for stamp, group in by_stamp(released, self.main_id):
-            # combined first: the next stage follows everybody from it, and hears it before
-            # the single-person topics
+            # the main person's floor first (the world stage places every frame on it, so
+            # it must have the floor of a frame before its motion), then the combined
+            # message: the next stage follows everybody from it, and hears it before the
+            # single-person topics
+            main = next((f for pid, f in group if pid == self.main_id), None)
+            if main is not None and main.stamp_ns > self.main_last_ns:
+                self._publish_floor(main)
             self.combined.publish(make_header(stamp, group[0][1].frame_id), [
                 (pid, f.result.pose, f.result.contact_active.astype(float))
                 for pid, f in group])
@@ -729,21 +736,27 @@ class PhysicsNode(Node):
             w = res.feet[foot]
             b.publish(pid, f'grf/{foot}', lambda w=w: wrench_to_msg(w.force, w.moment, header))
 
+    def _publish_floor(self, frame: PhysicsFrame) -> None:
+        """The floor of the main person's frame (once per stamp), before its motion: the
+        floor in the current camera frame (derotate_camera: the first image's floor turned
+        back by the rotation this frame was turned by)."""
+        if self.pub_floor is None or frame.floor is None \
+                or frame.stamp_ns == self._floor_stamp:
+            return
+        self._floor_stamp = frame.stamp_ns
+        used = self.used_rotations.get(frame.stamp_ns) if self.derotate else None
+        publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
+            make_header(frame.stamp_ns, frame.input_frame),
+            floor_in_camera(frame.floor, None if used is None else used[0]),
+            frame.frame_id))
+
     def _publish_frame(self, frame: PhysicsFrame) -> None:
         """The main person's (or the single input's) frame on the single-person topics: the
         motion always, the others only while someone listens (mocap_core.publishing)."""
         res = frame.result
         header = make_header(frame.stamp_ns, frame.frame_id)
         pose = res.pose
-        if self.pub_floor is not None and frame.floor is not None:
-            # first, so that a frame's floor is known when its motion arrives; the floor in
-            # the current camera frame (derotate_camera: the first image's floor turned back
-            # by the rotation this frame was turned by)
-            used = self.used_rotations.get(frame.stamp_ns) if self.derotate else None
-            publish_if_heard(self.pub_floor, lambda: floor_transform_msg(
-                make_header(frame.stamp_ns, frame.input_frame),
-                floor_in_camera(frame.floor, None if used is None else used[0]),
-                frame.frame_id))
+        self._publish_floor(frame)
         self.pub_motion.publish(cdr.pose_to_motion(pose, header))
         publish_if_heard(self.pub_joints,
                          lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
