@@ -121,3 +121,24 @@ def spin_node(make_node, args, name: str) -> int:
             close_nodes(executor, [node], label=name)
         finally:
             signals.restore()
+
+
+def camera_pose_params(topic_description: str, missing: str) -> tuple:
+    """The four parameters of a known camera pose (``camera_pose_topic``, ``_type``,
+    ``_convention``, ``_max_age_s``; :class:`mocap_core.camera_pose.KnownCameraPoses`), shared
+    by the nodes that take one. ``topic_description``: what the node does with the pose;
+    ``missing``: what happens to a frame without a pose near it."""
+    return (
+        ParamSpec('camera_pose_topic', '', "The camera's known pose in a world frame (a "
+                  "robot's odom or map pose of its camera): " + topic_description,
+                  read_only=True),
+        ParamSpec('camera_pose_type', 'odometry', "Message type on camera_pose_topic: "
+                  "'odometry' (nav_msgs/Odometry) or 'pose' (geometry_msgs/PoseStamped)",
+                  read_only=True, additional_constraints='odometry or pose'),
+        ParamSpec('camera_pose_convention', 'optical', "Which frame the camera pose is of: "
+                  "'optical' (x right, y down, z forward) or 'body' (REP-103 camera link: x "
+                  "forward, y left, z up)", read_only=True,
+                  additional_constraints='optical or body'),
+        ParamSpec('camera_pose_max_age_s', 0.1, "A camera pose further than this from a "
+                  "frame's stamp does not serve it (" + missing + ')', min_value=0.0),
+    )

@@ -84,7 +84,8 @@ from mocap_core.publishing import publish_if_heard
 from mocap_core.tf import TfBroadcaster
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import deserialised_unless, guarded
-from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
+from mocap_core.parameters import (ParamSpec, camera_pose_params, declare_parameters,
+                                   help_requested, spin_node)
 from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.rotations import quat_to_matrix
 
@@ -168,19 +169,10 @@ PARAMETERS = (
               "the camera's rotation and position taken out of the input root first: a "
               "moving camera then fixes the person in the world as a static one does",
               read_only=True),
-    ParamSpec('camera_pose_topic', '', 'The camera\'s pose in a world frame (a robot\'s odom '
-              'or map): the world pose is that pose composed with the input pose, GMR fills '
-              'gaps and smooths, and the outputs are in the pose\'s frame. Empty = unknown',
-              read_only=True),
-    ParamSpec('camera_pose_type', 'odometry', "Message type on camera_pose_topic: 'odometry' "
-              "(nav_msgs/Odometry) or 'pose' (geometry_msgs/PoseStamped)", read_only=True,
-              additional_constraints='odometry or pose'),
-    ParamSpec('camera_pose_convention', 'optical', "Which frame the camera pose is of: "
-              "'optical' (x right, y down, z forward) or 'body' (REP-103 camera link: x "
-              "forward, y left, z up)", read_only=True,
-              additional_constraints='optical or body'),
-    ParamSpec('camera_pose_max_age_s', 0.1, 'A camera pose further than this from a frame\'s '
-              'stamp does not serve it (GMR fills the frame)', min_value=0.0),
+    *camera_pose_params(
+        'the world pose is that pose composed with the input pose, GMR fills gaps and '
+        'smooths, and the outputs are in the pose\'s frame; empty = unknown',
+        'GMR fills the frame'),
     ParamSpec('static_camera', False, "Same as camera_mode:=static (kept for older launch "
               "files)", read_only=True),
     ParamSpec('camera_motion_topic', topics.CAMERA_MOTION, 'The camera-motion estimate '

@@ -106,7 +106,8 @@ from mocap_core.camera_pose import KnownCameraPoses
 from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, deserialised_unless, guarded
-from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
+from mocap_core.parameters import (ParamSpec, camera_pose_params, declare_parameters,
+                                   help_requested, spin_node)
 from mocap_core.qos import STREAM_QOS, input_qos
 from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bodies,
                                         motion_to_pose, msg_to_bodies_contacts,
@@ -148,19 +149,10 @@ PARAMETERS = (
               'world keeps standing while the camera turns or walks; the outputs stay in the '
               'camera\'s floor frame (frame_id floor). Not with derotate_camera. Off by '
               'default: the estimate\'s steps are too rough (docs/physics.md)', read_only=True),
-    ParamSpec('camera_pose_topic', '', 'The camera\'s known pose in a world frame (a robot\'s '
-              'odom or map pose of its camera): the simulated body is carried with it as with '
-              'carry_with_camera, whatever that says (not with derotate_camera); empty = none',
-              read_only=True),
-    ParamSpec('camera_pose_type', 'odometry', "Message type on camera_pose_topic: 'odometry' "
-              "(nav_msgs/Odometry) or 'pose' (geometry_msgs/PoseStamped)", read_only=True,
-              additional_constraints='odometry or pose'),
-    ParamSpec('camera_pose_convention', 'optical', "Which frame the camera pose is of: "
-              "'optical' (x right, y down, z forward) or 'body' (REP-103 camera link: x "
-              "forward, y left, z up)", read_only=True,
-              additional_constraints='optical or body'),
-    ParamSpec('camera_pose_max_age_s', 0.1, 'A camera pose further than this from a frame\'s '
-              'stamp does not serve it (the frame is not carried)', min_value=0.0),
+    *camera_pose_params(
+        'the simulated body is carried with it as with carry_with_camera, whatever that '
+        'says (not with derotate_camera); empty = none',
+        'the frame is not carried'),
     ParamSpec('camera_translation_coast_s', 0.5, 'carry_with_camera: a frame whose camera step '
               'was not measured moves the camera by its last measured velocity for this long '
               'after the last measurement, then not at all', min_value=0.0, max_value=10.0,
