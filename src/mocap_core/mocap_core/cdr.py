@@ -37,10 +37,11 @@ from .skeleton import CONTACT_POINT_NAMES
 from .topics import body_name
 from .urdf import revolute_joint_names
 
-__all__ = ['CdrWriter', 'PathTrail', 'bodies_contacts_to_msg', 'bodies_to_cloud',
-           'bodies_to_motion', 'built_messages', 'contacts_to_msg', 'marker_array',
-           'pose_to_joint_state', 'pose_to_markers', 'pose_to_motion', 'pose_transforms',
-           'positions_to_cloud', 'root_to_odometry', 'tf_message']
+__all__ = ['CdrWriter', 'DecodedMotion', 'PathTrail', 'bodies_contacts_to_msg',
+           'bodies_to_cloud', 'bodies_to_motion', 'built_messages', 'contacts_to_msg',
+           'decode_motion', 'marker_array', 'pose_to_joint_state', 'pose_to_markers',
+           'pose_to_motion', 'pose_transforms', 'positions_to_cloud', 'root_to_odometry',
+           'tf_message']
 
 _ENCAPSULATION = b'\x00\x01\x00\x00'      # CDR_LE, no options
 _I32 = struct.Struct('<i')
@@ -192,6 +193,117 @@ def bodies_to_motion(bodies: Sequence[Tuple[int, Pose]], header) -> bytes:
     transforms = (np.concatenate([pose_transforms(pose) for _, pose in bodies])
                   if bodies else np.zeros((0, 7)))
     return _motion(header, names, transforms)
+
+
+class DecodedMotion:
+    """A ``trajectory_msgs/MultiDOFJointTrajectory`` read by :func:`decode_motion`: what the
+    stages use of it, as arrays.
+
+    Attributes:
+        header: ``std_msgs/Header`` (a message object: stamp and frame id).
+        joint_names: the joint names, in the message's order.
+        transforms: ``(len(joint_names), 7)`` float64 of the first point: translation x, y, z
+            (m) and rotation x, y, z, w of each joint, in the message's order.
+        problem: why the transforms cannot be read (no point, a count unlike the names'),
+            or None; the conversions (:func:`mocap_core.ros_conversions.motion_to_pose`)
+            raise it as MessageError, as they do for the deserialised message.
+    """
+
+    __slots__ = ('header', 'joint_names', 'transforms', 'problem')
+
+    def __init__(self, header, joint_names: list, transforms: np.ndarray,
+                 problem: Optional[str] = None) -> None:
+        self.header = header
+        self.joint_names = joint_names
+        self.transforms = transforms
+        self.problem = problem
+
+
+class _Reader:
+    """Reads little-endian CDR fields (the module doc's encoding); MessageError past the
+    end."""
+
+    __slots__ = ('data', 'pos')
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self.pos = 4                                  # after the encapsulation header
+
+    def _take(self, n: int, align: int) -> int:
+        start = self.pos + (-(self.pos - 4) % align)
+        end = start + n
+        if end > len(self.data):
+            from .ros_conversions import MessageError
+            raise MessageError(f'truncated message ({len(self.data)} bytes)')
+        self.pos = end
+        return start
+
+    def u32(self) -> int:
+        return _U32.unpack_from(self.data, self._take(4, 4))[0]
+
+    def time(self) -> Tuple[int, int]:
+        return _TIME.unpack_from(self.data, self._take(8, 4))
+
+    def string(self) -> str:
+        n = self.u32()
+        start = self._take(n, 1)
+        return self.data[start:start + max(n - 1, 0)].decode(errors='replace')
+
+    def float64s(self, count: int) -> np.ndarray:
+        if count == 0:
+            return np.zeros(0)
+        start = self._take(8 * count, 8)
+        return np.frombuffer(self.data, dtype='<f8', count=count, offset=start).astype(float)
+
+
+#: Sequences longer than this in a motion message are malformed (a person has 18 joints).
+_MAX_JOINTS = 100_000
+
+
+def decode_motion(data: bytes):
+    """The CDR bytes of a ``trajectory_msgs/MultiDOFJointTrajectory`` (as
+    :func:`pose_to_motion` / :func:`bodies_to_motion` or any ROS 2 publisher write it) as a
+    :class:`DecodedMotion`, without building a Python object per transform (what a raw
+    subscription of the motion topics receives). Another encapsulation than little-endian CDR
+    is deserialised with rclpy and returned as the message. Raises MessageError for a
+    truncated message (where rclpy's deserialiser raises); no point, or a point whose
+    transforms are not one per joint name, is the decoded message's ``problem``."""
+    from std_msgs.msg import Header
+
+    from .ros_conversions import MessageError
+    data = bytes(data)
+    if data[:2] != _ENCAPSULATION[:2]:
+        if len(data) < 4:
+            raise MessageError(f'truncated message ({len(data)} bytes)')
+        from rclpy.serialization import deserialize_message
+        from trajectory_msgs.msg import MultiDOFJointTrajectory
+        return deserialize_message(data, MultiDOFJointTrajectory)
+    r = _Reader(data)
+    header = Header()
+    header.stamp.sec, header.stamp.nanosec = r.time()
+    header.frame_id = r.string()
+    n = r.u32()
+    if n > _MAX_JOINTS:
+        raise MessageError(f'MultiDOFJointTrajectory with {n} joint names')
+    names = [r.string() for _ in range(n)]
+    if r.u32() == 0:
+        return DecodedMotion(header, names, np.zeros((0, 7)),
+                             'MultiDOFJointTrajectory has no point')
+    m = r.u32()
+    if m > _MAX_JOINTS:
+        raise MessageError(f'MultiDOFJointTrajectory with {m} transforms')
+    transforms = r.float64s(7 * m).reshape(m, 7)
+    for _ in range(2):                              # the first point's velocities, accelerations
+        k = r.u32()
+        if k > _MAX_JOINTS:
+            raise MessageError(f'MultiDOFJointTrajectory with {k} velocities')
+        if k:
+            r._take(48 * k, 8)                      # geometry_msgs/Twist: 6 float64
+    r.time()                                        # time_from_start: the point is whole
+    if m != n:
+        return DecodedMotion(header, names, transforms, f'MultiDOFJointTrajectory has {n} '
+                             f'joint names but {m} transforms')
+    return DecodedMotion(header, names, transforms)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -69,18 +69,25 @@ def guarded(node: Any, callback: Callable[..., Any], what: Optional[str] = None
 
 
 def deserialised_unless(ignored: Callable[[], bool], msg_type: type,
-                        callback: Callable[[Any], Any]) -> Callable[[bytes], Any]:
+                        callback: Callable[[Any], Any],
+                        decode: Optional[Callable[[bytes], Any]] = None
+                        ) -> Callable[[bytes], Any]:
     """The callback of a raw subscription (``create_subscription(..., raw=True)``): the
-    serialised message is deserialised into ``msg_type`` and handed to ``callback`` only
-    while ``ignored()`` is False. For an input a node ignores most of the time (the
-    single-person topic while the combined input of several people delivers): such messages
-    cost no deserialisation, live or in :class:`~mocap_core.inprocess.InProcessGraph`."""
-    from rclpy.serialization import deserialize_message
+    serialised message is deserialised into ``msg_type`` (or read by ``decode``, e.g.
+    :func:`mocap_core.cdr.decode_motion`) and handed to ``callback`` only while ``ignored()``
+    is False. For an input a node ignores most of the time (the single-person topic while the
+    combined input of several people delivers): such messages cost no deserialisation, live
+    or in :class:`~mocap_core.inprocess.InProcessGraph`."""
+    if decode is None:
+        from rclpy.serialization import deserialize_message
+
+        def decode(data: bytes) -> Any:
+            return deserialize_message(data, msg_type)
 
     def on_raw(data: bytes) -> Any:
         if ignored():
             return None
-        return callback(deserialize_message(data, msg_type))
+        return callback(decode(data))
 
     on_raw.__name__ = getattr(callback, '__name__', 'on_raw')
     return on_raw

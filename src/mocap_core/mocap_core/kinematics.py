@@ -23,8 +23,9 @@ Forward kinematics::
 
 from __future__ import annotations
 
+import functools
 import operator
-from typing import NamedTuple, Sequence, Tuple
+from typing import NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from array_api_compat import device as _device
@@ -100,6 +101,9 @@ def forward_kinematics(parents: Sequence[int], offsets: Array, local_rotations: 
     J = len(p)
     if rotation_format not in ('quat', 'matrix'):
         raise ValueError(f"rotation_format must be 'quat' or 'matrix', got {rotation_format!r}")
+    fast = _fk_single_np(p, offsets, local_rotations, root_position, rotation_format)
+    if fast is not None:
+        return fast
     xp, (offsets, local_rotations, root) = _prep(offsets, local_rotations, root_position)
     _check_joints(offsets, (J, 3), 'offsets')
     _check_joints(root, (3,), 'root_position')
@@ -118,6 +122,44 @@ def forward_kinematics(parents: Sequence[int], offsets: Array, local_rotations: 
         G.append(Gp @ L[..., j, :, :])
         P.append(P[p[j]] + (Gp @ offsets[..., j, :, None])[..., 0])
     return FKResult(positions=xp.stack(P, axis=-2), global_rotations=xp.stack(G, axis=-3))
+
+
+def _fk_single_np(p: Sequence[int], offsets: Array, local_rotations: Array, root: Array,
+                  rotation_format: str) -> Optional[FKResult]:
+    """:func:`forward_kinematics` of one pose given as float64 NumPy arrays (the common case:
+    the nodes' per-frame poses), written into two output arrays; None for any other input."""
+    J = len(p)
+    rot_shape = (J, 4) if rotation_format == 'quat' else (J, 3, 3)
+    if not (type(offsets) is np.ndarray and type(local_rotations) is np.ndarray
+            and type(root) is np.ndarray and offsets.dtype == np.float64
+            and local_rotations.dtype == np.float64 and root.dtype == np.float64
+            and offsets.shape == (J, 3) and local_rotations.shape == rot_shape
+            and root.shape == (3,)):
+        return None
+    L = quat_to_matrix(local_rotations) if rotation_format == 'quat' else local_rotations
+    G = np.empty((J, 3, 3))
+    P = np.empty((J, 3))
+    G[0] = L[0]
+    P[0] = root
+    for joints, parent in _depth_levels(tuple(p)):      # every joint of one depth at once
+        Gp = G[parent]
+        G[joints] = Gp @ L[joints]
+        P[joints] = P[parent] + (Gp @ offsets[joints, :, None])[..., 0]
+    return FKResult(positions=P, global_rotations=G)
+
+
+@functools.lru_cache(maxsize=64)
+def _depth_levels(parents: Tuple[int, ...]) -> Tuple[Tuple[np.ndarray, np.ndarray], ...]:
+    """The non-root joints grouped by depth in the tree, root side first: per depth
+    (joint indices, their parents' indices)."""
+    depth = [0] * len(parents)
+    for j in range(1, len(parents)):
+        depth[j] = depth[parents[j]] + 1
+    levels = []
+    for d in range(1, max(depth, default=0) + 1):
+        joints = np.array([j for j in range(len(parents)) if depth[j] == d], dtype=np.intp)
+        levels.append((joints, np.array([parents[j] for j in joints], dtype=np.intp)))
+    return tuple(levels)
 
 
 def local_from_global_rotations(parents: Sequence[int], global_rotations: Array) -> Array:

@@ -310,26 +310,46 @@ def _point_transforms(msg: MultiDOFJointTrajectory) -> list:
     return transforms
 
 
+def _motion_arrays(msg) -> Tuple[List[str], np.ndarray]:
+    """(joint names, (N, 7) translation x, y, z and rotation x, y, z, w of the first point)
+    of a MultiDOFJointTrajectory, or of a :class:`mocap_core.cdr.DecodedMotion` (the same,
+    read straight from the CDR bytes); MessageError as :func:`_point_transforms`."""
+    table = getattr(msg, 'transforms', None)
+    if isinstance(table, np.ndarray):                 # DecodedMotion
+        if msg.problem:
+            raise MessageError(msg.problem)
+        return msg.joint_names, table
+    transforms = _point_transforms(msg)
+    table = np.array([[t.translation.x, t.translation.y, t.translation.z,
+                       t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]
+                      for t in transforms], dtype=np.float64).reshape(-1, 7)
+    return list(msg.joint_names), table
+
+
 def motion_to_pose(msg: MultiDOFJointTrajectory,
                    joint_names: Sequence[str] = JOINT_NAMES) -> Pose:
-    """MultiDOFJointTrajectory -> Pose with joints in the order of ``joint_names``.
+    """MultiDOFJointTrajectory (or a :class:`mocap_core.cdr.DecodedMotion`) -> Pose with
+    joints in the order of ``joint_names``.
 
     The message may list the joints in any order; extra joints are ignored. Raises
     MessageError for no point, a size mismatch, a missing joint, NaN or a zero quaternion.
     """
-    transforms = _point_transforms(msg)
-    index = {n: i for i, n in enumerate(msg.joint_names)}
+    return _arrays_to_pose(*_motion_arrays(msg), joint_names)
+
+
+def _arrays_to_pose(names: Sequence[str], table: np.ndarray,
+                    joint_names: Sequence[str] = JOINT_NAMES) -> Pose:
+    """:func:`motion_to_pose` of the joint names and (N, 7) table of :func:`_motion_arrays`."""
+    index = {n: i for i, n in enumerate(names)}
     missing = [n for n in joint_names if n not in index]
     if missing:
         raise MessageError(f'MultiDOFJointTrajectory lacks joint(s) {missing}')
-    if msg.joint_names[0] != joint_names[0]:
+    if names[0] != joint_names[0]:
         raise MessageError(f'first joint must be the root {joint_names[0]!r}, '
-                           f'got {msg.joint_names[0]!r}')
-    trans = np.array([[transforms[index[n]].translation.x, transforms[index[n]].translation.y,
-                       transforms[index[n]].translation.z] for n in joint_names])
-    quats = np.array([[transforms[index[n]].rotation.x, transforms[index[n]].rotation.y,
-                       transforms[index[n]].rotation.z, transforms[index[n]].rotation.w]
-                      for n in joint_names])
+                           f'got {names[0]!r}')
+    rows = table[[index[n] for n in joint_names]]
+    trans = rows[:, :3].copy()
+    quats = rows[:, 3:].copy()
     offsets = trans.copy()
     offsets[0] = 0.0
     with np.errstate(invalid='ignore'):
@@ -464,19 +484,12 @@ def bodies_to_motion(bodies: Sequence[Tuple[int, Pose]], header: Header
 
 
 def motion_to_bodies(msg: MultiDOFJointTrajectory) -> List[Tuple[int, Pose]]:
-    """The inverse of :func:`bodies_to_motion`: ``[(id, Pose)]`` in the message's order.
+    """The inverse of :func:`bodies_to_motion`: ``[(id, Pose)]`` in the message's order (also
+    of a :class:`mocap_core.cdr.DecodedMotion`).
     Raises MessageError for a name without a ``body_<id>/`` prefix or a malformed body."""
-    transforms = _point_transforms(msg)
-    out = []
-    for pid, idx in _split_bodies(msg.joint_names).items():
-        one = MultiDOFJointTrajectory()
-        one.header = msg.header
-        one.joint_names = [msg.joint_names[i].partition('/')[2] for i in idx]
-        pt = MultiDOFJointTrajectoryPoint()
-        pt.transforms = [transforms[i] for i in idx]
-        one.points = [pt]
-        out.append((pid, motion_to_pose(one)))
-    return out
+    names, table = _motion_arrays(msg)
+    return [(pid, _arrays_to_pose([names[i].partition('/')[2] for i in idx], table[idx]))
+            for pid, idx in _split_bodies(names).items()]
 
 
 def bodies_contacts_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header: Header

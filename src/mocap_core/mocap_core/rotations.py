@@ -85,6 +85,8 @@ def _prep(*xs: Any) -> Tuple[Any, list]:
     the namespace / dtype / device of the first real array argument (NumPy
     float64 when there is none); integer arrays are promoted to float64.
     """
+    if all(type(x) is np.ndarray and x.dtype == np.float64 for x in xs):
+        return _NP, list(xs)                  # the common case, without the generic checks
     ref = None
     for x in xs:
         if is_array_api_obj(x) and not isinstance(x, np.generic):
@@ -320,6 +322,8 @@ def matrix_to_quat(R: Array) -> Array:
     ``4 q_i^2`` is selected with a mask (no data-dependent Python branching),
     so every angle including 180 deg is handled accurately.
     """
+    if type(R) is np.ndarray and R.dtype == np.float64 and R.shape[-2:] == (3, 3):
+        return _matrix_to_quat_np(R)          # the common case, without the generic stacks
     xp, (R,) = _prep(R)
     _check_mat(R)
     m00, m01, m02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
@@ -340,6 +344,29 @@ def matrix_to_quat(R: Array) -> Array:
     q = xp.sum(xp.where(mask[..., None], cands, xp.zeros_like(cands)), axis=-2)
     q = q / xp.linalg.vector_norm(q, axis=-1, keepdims=True)
     return xp.where(q[..., 3:] < 0, -q, q)
+
+
+def _matrix_to_quat_np(R: np.ndarray) -> np.ndarray:
+    """:func:`matrix_to_quat` for a float64 NumPy array: the same candidates and choice, the
+    chosen candidate taken by index instead of a masked sum."""
+    m00, m01, m02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
+    m10, m11, m12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
+    m20, m21, m22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
+    c = np.empty(R.shape[:-2] + (4, 4))
+    c[..., 0, 0] = 1.0 + m00 - m11 - m22      # 4 x^2
+    c[..., 1, 1] = 1.0 - m00 + m11 - m22      # 4 y^2
+    c[..., 2, 2] = 1.0 - m00 - m11 + m22      # 4 z^2
+    c[..., 3, 3] = 1.0 + m00 + m11 + m22      # 4 w^2
+    c[..., 0, 1] = c[..., 1, 0] = m01 + m10
+    c[..., 0, 2] = c[..., 2, 0] = m02 + m20
+    c[..., 1, 2] = c[..., 2, 1] = m12 + m21
+    c[..., 0, 3] = c[..., 3, 0] = m21 - m12
+    c[..., 1, 3] = c[..., 3, 1] = m02 - m20
+    c[..., 2, 3] = c[..., 3, 2] = m10 - m01
+    best = np.argmax(np.diagonal(c, axis1=-2, axis2=-1), axis=-1)
+    q = np.take_along_axis(c, best[..., None, None], axis=-2)[..., 0, :]
+    q = q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    return np.where(q[..., 3:] < 0, -q, q)
 
 
 # --------------------------------------------------------------------------

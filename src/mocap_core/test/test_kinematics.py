@@ -75,6 +75,30 @@ def test_matches_reference_loop_batched():
             np.testing.assert_allclose(res.global_rotations[a, b], G, atol=1e-12)
 
 
+@pytest.mark.parametrize('fmt', ['quat', 'matrix'])
+def test_one_numpy_pose_matches_the_reference_and_the_batched_path(fmt):
+    """One float64 NumPy pose takes the by-depth path (the nodes' per-frame case): the same
+    as the reference loop and as the generic path of a batch of one, in both formats."""
+    offsets, quats, root = random_pose(seed=4)
+    rotations = quats if fmt == 'quat' else rot.quat_to_matrix(quats)
+    res = kin.forward_kinematics(PARENTS, offsets, rotations, root, rotation_format=fmt)
+    P, G = reference_fk(PARENTS, offsets, quats, root)
+    np.testing.assert_allclose(res.positions, P, atol=1e-12)
+    np.testing.assert_allclose(res.global_rotations, G, atol=1e-12)
+    batched = kin.forward_kinematics(PARENTS, offsets[None], rotations[None], root[None],
+                                     rotation_format=fmt)
+    np.testing.assert_allclose(res.positions, batched.positions[0], atol=1e-13)
+    np.testing.assert_allclose(res.global_rotations, batched.global_rotations[0], atol=1e-13)
+    # a chain deeper than the tree above, joints listed out of depth order
+    chain = [-1, 0, 0, 1, 2, 3, 4, 5]
+    off = np.random.default_rng(5).normal(size=(len(chain), 3))
+    q = Rotation.random(len(chain), random_state=5).as_quat()
+    res = kin.forward_kinematics(chain, off, q, root)
+    P, G = reference_fk(chain, off, q, root)
+    np.testing.assert_allclose(res.positions, P, atol=1e-12)
+    np.testing.assert_allclose(res.global_rotations, G, atol=1e-12)
+
+
 def test_matrix_format_and_offset_root_ignored():
     offsets, quats, root = random_pose(batch=(4,), seed=2)
     res_q = kin.forward_kinematics(PARENTS, offsets, quats, root)

@@ -365,13 +365,16 @@ class GMRNode(Node):
         self.diag.set_value('nonfinite_outputs', 0)
         self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, deserialised_unless(
-                lambda: self.bodies_mode, MultiDOFJointTrajectory, self.on_motion), 'motion'),
+                lambda: self.bodies_mode, MultiDOFJointTrajectory, self.on_motion,
+                decode=cdr.decode_motion), 'motion'),
             input_qos(STREAM_QOS, p['queue_depth']), raw=True))
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
                 MultiDOFJointTrajectory, p['bodies_motion_topic'],
-                guarded(self, self.on_bodies_motion, 'bodies motion'),
-                input_qos(STREAM_QOS, p['queue_depth'])))
+                guarded(self, deserialised_unless(
+                    lambda: False, MultiDOFJointTrajectory, self.on_bodies_motion,
+                    decode=cdr.decode_motion), 'bodies motion'),
+                input_qos(STREAM_QOS, p['queue_depth']), raw=True))
         if self.camera_mode == 'known':
             msg_type = Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped
             self.diag.watch('camera_pose', self.create_subscription(

@@ -406,7 +406,8 @@ class PhysicsNode(Node):
         qos = input_qos(STREAM_QOS, p['queue_depth'])
         self.diag.watch('input', self.create_subscription(
             MultiDOFJointTrajectory, p['motion_topic'], guarded(self, deserialised_unless(
-                lambda: self.bodies_mode, MultiDOFJointTrajectory, self.on_motion), 'motion'),
+                lambda: self.bodies_mode, MultiDOFJointTrajectory, self.on_motion,
+                decode=cdr.decode_motion), 'motion'),
             qos, raw=True))
         self.contacts_sub = None
         if contacts_topic:
@@ -418,7 +419,9 @@ class PhysicsNode(Node):
         if p['bodies_motion_topic']:
             self.diag.watch('bodies', self.create_subscription(
                 MultiDOFJointTrajectory, p['bodies_motion_topic'],
-                guarded(self, self.on_bodies_motion, 'bodies motion'), qos))
+                guarded(self, deserialised_unless(
+                    lambda: False, MultiDOFJointTrajectory, self.on_bodies_motion,
+                    decode=cdr.decode_motion), 'bodies motion'), qos, raw=True))
         if p['bodies_contacts_topic']:
             self.create_subscription(
                 JointState, p['bodies_contacts_topic'],
