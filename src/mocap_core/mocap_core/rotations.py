@@ -70,6 +70,7 @@ __all__ = [
     'quat_to_euler',
     'skew',
     'quat_from_two_vectors',
+    'closest_yaw',
 ]
 
 _NP = array_namespace(np.empty(0))
@@ -647,3 +648,11 @@ def quat_from_two_vectors(a: Array, b: Array) -> Array:
     anti = w < 16.0 * _eps(xp, w)
     q = xp.where(anti, xp.concat([perp, xp.zeros_like(w)], axis=-1), xp.concat([v, w], axis=-1))
     return quat_normalize(q)
+
+
+def closest_yaw(R: np.ndarray) -> float:
+    """The angle (rad) of the rotation about z nearest to the (3, 3) rotation ``R`` (in the
+    Frobenius norm: the turn about z that a tilted rotation stands for), ``atan2(R10 - R01,
+    R00 + R11)``. NumPy only."""
+    R = np.asarray(R, dtype=float)
+    return float(np.arctan2(R[1, 0] - R[0, 1], R[0, 0] + R[1, 1]))

@@ -329,6 +329,19 @@ def test_skew():
     np.testing.assert_array_equal(S, -np.swapaxes(S, -1, -2))
 
 
+def test_closest_yaw():
+    """The yaw of a rotation about z is itself; tilting it about x or y by up to 30 deg keeps
+    the nearest turn about z within a few degrees of it, and a tilt alone gives 0."""
+    for yaw in (-3.0, -1.2, 0.0, 0.4, 2.9):
+        Rz = Rotation.from_euler('z', yaw).as_matrix()
+        assert rot.closest_yaw(Rz) == pytest.approx(yaw, abs=1e-12)
+        for axis in 'xy':
+            tilt = Rotation.from_euler(axis, 0.5).as_matrix()
+            assert rot.closest_yaw(tilt) == pytest.approx(0.0, abs=1e-12)
+            got = rot.closest_yaw(Rz @ Rotation.from_euler(axis, 0.2).as_matrix())
+            assert abs((got - yaw + np.pi) % (2 * np.pi) - np.pi) < 0.05
+
+
 def test_quat_from_two_vectors():
     rng = np.random.default_rng(22)
     a = rng.normal(size=(100, 3)) * rng.uniform(0.1, 10, size=(100, 1))

@@ -87,7 +87,7 @@ from mocap_core.guard import deserialised_unless, guarded
 from mocap_core.parameters import (ParamSpec, camera_pose_params, declare_parameters,
                                    help_requested, spin_node)
 from mocap_core.qos import STREAM_QOS, input_qos
-from mocap_core.rotations import quat_to_matrix
+from mocap_core.rotations import closest_yaw, quat_to_matrix
 
 from .model import TTA_MODES, with_tta
 from mocap_core.foot_plant import FootPlantConfig
@@ -546,8 +546,7 @@ class GMRNode(Node):
         _, A, b = self.floor
         M = R_wc @ A
         origin = R_wc @ b + t_wc
-        return InputAnchor(True, heading_rotation(float(np.arctan2(M[1, 0] - M[0, 1],
-                                                                   M[0, 0] + M[1, 1]))),
+        return InputAnchor(True, heading_rotation(closest_yaw(M)),
                            np.array([origin[0], origin[1], 0.0]), known=True)
 
     def on_floor(self, msg: TransformStamped) -> None:

@@ -32,7 +32,7 @@ import numpy as np
 
 from mocap_core import topics
 from mocap_core.pose import Pose
-from mocap_core.rotations import matrix_to_quat, quat_multiply
+from mocap_core.rotations import closest_yaw, matrix_to_quat, quat_multiply
 
 from .floor import FloorFrame
 
@@ -202,7 +202,7 @@ def camera_step_on_floor(previous: Tuple[np.ndarray, np.ndarray],
     A, t = floor.rotation, floor.translation
     # p_cam_now = R1^T (R0 p_cam_before + C0 - C1), in the floor frame
     M = A @ R1.T @ R0 @ A.T
-    yaw = np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])
+    yaw = closest_yaw(M)
     c, s = np.cos(yaw), np.sin(yaw)
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     shift = A @ (R1.T @ (C0 - C1)) + t - Rz @ t

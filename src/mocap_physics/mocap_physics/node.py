@@ -365,8 +365,10 @@ class PhysicsNode(Node):
                                  f"{p['camera_pose_type']!r}")
             self.known_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
                                                 p['camera_pose_convention'])
-        self.rotations = CameraRotations(translation=self.carry,
-                                         coast_s=p['camera_translation_coast_s'])
+        #: the keypoint node's camera-motion estimate (none where a known pose is followed)
+        self.rotations: Optional[CameraRotations] = None if self.known_poses is not None \
+            else CameraRotations(translation=self.carry,
+                                 coast_s=p['camera_translation_coast_s'])
         #: the rotation and camera position each input stamp was moved by (for the floor
         #: message), newest last
         self.used_rotations: Dict[int, Tuple[np.ndarray, np.ndarray]] = {}
@@ -617,6 +619,8 @@ class PhysicsNode(Node):
 
     def on_camera_motion(self, msg: Odometry) -> None:
         """Keep the camera's rotation since the first image of each stamp."""
+        if self.rotations is None:           # a known camera pose is followed instead
+            return
         try:
             state, q, _ = odometry_to_camera_motion(msg)
         except MessageError as exc:
@@ -807,14 +811,14 @@ class PhysicsNode(Node):
         d.set_value('friction_cone_violations', st.cone_violations)
         d.set_value('stick_failures', st.stick_failures)
         d.set_value('dynamics', self.params.dynamics)
-        if self.derotate or self.carry:
+        if self.rotations is not None and (self.derotate or self.carry):
             d.set_value('camera_rotation_frames', f'{self.rotation_own_frames} with their own '
                         f'estimate, {self.rotation_held_frames} held')
         if self.carry:
             d.set_value('carried_frames', online.camera_steps)
         if self.known_poses is not None:
             d.set_value('camera_pose_missing_frames', self.camera_pose_missing)
-        if self.rotations.translation:
+        if self.rotations is not None and self.rotations.translation:
             r = self.rotations
             d.set_value('camera_translation_frames', f'{r.measured_frames} measured, '
                         f'{r.coasted_frames} coasted, {r.held_frames} held')
