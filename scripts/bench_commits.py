@@ -8,9 +8,10 @@ times in a row, 840 frames), once with the code of commit ``REV`` and once with 
 tree, in turn, ``--pairs`` times (each run in a fresh process, after a warm-up pass of the
 same process). The code of ``REV`` is a git worktree under ``~/.cache/mocap/bench_commits/``
 put first on ``PYTHONPATH`` (the packages are pure Python; the built workspace's message
-packages are shared). Prints frames/s, process CPU per frame and each node's mean time per
-message for every run, then the median of the per-pair ratios: on a shared machine whose
-speed changes from minute to minute, a ratio within a pair is what can be compared.
+packages and the package data, e.g. the shipped weights, are the working tree's). Prints
+frames/s, process CPU per frame and each node's mean time per message for every run, then the
+median of the per-pair ratios: on a shared machine whose speed changes from minute to minute,
+a ratio within a pair is what can be compared.
 Run from the repository root after ``source env.sh``.
 """
 
@@ -54,8 +55,9 @@ def worktree(rev: str) -> Path:
                          capture_output=True).stdout.strip()
     path = Path.home() / '.cache' / 'mocap' / 'bench_commits' / sha[:12]
     if not path.exists():
+        subprocess.run(['git', 'worktree', 'prune'], cwd=ROOT, check=True)
         subprocess.run(['git', 'worktree', 'add', '--detach', str(path), sha], cwd=ROOT,
-                       check=True, capture_output=True)
+                       check=True)
     return path
 
 
@@ -65,7 +67,9 @@ def run(src_root: Path, topics: str, work: Path) -> dict:
     env['PYTHONPATH'] = os.pathsep.join(paths + [env.get('PYTHONPATH', '')])
     out = subprocess.run([sys.executable, '-c', RUN, str(work),
                           str(ROOT / 'bags' / 'gt_cmu_walk_12_02'), topics],
-                         env=env, check=True, text=True, capture_output=True)
+                         env=env, text=True, capture_output=True)
+    if out.returncode != 0:
+        raise SystemExit(f'the run with the code of {src_root} failed:\n{out.stderr}')
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

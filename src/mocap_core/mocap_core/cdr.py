@@ -265,9 +265,10 @@ def decode_motion(data: bytes):
     :func:`pose_to_motion` / :func:`bodies_to_motion` or any ROS 2 publisher write it) as a
     :class:`DecodedMotion`, without building a Python object per transform (what a raw
     subscription of the motion topics receives). Another encapsulation than little-endian CDR
-    is deserialised with rclpy and returned as the message. Raises MessageError for a
-    truncated message (where rclpy's deserialiser raises); no point, or a point whose
-    transforms are not one per joint name, is the decoded message's ``problem``."""
+    is deserialised with rclpy and returned as the message. Only the first point's transforms
+    are kept; every point is read past, so that a truncated message raises MessageError
+    (where rclpy's deserialiser raises). No point, or a first point whose transforms are not
+    one per joint name, is the decoded message's ``problem``."""
     from std_msgs.msg import Header
 
     from .ros_conversions import MessageError
@@ -286,20 +287,30 @@ def decode_motion(data: bytes):
     if n > _MAX_JOINTS:
         raise MessageError(f'MultiDOFJointTrajectory with {n} joint names')
     names = [r.string() for _ in range(n)]
-    if r.u32() == 0:
+    points = r.u32()
+    if points == 0:
         return DecodedMotion(header, names, np.zeros((0, 7)),
                              'MultiDOFJointTrajectory has no point')
+    if points > _MAX_JOINTS:
+        raise MessageError(f'MultiDOFJointTrajectory with {points} points')
     m = r.u32()
     if m > _MAX_JOINTS:
         raise MessageError(f'MultiDOFJointTrajectory with {m} transforms')
     transforms = r.float64s(7 * m).reshape(m, 7)
-    for _ in range(2):                              # the first point's velocities, accelerations
-        k = r.u32()
-        if k > _MAX_JOINTS:
-            raise MessageError(f'MultiDOFJointTrajectory with {k} velocities')
-        if k:
-            r._take(48 * k, 8)                      # geometry_msgs/Twist: 6 float64
-    r.time()                                        # time_from_start: the point is whole
+    for p in range(points):                 # the rest of every point is read past (checked)
+        if p > 0:
+            k = r.u32()
+            if k > _MAX_JOINTS:
+                raise MessageError(f'MultiDOFJointTrajectory with {k} transforms')
+            if k:
+                r._take(56 * k, 8)                  # geometry_msgs/Transform: 7 float64
+        for _ in range(2):                          # velocities, accelerations
+            k = r.u32()
+            if k > _MAX_JOINTS:
+                raise MessageError(f'MultiDOFJointTrajectory with {k} velocities')
+            if k:
+                r._take(48 * k, 8)                  # geometry_msgs/Twist: 6 float64
+        r.time()                                    # time_from_start
     if m != n:
         return DecodedMotion(header, names, transforms, f'MultiDOFJointTrajectory has {n} '
                              f'joint names but {m} transforms')

@@ -158,7 +158,10 @@ def _depth_levels(parents: Tuple[int, ...]) -> Tuple[Tuple[np.ndarray, np.ndarra
     levels = []
     for d in range(1, max(depth, default=0) + 1):
         joints = np.array([j for j in range(len(parents)) if depth[j] == d], dtype=np.intp)
-        levels.append((joints, np.array([parents[j] for j in joints], dtype=np.intp)))
+        parent = np.array([parents[j] for j in joints], dtype=np.intp)
+        joints.setflags(write=False)                  # shared by every call (cached)
+        parent.setflags(write=False)
+        levels.append((joints, parent))
     return tuple(levels)
 
 

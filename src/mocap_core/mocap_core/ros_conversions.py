@@ -314,11 +314,11 @@ def _motion_arrays(msg) -> Tuple[List[str], np.ndarray]:
     """(joint names, (N, 7) translation x, y, z and rotation x, y, z, w of the first point)
     of a MultiDOFJointTrajectory, or of a :class:`mocap_core.cdr.DecodedMotion` (the same,
     read straight from the CDR bytes); MessageError as :func:`_point_transforms`."""
-    table = getattr(msg, 'transforms', None)
-    if isinstance(table, np.ndarray):                 # DecodedMotion
+    from .cdr import DecodedMotion                    # (cdr imports this module)
+    if isinstance(msg, DecodedMotion):
         if msg.problem:
             raise MessageError(msg.problem)
-        return msg.joint_names, table
+        return msg.joint_names, msg.transforms
     transforms = _point_transforms(msg)
     table = np.array([[t.translation.x, t.translation.y, t.translation.z,
                        t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]

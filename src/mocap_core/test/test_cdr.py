@@ -183,6 +183,7 @@ def test_decoded_motion_refuses_what_the_message_path_refuses():
     """Truncated bytes, no point, a transform count unlike the names: MessageError (the
     node's guard drops and counts it); the conversions' own checks (a missing joint, NaN)
     apply to the decoded message as to the deserialised one."""
+    from geometry_msgs.msg import Twist
     from trajectory_msgs.msg import MultiDOFJointTrajectoryPoint
     header = HEADERS[1]
     data = cdr.pose_to_motion(_pose(0), header)
@@ -210,9 +211,16 @@ def test_decoded_motion_refuses_what_the_message_path_refuses():
     with pytest.raises(rc.MessageError):
         rc.motion_to_pose(cdr.decode_motion(serialize_message(msg)))
     msg = rc.pose_to_motion(_pose(0), header)
-    msg.points.append(MultiDOFJointTrajectoryPoint())     # a second point is ignored
-    _poses_equal(rc.motion_to_pose(cdr.decode_motion(serialize_message(msg))),
+    second = MultiDOFJointTrajectoryPoint()
+    second.transforms = msg.points[0].transforms[:3]
+    second.velocities = [Twist()] * 2
+    msg.points.append(second)                             # a second point is read past
+    data = serialize_message(msg)
+    _poses_equal(rc.motion_to_pose(cdr.decode_motion(data)),
                  rc.motion_to_pose(rc.pose_to_motion(_pose(0), header)))
+    for cut in (len(data) - 9, len(data) - 60, len(data) - 100):   # cut in the second point
+        with pytest.raises(rc.MessageError):
+            cdr.decode_motion(data[:cut])
 
 
 def test_decoded_motion_of_another_encapsulation_goes_through_rclpy():
