@@ -469,8 +469,7 @@ class PhysicsNode(Node):
             contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
             contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
                                if contacts_topic else None),
-            report=self._report, record_time=self.diag.latency.add,
-            world_floor=self.known_poses is not None)
+            report=self._report, record_time=self.diag.latency.add)
 
     def _floor_source(self) -> FloorSource:
         """The floor of ``floor_source`` (module docstring); raises ValueError."""
@@ -815,12 +814,10 @@ class PhysicsNode(Node):
         if self.rotations is not None and (self.derotate or self.carry):
             d.set_value('camera_rotation_frames', f'{self.rotation_own_frames} with their own '
                         f'estimate, {self.rotation_held_frames} held')
-        if self.carry and self.known_poses is None:
+        if self.carry:
             d.set_value('carried_frames', online.camera_steps)
         if self.known_poses is not None:
             d.set_value('camera_pose_missing_frames', self.camera_pose_missing)
-            d.set_value('floor_frame', 'fixed in the world by the known camera pose (frames '
-                        f'that held the last pose: {online.camera_held})')
         if self.rotations is not None and self.rotations.translation:
             r = self.rotations
             d.set_value('camera_translation_frames', f'{r.measured_frames} measured, '

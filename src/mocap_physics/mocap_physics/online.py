@@ -27,13 +27,7 @@ physics-corrected frames in a floor frame (z up, floor z = 0), one person:
    about the floor's normal and the shift along it that the camera's motion made the world
    take in the floor frame (:func:`~.camera_rotation.camera_step_on_floor`,
    ``PhysicsCycle.change_frame``): the floor frame rides with the camera, and a foot that
-   stands in the world keeps standing. With ``world_floor`` (a *known* camera pose, e.g. a
-   robot's pan-tilt head) the floor frame does not ride with the camera at all: every input
-   pose is first moved into the camera frame of the first frame by the camera's pose, the
-   tracker fits the floor there (so a camera that tilts or rises does not scatter the feet
-   it fits over), and the floor frame is that fit, fixed in the world; each frame's floor
-   (:attr:`PhysicsFrame.floor`, this camera frame -> the floor frame) is that fit composed
-   with the camera's pose. Nothing needs carrying then.
+   stands in the world keeps standing.
 5. **Cycle**: the target, mapped into the floor frame, goes through
    :meth:`~.cycle.PhysicsCycle.step` with the time ``stamp_ns * 1e-9`` s.
 
@@ -130,10 +124,6 @@ class OnlinePhysics:
         record_time: receives the duration (s) of every cycle step run, failed ones too.
         clock: monotonic clock, s.
         skeleton: the skeleton, when known before the first frame.
-        world_floor: the floor frame is fixed in the world by each frame's camera pose
-            (module docstring, 4); for a camera pose that is known, not estimated (its
-            errors would move the floor). Frames without a camera pose hold the last one
-            (counted in ``camera_held``).
 
     Raises:
         ValueError: bad parameters; ``mocap_core.checkpoint.WeightsError`` for unusable
@@ -146,7 +136,7 @@ class OnlinePhysics:
                  report: Optional[Callable[[Notice], None]] = None,
                  record_time: Optional[Callable[[float], None]] = None,
                  clock: Callable[[], float] = time.monotonic,
-                 skeleton: Optional[Skeleton] = None, world_floor: bool = False) -> None:
+                 skeleton: Optional[Skeleton] = None) -> None:
         self.cycle = PhysicsCycle(skeleton, params)      # validates the parameters
         self.params = self.cycle.params
         self.tracker: Optional[FloorTracker] = floor if isinstance(floor, FloorTracker) else None
@@ -168,12 +158,6 @@ class OnlinePhysics:
         self._last_camera: Optional[CameraPose] = None
         #: frames whose state the camera's motion carried
         self.camera_steps = 0
-        #: world_floor: the floor frame fixed in the world by the camera's pose (module doc)
-        self.world_floor = bool(world_floor)
-        #: world_floor: the first camera pose, whose camera frame the tracker fits in
-        self._first_camera: Optional[CameraPose] = None
-        #: world_floor: frames that had no camera pose of their own (the last one was held)
-        self.camera_held = 0
         #: contact probabilities (4,) by stamp (ns), oldest first
         self.contacts: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
         self.last_stamp = -1
@@ -351,30 +335,19 @@ class OnlinePhysics:
             self._notify('nocontacts', 'no contact probabilities for this frame: contacts from '
                          'the kinematics only', period_s=10.0)
         input_frame = frame_id or DEFAULT_INPUT_FRAME
-        frame_floor = None
-        if self.world_floor and self.has_floor:
-            # the pose in the first camera frame, the floor fitted and fixed there
-            to_first = self._to_first_camera(camera)
-            pose = to_first.transform_pose(pose)
-            if self.tracker is not None and not self._update_floor(pose, probabilities):
-                return None
-            frame_floor = self.floor.compose(to_first)
+        if self.tracker is not None and not self._update_floor(pose, probabilities):
+            return None
+        if self.floor is not None:
+            if camera is not None and self._last_camera is not None and \
+                    self.last_stamp >= 0 and int(stamp_ns) > self.last_stamp:
+                R, t = camera_step_on_floor(self._last_camera, camera, self.floor)
+                self.cycle.change_frame(R, t, carry=True)
+                self.camera_steps += 1
+            self._last_camera = camera
             pose = self.floor.transform_pose(pose)
             out_frame = self.frame_id or 'floor'
         else:
-            if self.tracker is not None and not self._update_floor(pose, probabilities):
-                return None
-            if self.floor is not None:
-                if camera is not None and self._last_camera is not None and \
-                        self.last_stamp >= 0 and int(stamp_ns) > self.last_stamp:
-                    R, t = camera_step_on_floor(self._last_camera, camera, self.floor)
-                    self.cycle.change_frame(R, t, carry=True)
-                    self.camera_steps += 1
-                self._last_camera = camera
-                pose = self.floor.transform_pose(pose)
-                out_frame = self.frame_id or 'floor'
-            else:
-                out_frame = self.frame_id or frame_id or 'world'
+            out_frame = self.frame_id or frame_id or 'world'
         # the flat feet are measured against a floor that has settled: a fitted one (not the
         # provisional floor of the first frames), or the input's own (no floor source)
         if self.flat_foot is not None and (self.tracker is None or self.tracker.ready):
@@ -400,25 +373,7 @@ class OnlinePhysics:
                          if res.messages else res.status, 'status')
         self.last_stamp = int(stamp_ns)
         self.last_result = res
-        return PhysicsFrame(int(stamp_ns), res, out_frame, input_frame,
-                            frame_floor if frame_floor is not None else self.floor)
-
-    def _to_first_camera(self, camera: Optional[CameraPose]) -> FloorFrame:
-        """world_floor: the transform of this frame's camera frame into the first camera
-        pose's (``p_first = R0^T (R p + C - C0)``); a frame without a pose holds the last
-        one (the identity before the first)."""
-        if camera is None:
-            camera = self._last_camera
-            if camera is None:
-                return FloorFrame(np.eye(3), np.zeros(3), 'camera')
-            self.camera_held += 1
-        if self._first_camera is None:
-            self._first_camera = camera
-        self._last_camera = camera
-        R0, C0 = self._first_camera
-        R, C = camera
-        return FloorFrame(R0.T @ np.asarray(R, dtype=float),
-                          R0.T @ (np.asarray(C, dtype=float) - C0), 'camera')
+        return PhysicsFrame(int(stamp_ns), res, out_frame, input_frame, self.floor)
 
 
 __all__ = ['OnlinePhysics', 'PhysicsFrame', 'Notice', 'FloorSource', 'DEFAULT_INPUT_FRAME']
