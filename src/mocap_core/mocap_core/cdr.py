@@ -30,9 +30,9 @@ from typing import Dict, Iterator, Optional, Sequence, Tuple
 import numpy as np
 
 from .pose import Pose
-from .ros_conversions import (KEYPOINT_ID_FIELD, POSITION_FIELDS, bodies_cloud_values,
-                              cloud_values, contact_values, effort_values, pose_marker_specs,
-                              positions_cloud_values)
+from .ros_conversions import (KEYPOINT_ID_FIELD, POSITION_FIELDS, DecodedMotion,
+                              bodies_cloud_values, cloud_values, contact_values,
+                              effort_values, pose_marker_specs, positions_cloud_values)
 from .skeleton import CONTACT_POINT_NAMES
 from .topics import body_name
 from .urdf import revolute_joint_names
@@ -193,30 +193,6 @@ def bodies_to_motion(bodies: Sequence[Tuple[int, Pose]], header) -> bytes:
     transforms = (np.concatenate([pose_transforms(pose) for _, pose in bodies])
                   if bodies else np.zeros((0, 7)))
     return _motion(header, names, transforms)
-
-
-class DecodedMotion:
-    """A ``trajectory_msgs/MultiDOFJointTrajectory`` read by :func:`decode_motion`: what the
-    stages use of it, as arrays.
-
-    Attributes:
-        header: ``std_msgs/Header`` (a message object: stamp and frame id).
-        joint_names: the joint names, in the message's order.
-        transforms: ``(len(joint_names), 7)`` float64 of the first point: translation x, y, z
-            (m) and rotation x, y, z, w of each joint, in the message's order.
-        problem: why the transforms cannot be read (no point, a count unlike the names'),
-            or None; the conversions (:func:`mocap_core.ros_conversions.motion_to_pose`)
-            raise it as MessageError, as they do for the deserialised message.
-    """
-
-    __slots__ = ('header', 'joint_names', 'transforms', 'problem')
-
-    def __init__(self, header, joint_names: list, transforms: np.ndarray,
-                 problem: Optional[str] = None) -> None:
-        self.header = header
-        self.joint_names = joint_names
-        self.transforms = transforms
-        self.problem = problem
 
 
 class _Reader:

@@ -310,11 +310,34 @@ def _point_transforms(msg: MultiDOFJointTrajectory) -> list:
     return transforms
 
 
+class DecodedMotion:
+    """A ``trajectory_msgs/MultiDOFJointTrajectory`` read by
+    :func:`mocap_core.cdr.decode_motion`: what the stages use of it, as arrays.
+
+    Attributes:
+        header: ``std_msgs/Header`` (a message object: stamp and frame id).
+        joint_names: the joint names, in the message's order.
+        transforms: ``(len(joint_names), 7)`` float64 of the first point: translation x, y, z
+            (m) and rotation x, y, z, w of each joint, in the message's order.
+        problem: why the transforms cannot be read (no point, a count unlike the names'),
+            or None; the conversions (:func:`mocap_core.ros_conversions.motion_to_pose`)
+            raise it as MessageError, as they do for the deserialised message.
+    """
+
+    __slots__ = ('header', 'joint_names', 'transforms', 'problem')
+
+    def __init__(self, header, joint_names: list, transforms: np.ndarray,
+                 problem: Optional[str] = None) -> None:
+        self.header = header
+        self.joint_names = joint_names
+        self.transforms = transforms
+        self.problem = problem
+
+
 def _motion_arrays(msg) -> Tuple[List[str], np.ndarray]:
     """(joint names, (N, 7) translation x, y, z and rotation x, y, z, w of the first point)
     of a MultiDOFJointTrajectory, or of a :class:`mocap_core.cdr.DecodedMotion` (the same,
     read straight from the CDR bytes); MessageError as :func:`_point_transforms`."""
-    from .cdr import DecodedMotion                    # (cdr imports this module)
     if isinstance(msg, DecodedMotion):
         if msg.problem:
             raise MessageError(msg.problem)
