@@ -28,9 +28,10 @@ import sys
 from typing import Dict, Iterator, Optional, Sequence, Tuple
 
 import numpy as np
+from std_msgs.msg import Header
 
 from .pose import Pose
-from .ros_conversions import (KEYPOINT_ID_FIELD, POSITION_FIELDS, DecodedMotion,
+from .ros_conversions import (KEYPOINT_ID_FIELD, POSITION_FIELDS, DecodedMotion, MessageError,
                               bodies_cloud_values, cloud_values, contact_values,
                               effort_values, pose_marker_specs, positions_cloud_values)
 from .skeleton import CONTACT_POINT_NAMES
@@ -209,7 +210,6 @@ class _Reader:
         start = self.pos + (-(self.pos - 4) % align)
         end = start + n
         if end > len(self.data):
-            from .ros_conversions import MessageError
             raise MessageError(f'truncated message ({len(self.data)} bytes)')
         self.pos = end
         return start
@@ -245,9 +245,6 @@ def decode_motion(data: bytes):
     are kept; every point is read past, so that a truncated message raises MessageError
     (where rclpy's deserialiser raises). No point, or a first point whose transforms are not
     one per joint name, is the decoded message's ``problem``."""
-    from std_msgs.msg import Header
-
-    from .ros_conversions import MessageError
     data = bytes(data)
     if data[:2] != _ENCAPSULATION[:2]:
         if len(data) < 4:
@@ -565,7 +562,6 @@ def built_messages() -> Iterator[None]:
         return serialize(path)
 
     def tf_built(stamp, parents, children, transforms) -> bytes:
-        from std_msgs.msg import Header
         from tf2_msgs.msg import TFMessage
         return serialize(TFMessage(transforms=[
             rc.transform_stamped(Header(stamp=stamp, frame_id=p), c, t[3:], t[:3])

@@ -336,8 +336,8 @@ class DecodedMotion:
 
 def _motion_arrays(msg) -> Tuple[List[str], np.ndarray]:
     """(joint names, (N, 7) translation x, y, z and rotation x, y, z, w of the first point)
-    of a MultiDOFJointTrajectory, or of a :class:`mocap_core.cdr.DecodedMotion` (the same,
-    read straight from the CDR bytes); MessageError as :func:`_point_transforms`."""
+    of a MultiDOFJointTrajectory, or of a :class:`DecodedMotion` (the same, read straight
+    from the CDR bytes); MessageError as :func:`_point_transforms`."""
     if isinstance(msg, DecodedMotion):
         if msg.problem:
             raise MessageError(msg.problem)
@@ -351,7 +351,7 @@ def _motion_arrays(msg) -> Tuple[List[str], np.ndarray]:
 
 def motion_to_pose(msg: MultiDOFJointTrajectory,
                    joint_names: Sequence[str] = JOINT_NAMES) -> Pose:
-    """MultiDOFJointTrajectory (or a :class:`mocap_core.cdr.DecodedMotion`) -> Pose with
+    """MultiDOFJointTrajectory (or a :class:`DecodedMotion`) -> Pose with
     joints in the order of ``joint_names``.
 
     The message may list the joints in any order; extra joints are ignored. Raises
@@ -508,7 +508,7 @@ def bodies_to_motion(bodies: Sequence[Tuple[int, Pose]], header: Header
 
 def motion_to_bodies(msg: MultiDOFJointTrajectory) -> List[Tuple[int, Pose]]:
     """The inverse of :func:`bodies_to_motion`: ``[(id, Pose)]`` in the message's order (also
-    of a :class:`mocap_core.cdr.DecodedMotion`).
+    of a :class:`DecodedMotion`).
     Raises MessageError for a name without a ``body_<id>/`` prefix or a malformed body."""
     names, table = _motion_arrays(msg)
     return [(pid, _arrays_to_pose([names[i].partition('/')[2] for i in idx], table[idx]))
