@@ -153,6 +153,12 @@ class PhysicsCycle:
         self._anchor = np.zeros((4, 2))
         self._anchored = np.zeros(4, dtype=bool)
         self._root_offset = np.zeros(2)       # m, floor x, y (_follow_feet)
+        #: stance drift (_follow_drift): the last target's contact points (4, 3) and stance
+        #: mask, and the low-passed drift velocity of the stance points, m/s (floor x, y)
+        self._drift_prev: Optional[Tuple[np.ndarray, np.ndarray]] = None
+        self._drift_velocity = np.zeros(2)
+        #: frames the stance drift carried the state, and the last drift speed, m/s
+        self.drift_frames = 0
         self._stick_vertical = True
         #: the stick needs the residual root actuation (module docstring); the whole-body
         #: dynamics holds stance points by its own acceleration rows instead
@@ -197,7 +203,7 @@ class PhysicsCycle:
             self.wbid.reset()
 
     def change_frame(self, rotation: np.ndarray, translation: np.ndarray,
-                     carry: Optional[bool] = None) -> None:
+                     carry: Optional[bool] = None, drift: bool = False) -> None:
         """Re-express the state in a new floor frame: ``p_new = rotation p_old +
         translation`` (e.g. a refined floor estimate, or the camera's motion between two
         frames). Only the root placement in q changes (Pinocchio's free-flyer velocity is
@@ -223,6 +229,10 @@ class PhysicsCycle:
         angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
         if carry is None:
             carry = angle <= SMALL_FRAME_CHANGE_DEG and np.linalg.norm(t) <= SMALL_FRAME_CHANGE_M
+        if self._drift_prev is not None and not drift:
+            pts, stance = self._drift_prev
+            self._drift_prev = (pts @ R.T + t, stance)
+            self._drift_velocity = R[:2, :2] @ self._drift_velocity
         if carry:
             self._anchor = self._anchor @ R[:2, :2].T + t[:2]
             self._root_offset = R[:2, :2] @ self._root_offset     # a horizontal vector
@@ -343,7 +353,7 @@ class PhysicsCycle:
     # -- the cycle ---------------------------------------------------------------------------
     def step(self, target, stamp: Optional[float] = None,
              contact_probabilities: Optional[Sequence[float]] = None,
-             alpha: Optional[np.ndarray] = None) -> FrameResult:
+             alpha: Optional[np.ndarray] = None, camera_static: bool = False) -> FrameResult:
         """Advance the simulation by one frame towards ``target``.
 
         Args:
@@ -353,6 +363,8 @@ class PhysicsCycle:
             contact_probabilities: (4,) in ``CONTACT_POINT_NAMES`` order, or None
                 (kinematic contact detection only). NaN entries count as unknown.
             alpha: optional (nv,) offset force of eq. 7 (0 with fixed gains).
+            camera_static: the camera is known to stand still in this frame (the stance
+                drift, ``stance_drift_s``, is then zero).
 
         Raises:
             InvalidInput: no skeleton/model yet and the target cannot provide one, or the
@@ -414,6 +426,9 @@ class PhysicsCycle:
                 self._period = 0.9 * self._period + 0.1 * gap
         if not np.isfinite(stamp):
             stamp = (self._stamp or 0.0) + self._period
+        if p.stance_drift_s > 0.0 and self._stance_on:
+            self._follow_drift(q_hat if valid else None, mask, frame_dt, reinit is not None,
+                               camera_static)
         if valid:          # a held target (the last one) carries its offset already
             q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
         v_hat = None
@@ -466,6 +481,45 @@ class PhysicsCycle:
         if events:
             self.stats.last_event = ', '.join(events)
         return result
+
+    def _follow_drift(self, q_hat: Optional[np.ndarray], mask: np.ndarray, frame_dt: float,
+                      reinit: bool, camera_static: bool = False) -> None:
+        """Stance drift (``stance_drift_s`` > 0, whole body): the floor frame rides with the
+        camera, so with a moving camera a foot that stands in the world moves in it, and the
+        target's stance points move with it. Their mean horizontal motion between two frames
+        (points in stance in both, near the floor), low-passed with the time constant
+        ``stance_drift_s``, is taken as the world's motion in the floor frame: the state and
+        the stance anchors are carried by it (``change_frame(..., carry=True)``), as a known
+        camera motion carries them. The lifter's quick foot noise is filtered out; its slow
+        slides are followed. Without stance points the last drift fades with the same time
+        constant. A frame whose camera is known to stand still (``camera_static``: the
+        camera-motion estimate's ``static``) has no drift: the velocity is reset and the
+        stance anchors hold."""
+        p = self.params
+        if reinit or q_hat is None or self._q is None:
+            if reinit:
+                self._drift_prev, self._drift_velocity = None, np.zeros(2)
+            return
+        pts = self.model.contact_positions(q_hat)
+        stance = mask & (pts[:, 2] < p.stance_height)
+        a = 1.0 - np.exp(-frame_dt / p.stance_drift_s)
+        if camera_static:
+            self._drift_velocity = np.zeros(2)
+        elif self._drift_prev is not None:
+            prev, was = self._drift_prev
+            both = stance & was
+            if np.any(both):
+                sample = np.mean(pts[both, :2] - prev[both, :2], axis=0) / frame_dt
+                self._drift_velocity = self._drift_velocity + a * (
+                    sample - self._drift_velocity)
+            else:
+                self._drift_velocity = self._drift_velocity * (1.0 - a)
+        self._drift_prev = (pts, stance)
+        shift = self._drift_velocity * frame_dt
+        if np.any(shift != 0.0):
+            self.change_frame(np.eye(3), np.array([shift[0], shift[1], 0.0]), carry=True,
+                              drift=True)
+            self.drift_frames += 1
 
     def _follow_feet(self, q_hat: np.ndarray, frame_dt: float, reinit: bool) -> np.ndarray:
         """Root follow (``root_follow_gain`` > 0, whole body): the target's root moved

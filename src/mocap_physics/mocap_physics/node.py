@@ -87,6 +87,7 @@ at start with exit status 2 and one line ``physics: error: ...``.
 
 from __future__ import annotations
 
+import collections
 import os
 import sys
 from typing import Dict, List, Optional, Tuple
@@ -231,6 +232,11 @@ PARAMETERS = (
               '> 0: the root follow offset also fades in stance with this time constant, s, '
               'the stance feet sliding slowly with it back under the lifter\'s root (0: it '
               'does not fade in stance)', min_value=0.0, read_only=True),
+    ParamSpec('stance_drift_s', _D.stance_drift_s, 'whole_body: > 0: the floor frame (it '
+              'rides with the camera) follows the slow drift of the target\'s stance feet, '
+              'low-passed with this time constant, s: with a moving camera the feet then stand '
+              'in the world, not in the camera\'s frame (0: off)', min_value=0.0,
+              read_only=True),
     ParamSpec('root_follow_relax_s', _D.root_follow_relax_s, 'whole_body: without stance, '
               'the root follow offset fades with this time constant, s', min_value=0.01,
               read_only=True),
@@ -343,6 +349,7 @@ class PhysicsNode(Node):
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
             wbid_condensed=p['wbid_condensed'],
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
+            stance_drift_s=p['stance_drift_s'] if not self._carried(p) else 0.0,
             root_follow_gain=p['root_follow_gain'],
             root_follow_relax_s=p['root_follow_relax_s'],
             root_follow_stance_relax_s=p['root_follow_stance_relax_s'],
@@ -353,9 +360,11 @@ class PhysicsNode(Node):
         # the camera's rotation taken out of the input (derotate_camera)
         self.derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
             and bool(p['camera_motion_topic'])
-        self.carry = not self.derotate and p['floor_source'] != 'input' and (
-            bool(p['camera_pose_topic']) or
-            (bool(p['carry_with_camera']) and bool(p['camera_motion_topic'])))
+        self.carry = self._carried(p)
+        #: the stance drift (stance_drift_s; off while the body is carried with the camera)
+        #: is zero in frames the camera-motion estimate calls static: its state by stamp
+        self.drift = self.params.stance_drift_s > 0.0
+        self.camera_states: 'collections.OrderedDict[int, str]' = collections.OrderedDict()
         #: the known camera pose (camera_pose_topic), for carry_with_camera
         self.known_poses: Optional[KnownCameraPoses] = None
         self.camera_pose_missing = 0
@@ -433,7 +442,7 @@ class PhysicsNode(Node):
                 Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped,
                 p['camera_pose_topic'], guarded(self, self.on_camera_pose, 'camera pose'),
                 qos))
-        elif self.derotate or self.carry:
+        elif self.derotate or self.carry or (self.drift and p['camera_motion_topic']):
             self.diag.watch('camera_motion', self.create_subscription(
                 Odometry, p['camera_motion_topic'],
                 guarded(self, self.on_camera_motion, 'camera motion'), qos))
@@ -447,6 +456,13 @@ class PhysicsNode(Node):
         self.diag.set_value('carry_with_camera', 'off' if not self.carry else
                             'with the known camera pose' if self.known_poses is not None
                             else 'with the camera-motion estimate')
+        if p['stance_drift_s'] > 0.0 and self.carry:
+            self.get_logger().info('stance_drift_s: off while the body is carried with the '
+                                   'camera (its motion is known)')
+        self.diag.set_value('stance_drift', 'off' if not self.drift else
+                            f"followed ({self.params.stance_drift_s:g} s), zero while the "
+                            "camera-motion estimate says static" if p['camera_motion_topic']
+                            else f"followed ({self.params.stance_drift_s:g} s)")
         self.diag.set_value('camera_rotation', 'taken out (outputs in the first image\'s '
                             'floor frame)' if self.derotate else 'off')
         self.diag.watch('motion', self.pub_motion)
@@ -582,7 +598,8 @@ class PhysicsNode(Node):
             if accepted:
                 frames = frames + online.add_motion(stamp, self._derotated(stamp, pose),
                                                     msg.header.frame_id,
-                                                    camera=self._camera(stamp))
+                                                    camera=self._camera(stamp),
+                                                    camera_static=self._camera_static(stamp))
             released.append((pid, frames))
         self._publish_people(released)
         timeout = int(self.p['person_timeout_s'] * 1e9)
@@ -615,16 +632,33 @@ class PhysicsNode(Node):
             self._problem('motion', f'dropping a motion message: {exc}')
             return
         self._publish(self.online.add_motion(stamp, self._derotated(stamp, pose),
-                                             msg.header.frame_id, camera=self._camera(stamp)))
+                                             msg.header.frame_id, camera=self._camera(stamp),
+                                             camera_static=self._camera_static(stamp)))
+
+    def _carried(self, p) -> bool:
+        """Whether the simulated body is carried with the camera's motion (a known camera
+        pose, or carry_with_camera with the estimate; not while derotating)."""
+        derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
+            and bool(p['camera_motion_topic'])
+        return not derotate and p['floor_source'] != 'input' and (
+            bool(p['camera_pose_topic']) or
+            (bool(p['carry_with_camera']) and bool(p['camera_motion_topic'])))
 
     def on_camera_motion(self, msg: Odometry) -> None:
-        """Keep the camera's rotation since the first image of each stamp."""
+        """Keep the camera's rotation since the first image of each stamp, and its state
+        (static or not) for the stance drift."""
         if self.rotations is None:           # a known camera pose is followed instead
             return
         try:
             state, q, _ = odometry_to_camera_motion(msg)
         except MessageError as exc:
             self._problem('camera_motion', f'ignoring camera motion: {exc}')
+            return
+        if self.drift:
+            self.camera_states[stamp_to_ns(msg.header.stamp)] = state
+            while len(self.camera_states) > 600:
+                self.camera_states.popitem(last=False)
+        if not (self.derotate or self.carry):
             return
         position = odometry_to_camera_position(msg) if self.rotations.translation else None
         self.rotations.add(stamp_to_ns(msg.header.stamp), state, quat_to_matrix(q), position)
@@ -640,6 +674,16 @@ class PhysicsNode(Node):
         """Keep the camera's known pose (camera_pose_topic)."""
         if self.known_poses.add(*camera_pose_from_msg(msg)) == 'invalid':
             self._problem('camera_pose', 'ignoring camera pose: not finite')
+
+    def _camera_static(self, stamp: int) -> bool:
+        """Whether the camera-motion estimate calls the camera static at ``stamp`` (its own
+        estimate, else the newest one at most 0.5 s before it)."""
+        state = self.camera_states.get(stamp)
+        if state is None:
+            before = next((s for s in reversed(self.camera_states) if s < stamp), None)
+            if before is not None and stamp - before <= 500_000_000:
+                state = self.camera_states[before]
+        return state == 'static'
 
     def _camera(self, stamp: int):
         """The camera's pose (R, C) of ``stamp`` for carry_with_camera, else None (also

@@ -89,13 +89,14 @@ def test_translation_measured_coasted_and_held():
 
 
 def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame',
-         positions=None, known=None):
+         positions=None, known=None, state=None):
     """Drive a physics node in process (as ``mocap process`` does) with camera-frame poses,
     their contacts and the camera-motion estimate (rotations since the first image, None =
     no estimate published; ``positions``: the camera's measured positions in the first
     camera frame, None entries unmeasured; ``known``: (R, t) known camera poses published
-    as PoseStamped on /robot/camera, None entries not published); returns the output
-    frames and the published floors."""
+    as PoseStamped on /robot/camera, None entries not published; ``state``: the estimate's
+    state, default ``rotating`` or ``moving`` with positions); returns the output frames and
+    the published floors."""
     import rclpy
     from rclpy.parameter import Parameter
 
@@ -122,7 +123,7 @@ def _run(node_kwargs, poses, contacts, rotations, frame='camera_optical_frame',
             if rotations is not None:
                 pos = None if positions is None else positions[i]
                 graph.publish(topics.CAMERA_MOTION, camera_motion_to_odometry(
-                    'rotating' if positions is None else 'moving',
+                    state or ('rotating' if positions is None else 'moving'),
                     matrix_to_quat(rotations[i]), np.array([0.0, 0.3, 0.0]),
                     make_header(stamp, frame + '_start'), frame, position=pos))
             if known is not None and known[i] is not None:
@@ -269,3 +270,111 @@ def test_carried_with_a_known_camera_pose(panning):
     assert node.online.camera_steps == 30 + 3 - 1
     raw, _, _ = _run({}, panned, contacts, None)
     assert np.abs(_feet(car) - _feet(raw)).max() > 0.05
+
+
+def _world_skating(feet, contacts, fps=30.0):
+    """Mean horizontal speed (mm/frame) of the feet joints (N, 4, 3) between consecutive
+    frames where the foot's contacts (N, 4: heel, toe per foot) hold in both."""
+    steps = np.linalg.norm(np.diff(feet[:, :, :2], axis=0), axis=-1)     # (N-1, 4)
+    down = contacts > 0.5
+    both = down[1:] & down[:-1]
+    return 1000.0 * steps[both].mean()
+
+
+def test_stance_drift_keeps_the_feet_standing_for_a_camera_walking_sideways(panning):
+    """``stance_drift_s``: no camera pose at all; a camera walking sideways at 1 m/s. The
+    stance points of the target drift through the floor frame at the camera's speed; the
+    physics follows that drift, so mapped into the world (by the true camera positions, for
+    scoring only) its stance feet slide far less than without it, where the stance anchors
+    hold the feet still in the moving frame. For the static camera the option changes the
+    output by a few millimetres only (the recorded target's stance feet do not drift)."""
+    from mocap_physics.cycle_params import PhysicsParams
+    from mocap_physics.online import OnlinePhysics
+    from mocap_physics.training.evaluate import load_gt_bag
+    static, _, _, contacts, up = panning
+    floor = load_gt_bag(BAG).to_world
+    n = len(static)
+    side = np.cross(up, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    centres = [side * (i / 30.0) for i in range(n)]
+    moved = [Pose(p.skeleton, p.rotations, p.root_position - c)
+             for p, c in zip(static, centres)]
+
+    def run(poses, drift):
+        online = OnlinePhysics(PhysicsParams(stance_drift_s=drift), floor)
+        out = [online.step(1_000_000_000 + i * 33_333_333, p, 'camera', c)
+               for i, (p, c) in enumerate(zip(poses, contacts))]
+        assert all(f is not None for f in out)
+        return out, online
+
+    def world_feet(frames):                       # floor of each moved camera -> the first's
+        return np.array([f + floor.rotation @ c for f, c in zip(_feet(frames), centres)])
+    # _feet: left ankle, left toe, right ankle, right toe; contacts: left heel, left toe,
+    # right heel, right toe (the ankle stands with its heel)
+    feet_contacts = contacts
+    late = slice(15, None)                         # after the drift's filter has settled
+    drift, online = run(moved, 0.3)
+    held, _ = run(moved, 0.0)
+    s_drift = _world_skating(world_feet(drift)[late], feet_contacts[late])
+    s_held = _world_skating(world_feet(held)[late], feet_contacts[late])
+    assert online.cycle.drift_frames > 0
+    assert s_held > 20.0                           # the camera's 33 mm per frame, partly held
+    assert s_drift < 0.4 * s_held
+    # the drift it settled on is the camera's motion seen in the floor frame
+    v = online.cycle._drift_velocity
+    expect = -(floor.rotation @ side)[:2]
+    assert np.linalg.norm(v - expect) < 0.3
+    still, _ = run(static, 0.3)
+    ref, _ = run(static, 0.0)
+    assert np.abs(_feet(still) - _feet(ref)).max() < 0.03
+
+
+def test_stance_drift_is_carried_through_a_change_of_floor_frame():
+    """A floor re-estimate (``change_frame``) between two frames moves the remembered stance
+    points with it: the same standing body seen in the new frame is no drift at all."""
+    from mocap_physics.cycle import PhysicsCycle
+    from mocap_physics.cycle_params import PhysicsParams
+    from mocap_physics.training.evaluate import load_gt_bag
+    clip = load_gt_bag(BAG)
+    cyc = PhysicsCycle(clip.skeleton, PhysicsParams(stance_drift_s=0.3))
+    stand = cyc.model.pose_to_q(clip.to_world.transform_pose(
+        Pose(clip.skeleton, clip.gt_rotations[0], clip.gt_root_positions[0])))
+    probs = np.ones(4)
+    for k in range(5):
+        cyc.step(stand, k / 30.0, probs)
+    assert np.linalg.norm(cyc._drift_velocity) < 1e-6
+    R = axis_angle_to_matrix(np.array([0.0, 0.0, 0.3]))
+    t = np.array([0.4, -0.2, 0.0])
+    cyc.change_frame(R, t)
+    import pinocchio as pin
+    M = pin.SE3(R, t)
+    moved = stand.copy()
+    moved[:7] = pin.SE3ToXYZQUAT(M * pin.XYZQUATToSE3(stand[:7]))
+    cyc.step(moved, 5 / 30.0, probs)
+    assert np.linalg.norm(cyc._drift_velocity) < 1e-6
+
+
+def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
+    """The node with ``stance_drift_s``: the estimate says the camera moves (a camera walking
+    sideways at 1 m/s whose steps were not measured), and the drift is followed; the same
+    input with the estimate saying ``static`` gives exactly the output without the drift;
+    carried with the camera's pose instead, the drift is off (it would carry twice)."""
+    static, _, _, contacts, up = panning
+    n = 40
+    side = np.cross(up, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    moved = [Pose(p.skeleton, p.rotations, p.root_position - side * (i / 30.0))
+             for i, p in enumerate(static[:n])]
+    ident = [np.eye(3)] * n
+    drift = {'stance_drift_s': 0.3}
+    off, _, _ = _run({}, moved, contacts[:n], ident)
+    follows, _, node = _run(drift, moved, contacts[:n], ident, state='moving')
+    assert node.drift and node.online.cycle.drift_frames > 0
+    held, _, node = _run(drift, moved, contacts[:n], ident, state='static')
+    assert node.online.cycle.drift_frames == 0
+    assert np.abs(_feet(held) - _feet(off)).max() < 1e-9
+    assert np.abs(_feet(follows) - _feet(off)).max() > 0.05
+    _, _, node = _run(dict(drift, camera_pose_topic='/robot/camera', camera_pose_type='pose'),
+                      moved, contacts[:n], None,
+                      known=[(np.eye(3), side * (i / 30.0)) for i in range(n)])
+    assert node.carry and not node.drift and node.online.cycle.drift_frames == 0

@@ -43,10 +43,10 @@ def _spy(online: OnlinePhysics) -> list:
     calls = []
     step = online.cycle.step
 
-    def spy(target, stamp=None, contact_probabilities=None, alpha=None):
+    def spy(target, stamp=None, contact_probabilities=None, alpha=None, **kwargs):
         calls.append((stamp, None if contact_probabilities is None
                       else np.array(contact_probabilities)))
-        return step(target, stamp, contact_probabilities, alpha)
+        return step(target, stamp, contact_probabilities, alpha, **kwargs)
     online.cycle.step = spy
     return calls
 
