@@ -353,7 +353,7 @@ class PhysicsCycle:
     # -- the cycle ---------------------------------------------------------------------------
     def step(self, target, stamp: Optional[float] = None,
              contact_probabilities: Optional[Sequence[float]] = None,
-             alpha: Optional[np.ndarray] = None, camera_static: bool = False) -> FrameResult:
+             alpha: Optional[np.ndarray] = None, camera_moving: bool = False) -> FrameResult:
         """Advance the simulation by one frame towards ``target``.
 
         Args:
@@ -363,8 +363,9 @@ class PhysicsCycle:
             contact_probabilities: (4,) in ``CONTACT_POINT_NAMES`` order, or None
                 (kinematic contact detection only). NaN entries count as unknown.
             alpha: optional (nv,) offset force of eq. 7 (0 with fixed gains).
-            camera_static: the camera is known to stand still in this frame (the stance
-                drift, ``stance_drift_s``, is then zero).
+            camera_moving: the camera may move in this frame (a camera-motion estimate
+                that is not ``static``): only then is the stance drift followed
+                (``stance_drift_s``).
 
         Raises:
             InvalidInput: no skeleton/model yet and the target cannot provide one, or the
@@ -428,7 +429,7 @@ class PhysicsCycle:
             stamp = (self._stamp or 0.0) + self._period
         if p.stance_drift_s > 0.0 and self._stance_on:
             self._follow_drift(q_hat if valid else None, mask, frame_dt, reinit is not None,
-                               camera_static)
+                               camera_moving)
         if valid:          # a held target (the last one) carries its offset already
             q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
         v_hat = None
@@ -483,7 +484,7 @@ class PhysicsCycle:
         return result
 
     def _follow_drift(self, q_hat: Optional[np.ndarray], mask: np.ndarray, frame_dt: float,
-                      reinit: bool, camera_static: bool = False) -> None:
+                      reinit: bool, camera_moving: bool = False) -> None:
         """Stance drift (``stance_drift_s`` > 0, whole body): the floor frame rides with the
         camera, so with a moving camera a foot that stands in the world moves in it, and the
         target's stance points move with it. Their mean horizontal motion between two frames
@@ -492,9 +493,10 @@ class PhysicsCycle:
         the stance anchors are carried by it (``change_frame(..., carry=True)``), as a known
         camera motion carries them. The lifter's quick foot noise is filtered out; its slow
         slides are followed. Without stance points the last drift fades with the same time
-        constant. A frame whose camera is known to stand still (``camera_static``: the
-        camera-motion estimate's ``static``) has no drift: the velocity is reset and the
-        stance anchors hold."""
+        constant. Only frames whose camera may move (``camera_moving``: the node passes the
+        camera-motion estimate's states other than ``static``) drift; in the others the
+        velocity is reset and the stance anchors hold (a static camera's lifter feet drift
+        too, and holding them is right there: docs/physics.md, "Stance drift")."""
         p = self.params
         if reinit or q_hat is None or self._q is None:
             if reinit:
@@ -503,7 +505,7 @@ class PhysicsCycle:
         pts = self.model.contact_positions(q_hat)
         stance = mask & (pts[:, 2] < p.stance_height)
         a = 1.0 - np.exp(-frame_dt / p.stance_drift_s)
-        if camera_static:
+        if not camera_moving:
             self._drift_velocity = np.zeros(2)
         elif self._drift_prev is not None:
             prev, was = self._drift_prev

@@ -232,10 +232,12 @@ PARAMETERS = (
               '> 0: the root follow offset also fades in stance with this time constant, s, '
               'the stance feet sliding slowly with it back under the lifter\'s root (0: it '
               'does not fade in stance)', min_value=0.0, read_only=True),
-    ParamSpec('stance_drift_s', _D.stance_drift_s, 'whole_body: > 0: the floor frame (it '
-              'rides with the camera) follows the slow drift of the target\'s stance feet, '
-              'low-passed with this time constant, s: with a moving camera the feet then stand '
-              'in the world, not in the camera\'s frame (0: off)', min_value=0.0,
+    ParamSpec('stance_drift_s', _D.stance_drift_s, 'whole_body: > 0: in frames where the '
+              'camera-motion estimate (camera_motion_topic) says the camera moves, the floor '
+              'frame (it rides with the camera) follows the drift of the target\'s stance '
+              'feet, low-passed with this time constant, s: the feet then stand in the world, '
+              'not in the moving camera\'s frame. 0: off; also off without an estimate, with '
+              'a static one and while the body is carried with the camera', min_value=0.0,
               read_only=True),
     ParamSpec('root_follow_relax_s', _D.root_follow_relax_s, 'whole_body: without stance, '
               'the root follow offset fades with this time constant, s', min_value=0.01,
@@ -362,7 +364,8 @@ class PhysicsNode(Node):
             and bool(p['camera_motion_topic'])
         self.carry = self._carried(p)
         #: the stance drift (stance_drift_s; off while the body is carried with the camera)
-        #: is zero in frames the camera-motion estimate calls static: its state by stamp
+        #: is followed only in frames the camera-motion estimate says are not static: its
+        #: state by stamp
         self.drift = self.params.stance_drift_s > 0.0
         self.camera_states: 'collections.OrderedDict[int, str]' = collections.OrderedDict()
         #: the known camera pose (camera_pose_topic), for carry_with_camera
@@ -460,9 +463,9 @@ class PhysicsNode(Node):
             self.get_logger().info('stance_drift_s: off while the body is carried with the '
                                    'camera (its motion is known)')
         self.diag.set_value('stance_drift', 'off' if not self.drift else
-                            f"followed ({self.params.stance_drift_s:g} s), zero while the "
-                            "camera-motion estimate says static" if p['camera_motion_topic']
-                            else f"followed ({self.params.stance_drift_s:g} s)")
+                            f"followed ({self.params.stance_drift_s:g} s) in frames the "
+                            "camera-motion estimate says the camera moves" if
+                            p['camera_motion_topic'] else 'off (no camera_motion_topic)')
         self.diag.set_value('camera_rotation', 'taken out (outputs in the first image\'s '
                             'floor frame)' if self.derotate else 'off')
         self.diag.watch('motion', self.pub_motion)
@@ -599,7 +602,7 @@ class PhysicsNode(Node):
                 frames = frames + online.add_motion(stamp, self._derotated(stamp, pose),
                                                     msg.header.frame_id,
                                                     camera=self._camera(stamp),
-                                                    camera_static=self._camera_static(stamp))
+                                                    camera_moving=self._camera_moving(stamp))
             released.append((pid, frames))
         self._publish_people(released)
         timeout = int(self.p['person_timeout_s'] * 1e9)
@@ -633,7 +636,7 @@ class PhysicsNode(Node):
             return
         self._publish(self.online.add_motion(stamp, self._derotated(stamp, pose),
                                              msg.header.frame_id, camera=self._camera(stamp),
-                                             camera_static=self._camera_static(stamp)))
+                                             camera_moving=self._camera_moving(stamp)))
 
     def _carried(self, p) -> bool:
         """Whether the simulated body is carried with the camera's motion (a known camera
@@ -675,15 +678,16 @@ class PhysicsNode(Node):
         if self.known_poses.add(*camera_pose_from_msg(msg)) == 'invalid':
             self._problem('camera_pose', 'ignoring camera pose: not finite')
 
-    def _camera_static(self, stamp: int) -> bool:
-        """Whether the camera-motion estimate calls the camera static at ``stamp`` (its own
-        estimate, else the newest one at most 0.5 s before it)."""
+    def _camera_moving(self, stamp: int) -> bool:
+        """Whether the camera may move at ``stamp`` for the stance drift: the camera-motion
+        estimate of that stamp (else the newest one at most 0.5 s before it) exists and is
+        not ``static``."""
         state = self.camera_states.get(stamp)
         if state is None:
             before = next((s for s in reversed(self.camera_states) if s < stamp), None)
             if before is not None and stamp - before <= 500_000_000:
                 state = self.camera_states[before]
-        return state == 'static'
+        return state is not None and state != 'static'
 
     def _camera(self, stamp: int):
         """The camera's pose (R, C) of ``stamp`` for carry_with_camera, else None (also

@@ -151,7 +151,7 @@ class OnlinePhysics:
         #: restart threshold of :meth:`admit`, ns
         self.restart_after_ns = max(self.params.max_frame_gap, 1.0) * 1e9
         #: motion frames waiting for their contacts: (stamp ns, pose, frame_id, arrival,
-        #: camera pose or None, camera known to stand still)
+        #: camera pose or None, whether the camera may move)
         self.pending: Deque[Tuple[int, Pose, str, float, Optional[CameraPose], bool]] = \
             collections.deque()
         #: the camera pose of the last frame stepped (step 4 of the module docstring)
@@ -214,17 +214,17 @@ class OnlinePhysics:
 
     def add_motion(self, stamp_ns: int, pose: Pose, frame_id: str = '',
                    camera: Optional[CameraPose] = None,
-                   camera_static: bool = False) -> List[PhysicsFrame]:
+                   camera_moving: bool = False) -> List[PhysicsFrame]:
         """Queue a target pose (input frame ``frame_id``; ``camera``: the camera's pose of
-        this frame, module docstring 4; ``camera_static``: the camera is known to stand
-        still, for the cycle's stance drift) and return the frames that can go now (earlier
+        this frame, module docstring 4; ``camera_moving``: the camera may move, for the
+        cycle's stance drift) and return the frames that can go now (earlier
         ones included). Runs :meth:`admit` first (a no-op when the caller already admitted
         this stamp)."""
         accepted, frames = self.admit(stamp_ns)
         if not accepted:
             return frames
         self.pending.append((int(stamp_ns), pose, frame_id, self._clock(), camera,
-                             bool(camera_static)))
+                             bool(camera_moving)))
         return frames + self.process()
 
     def _contacts_for(self, stamp: int, waited: float) -> Tuple[bool, Optional[np.ndarray]]:
@@ -249,13 +249,13 @@ class OnlinePhysics:
         ``wait=False`` every waiting frame, with the contacts that are there."""
         frames: List[PhysicsFrame] = []
         while self.pending:
-            stamp, pose, frame_id, t_in, camera, static = self.pending[0]
+            stamp, pose, frame_id, t_in, camera, moving = self.pending[0]
             waited = self._clock() - t_in if wait else float('inf')
             ready, probs = self._contacts_for(stamp, waited)
             if not ready:
                 break
             self.pending.popleft()
-            out = self.step(stamp, pose, frame_id, probs, camera=camera, camera_static=static)
+            out = self.step(stamp, pose, frame_id, probs, camera=camera, camera_moving=moving)
             if out is not None:
                 frames.append(out)
         return frames
@@ -318,7 +318,7 @@ class OnlinePhysics:
              probabilities: Optional[np.ndarray] = None,
              time_s: Optional[float] = None,
              camera: Optional[CameraPose] = None,
-             camera_static: bool = False) -> Optional[PhysicsFrame]:
+             camera_moving: bool = False) -> Optional[PhysicsFrame]:
         """Run one frame now (module docstring, 3-4), without the ordering and waiting of
         :meth:`add_motion`.
 
@@ -331,8 +331,8 @@ class OnlinePhysics:
             camera: the camera's pose of this frame (R (3, 3), C (3,) m: its frame into the
                 first image's camera frame, ``p_first = R p_camera + C``), or None (module
                 docstring, 4).
-            camera_static: the camera is known to stand still in this frame (the cycle's
-                stance drift is then zero).
+            camera_moving: the camera may move in this frame (only then does the cycle
+                follow the stance drift).
 
         Returns:
             The frame, or None when it was dropped (reported as a Notice).
@@ -361,7 +361,7 @@ class OnlinePhysics:
         t = stamp_ns * 1e-9 if time_s is None else float(time_s)
         t0 = time.perf_counter()
         try:
-            res = self.cycle.step(pose, t, probabilities, camera_static=camera_static)
+            res = self.cycle.step(pose, t, probabilities, camera_moving=camera_moving)
         except (InvalidInput, SkeletonError) as exc:
             self._notify('skeleton', f'skipping a frame: {exc}', 'problem', dropped=True)
             return None

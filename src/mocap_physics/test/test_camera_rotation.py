@@ -302,7 +302,7 @@ def test_stance_drift_keeps_the_feet_standing_for_a_camera_walking_sideways(pann
 
     def run(poses, drift):
         online = OnlinePhysics(PhysicsParams(stance_drift_s=drift), floor)
-        out = [online.step(1_000_000_000 + i * 33_333_333, p, 'camera', c)
+        out = [online.step(1_000_000_000 + i * 33_333_333, p, 'camera', c, camera_moving=True)
                for i, (p, c) in enumerate(zip(poses, contacts))]
         assert all(f is not None for f in out)
         return out, online
@@ -341,7 +341,7 @@ def test_stance_drift_is_carried_through_a_change_of_floor_frame():
         Pose(clip.skeleton, clip.gt_rotations[0], clip.gt_root_positions[0])))
     probs = np.ones(4)
     for k in range(5):
-        cyc.step(stand, k / 30.0, probs)
+        cyc.step(stand, k / 30.0, probs, camera_moving=True)
     assert np.linalg.norm(cyc._drift_velocity) < 1e-6
     R = axis_angle_to_matrix(np.array([0.0, 0.0, 0.3]))
     t = np.array([0.4, -0.2, 0.0])
@@ -350,15 +350,16 @@ def test_stance_drift_is_carried_through_a_change_of_floor_frame():
     M = pin.SE3(R, t)
     moved = stand.copy()
     moved[:7] = pin.SE3ToXYZQUAT(M * pin.XYZQUATToSE3(stand[:7]))
-    cyc.step(moved, 5 / 30.0, probs)
+    cyc.step(moved, 5 / 30.0, probs, camera_moving=True)
     assert np.linalg.norm(cyc._drift_velocity) < 1e-6
 
 
 def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
     """The node with ``stance_drift_s``: the estimate says the camera moves (a camera walking
     sideways at 1 m/s whose steps were not measured), and the drift is followed; the same
-    input with the estimate saying ``static`` gives exactly the output without the drift;
-    carried with the camera's pose instead, the drift is off (it would carry twice)."""
+    input with the estimate saying ``static``, or without an estimate, gives exactly the
+    output without the drift; carried with the camera's pose instead, the drift is off (it
+    would carry twice)."""
     static, _, _, contacts, up = panning
     n = 40
     side = np.cross(up, [0.0, 0.0, 1.0])
@@ -373,6 +374,9 @@ def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
     held, _, node = _run(drift, moved, contacts[:n], ident, state='static')
     assert node.online.cycle.drift_frames == 0
     assert np.abs(_feet(held) - _feet(off)).max() < 1e-9
+    alone, _, node = _run(drift, moved, contacts[:n], None)
+    assert node.drift and node.online.cycle.drift_frames == 0
+    assert np.abs(_feet(alone) - _feet(off)).max() < 1e-9
     assert np.abs(_feet(follows) - _feet(off)).max() > 0.05
     _, _, node = _run(dict(drift, camera_pose_topic='/robot/camera', camera_pose_type='pose'),
                       moved, contacts[:n], None,
