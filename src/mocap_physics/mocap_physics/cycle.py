@@ -517,7 +517,9 @@ class PhysicsCycle:
             else:
                 self._drift_velocity = self._drift_velocity * (1.0 - a)
         self._drift_prev = (pts, stance)
-        shift = self._drift_velocity * frame_dt
+        speed = float(np.linalg.norm(self._drift_velocity))
+        followed = max(0.0, 1.0 - p.stance_drift_deadband / speed) if speed > 0.0 else 0.0
+        shift = followed * self._drift_velocity * frame_dt
         if np.any(shift != 0.0):
             self.change_frame(np.eye(3), np.array([shift[0], shift[1], 0.0]), carry=True,
                               drift=True)

@@ -48,9 +48,12 @@ class PhysicsParams:
     #                                       this time constant
     root_follow_stance_relax_s: float = 0.0   # s: > 0: it also fades in stance, the stance
     #                                       anchors moving with it (0: it does not)
-    stance_drift_s: float = 0.0           # s: > 0: the floor frame follows the slow drift of
+    stance_drift_s: float = 0.25          # s: > 0: the floor frame follows the slow drift of
     #                                       the target's stance feet (a moving camera; time
     #                                       constant of its low-pass; cycle.py, stance drift)
+    stance_drift_deadband: float = 0.2   # m/s: that drift is followed only where faster, by
+    #                                       what it exceeds this (lifter noise of a near-still
+    #                                       camera)
     slide_threshold: float = 0.15         # body weights: horizontal residual that lets a foot
     #                                       with saturated friction slide (whole body)
     slide_time: float = 0.1               # s: whole body: that residual is averaged over this
@@ -127,7 +130,8 @@ class PhysicsParams:
                 bad.append(f'{name}={val} (must be > 0)')
         for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness',
                      'stance_release', 'slide_threshold', 'slide_time', 'stance_height',
-                     'root_follow_gain', 'root_follow_stance_relax_s', 'stance_drift_s'):
+                     'root_follow_gain', 'root_follow_stance_relax_s', 'stance_drift_s',
+                     'stance_drift_deadband'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0):
                 bad.append(f'{name}={val} (must be >= 0)')

@@ -237,8 +237,12 @@ PARAMETERS = (
               'frame (it rides with the camera) follows the drift of the target\'s stance '
               'feet, low-passed with this time constant, s: the feet then stand in the world, '
               'not in the moving camera\'s frame. 0: off; also off without an estimate, with '
-              'a static one and while the body is carried with the camera', min_value=0.0,
+              'a static one, with floor_source input or derotate_camera, and while the body '
+              'is carried with the camera', min_value=0.0,
               read_only=True),
+    ParamSpec('stance_drift_deadband', _D.stance_drift_deadband, 'stance_drift_s: the drift '
+              'is followed only by what its speed exceeds this, m/s (the lifter\'s foot noise '
+              'under a camera that hardly moves)', min_value=0.0, read_only=True),
     ParamSpec('root_follow_relax_s', _D.root_follow_relax_s, 'whole_body: without stance, '
               'the root follow offset fades with this time constant, s', min_value=0.01,
               read_only=True),
@@ -351,7 +355,9 @@ class PhysicsNode(Node):
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
             wbid_condensed=p['wbid_condensed'],
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],
-            stance_drift_s=p['stance_drift_s'] if not self._carried(p) else 0.0,
+            stance_drift_s=0.0 if self._carried(p) or self._derotating(p) or
+            p['floor_source'] == 'input' else p['stance_drift_s'],
+            stance_drift_deadband=p['stance_drift_deadband'],
             root_follow_gain=p['root_follow_gain'],
             root_follow_relax_s=p['root_follow_relax_s'],
             root_follow_stance_relax_s=p['root_follow_stance_relax_s'],
@@ -360,8 +366,7 @@ class PhysicsNode(Node):
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
         # the camera's rotation taken out of the input (derotate_camera)
-        self.derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
-            and bool(p['camera_motion_topic'])
+        self.derotate = self._derotating(p)
         self.carry = self._carried(p)
         #: the stance drift (stance_drift_s; off while the body is carried with the camera)
         #: is followed only in frames the camera-motion estimate says are not static: its
@@ -459,9 +464,9 @@ class PhysicsNode(Node):
         self.diag.set_value('carry_with_camera', 'off' if not self.carry else
                             'with the known camera pose' if self.known_poses is not None
                             else 'with the camera-motion estimate')
-        if p['stance_drift_s'] > 0.0 and self.carry:
-            self.get_logger().info('stance_drift_s: off while the body is carried with the '
-                                   'camera (its motion is known)')
+        if p['stance_drift_s'] > 0.0 and (self.carry or self.derotate):
+            self.get_logger().info('stance_drift_s: off while the camera\'s motion is taken '
+                                   'out or the body is carried with it')
         self.diag.set_value('stance_drift', 'off' if not self.drift else
                             f"followed ({self.params.stance_drift_s:g} s) in frames the "
                             "camera-motion estimate says the camera moves" if
@@ -638,12 +643,17 @@ class PhysicsNode(Node):
                                              msg.header.frame_id, camera=self._camera(stamp),
                                              camera_moving=self._camera_moving(stamp)))
 
-    def _carried(self, p) -> bool:
+    @staticmethod
+    def _derotating(p) -> bool:
+        """Whether the camera's rotation is taken out of the input (derotate_camera)."""
+        return bool(p['derotate_camera']) and p['floor_source'] != 'input' \
+            and bool(p['camera_motion_topic'])
+
+    @staticmethod
+    def _carried(p) -> bool:
         """Whether the simulated body is carried with the camera's motion (a known camera
         pose, or carry_with_camera with the estimate; not while derotating)."""
-        derotate = bool(p['derotate_camera']) and p['floor_source'] != 'input' \
-            and bool(p['camera_motion_topic'])
-        return not derotate and p['floor_source'] != 'input' and (
+        return not PhysicsNode._derotating(p) and p['floor_source'] != 'input' and (
             bool(p['camera_pose_topic']) or
             (bool(p['carry_with_camera']) and bool(p['camera_motion_topic'])))
 

@@ -368,7 +368,7 @@ def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
              for i, p in enumerate(static[:n])]
     ident = [np.eye(3)] * n
     drift = {'stance_drift_s': 0.3}
-    off, _, _ = _run({}, moved, contacts[:n], ident)
+    off, _, _ = _run({'stance_drift_s': 0.0}, moved, contacts[:n], ident)
     follows, _, node = _run(drift, moved, contacts[:n], ident, state='moving')
     assert node.drift and node.online.cycle.drift_frames > 0
     held, _, node = _run(drift, moved, contacts[:n], ident, state='static')
