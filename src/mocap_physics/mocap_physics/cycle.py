@@ -157,6 +157,7 @@ class PhysicsCycle:
         #: mask, and the low-passed drift velocity of the stance points, m/s (floor x, y)
         self._drift_prev: Optional[Tuple[np.ndarray, np.ndarray]] = None
         self._drift_velocity = np.zeros(2)
+        self._drift_samples = 0
         #: frames the stance drift carried the state, and the last drift speed, m/s
         self.drift_frames = 0
         self._stick_vertical = True
@@ -491,9 +492,11 @@ class PhysicsCycle:
         (points in stance in both, near the floor), low-passed with the time constant
         ``stance_drift_s``, is taken as the world's motion in the floor frame: the state and
         the stance anchors are carried by it (``change_frame(..., carry=True)``), as a known
-        camera motion carries them. The lifter's quick foot noise is filtered out; its slow
-        slides are followed. Without stance points the last drift fades with the same time
-        constant. Only frames whose camera may move (``camera_moving``: the node passes the
+        camera motion carries them, by what its speed exceeds ``stance_drift_deadband``. The
+        lifter's quick foot noise is filtered out; its slow slides are followed. Until the
+        filter has as many samples as its time constant spans, the drift is their mean (no
+        start from zero); without stance points (a run's flight) the last drift is held, as
+        the camera keeps moving. Only frames whose camera may move (``camera_moving``: the node passes the
         camera-motion estimate's states other than ``static``) drift; in the others the
         velocity is reset and the stance anchors hold (a static camera's lifter feet drift
         too, and holding them is right there: docs/physics.md, "Stance drift")."""
@@ -501,21 +504,24 @@ class PhysicsCycle:
         if reinit or q_hat is None or self._q is None:
             if reinit:
                 self._drift_prev, self._drift_velocity = None, np.zeros(2)
+                self._drift_samples = 0
             return
         pts = self.model.contact_positions(q_hat)
         stance = mask & (pts[:, 2] < p.stance_height)
         a = 1.0 - np.exp(-frame_dt / p.stance_drift_s)
         if not camera_moving:
             self._drift_velocity = np.zeros(2)
+            self._drift_samples = 0
         elif self._drift_prev is not None:
             prev, was = self._drift_prev
             both = stance & was
             if np.any(both):
                 sample = np.mean(pts[both, :2] - prev[both, :2], axis=0) / frame_dt
+                self._drift_samples += 1
+                # the mean of the samples so far until the filter's memory is that long
+                a = max(a, 1.0 / self._drift_samples)
                 self._drift_velocity = self._drift_velocity + a * (
                     sample - self._drift_velocity)
-            else:
-                self._drift_velocity = self._drift_velocity * (1.0 - a)
         self._drift_prev = (pts, stance)
         speed = float(np.linalg.norm(self._drift_velocity))
         followed = max(0.0, 1.0 - p.stance_drift_deadband / speed) if speed > 0.0 else 0.0
