@@ -496,10 +496,11 @@ class PhysicsCycle:
         lifter's quick foot noise is filtered out; its slow slides are followed. Until the
         filter has as many samples as its time constant spans, the drift is their mean (no
         start from zero); without stance points (a run's flight) the last drift is held, as
-        the camera keeps moving. Only frames whose camera may move (``camera_moving``: the node passes the
-        camera-motion estimate's states other than ``static``) drift; in the others the
-        velocity is reset and the stance anchors hold (a static camera's lifter feet drift
-        too, and holding them is right there: docs/physics.md, "Stance drift")."""
+        the camera keeps moving. Only frames whose camera may move (``camera_moving``: the
+        node passes the camera-motion estimate's states other than ``static``) drift; in
+        the others the velocity is reset and the stance anchors hold (a static camera's
+        lifter feet drift too, and holding them is right there: docs/physics.md, "Stance
+        drift")."""
         p = self.params
         if reinit or q_hat is None or self._q is None:
             if reinit:
