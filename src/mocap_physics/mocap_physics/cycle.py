@@ -171,6 +171,12 @@ class PhysicsCycle:
 
     # -- state -------------------------------------------------------------------------------
     @property
+    def drift_velocity(self) -> np.ndarray:
+        """(2,) the stance drift's low-passed velocity, m/s, floor x, y (before the dead
+        band; zero where it is not followed)."""
+        return self._drift_velocity.copy()
+
+    @property
     def state(self) -> Optional[Tuple[np.ndarray, np.ndarray]]:
         """(q, qdot) copies, or None before the first frame."""
         if self._q is None:

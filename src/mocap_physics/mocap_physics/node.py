@@ -874,6 +874,10 @@ class PhysicsNode(Node):
                         f'estimate, {self.rotation_held_frames} held')
         if self.carry:
             d.set_value('carried_frames', online.camera_steps)
+        if self.drift:
+            v = online.cycle.drift_velocity
+            d.set_value('stance_drift_frames', online.cycle.drift_frames)
+            d.set_value('stance_drift_m_s', f'{v[0]:.2f} {v[1]:.2f}')
         if self.known_poses is not None:
             d.set_value('camera_pose_missing_frames', self.camera_pose_missing)
         if self.rotations is not None and self.rotations.translation:

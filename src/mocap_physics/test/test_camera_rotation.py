@@ -371,6 +371,10 @@ def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
     off, _, _ = _run({'stance_drift_s': 0.0}, moved, contacts[:n], ident)
     follows, _, node = _run(drift, moved, contacts[:n], ident, state='moving')
     assert node.drift and node.online.cycle.drift_frames > 0
+    node.refresh_diagnostics()
+    assert int(node.diag._values['stance_drift_frames']) == node.online.cycle.drift_frames
+    vx, vy = map(float, node.diag._values['stance_drift_m_s'].split())
+    assert np.hypot(vx, vy) > 0.5                  # the camera's 1 m/s, seen in the floor
     held, _, node = _run(drift, moved, contacts[:n], ident, state='static')
     assert node.online.cycle.drift_frames == 0
     assert np.abs(_feet(held) - _feet(off)).max() < 1e-9
