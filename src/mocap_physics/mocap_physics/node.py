@@ -20,8 +20,9 @@ Subscribes:
     (``stance_drift_s``: only where the camera is not ``static``; the floor frame then
     follows the drift of the target's stance feet, so that with a moving camera the feet
     stand in the world; docs/physics.md, "Stance drift"). With ``derotate_camera``: the
-    camera's rotation since the first image by stamp. Each input pose is turned by its frame's rotation into the first image's
-    camera frame before the floor estimate and the simulation
+    camera's rotation since the first image by stamp. Each input pose is turned by its
+    frame's rotation into the first image's camera frame before the floor estimate and the
+    simulation
     (:mod:`mocap_physics.camera_rotation`), so that a turning camera does not move the feet;
     the outputs are then in ``floor_start``, the floor frame of the first image, and the
     floor message stays the floor seen from each frame's camera. A frame without its own
