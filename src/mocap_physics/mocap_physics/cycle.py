@@ -153,12 +153,13 @@ class PhysicsCycle:
         self._anchor = np.zeros((4, 2))
         self._anchored = np.zeros(4, dtype=bool)
         self._root_offset = np.zeros(2)       # m, floor x, y (_follow_feet)
-        #: stance drift (_follow_drift): the last target's contact points (4, 3) and stance
-        #: mask, and the low-passed drift velocity of the stance points, m/s (floor x, y)
-        self._drift_prev: Optional[Tuple[np.ndarray, np.ndarray]] = None
+        #: stance drift (_follow_drift): the last valid target's contact points (4, 3) m in
+        #: the floor frame, their stance mask (4,) and their time (s); the low-passed drift
+        #: velocity of the stance points (2,) m/s, floor x, y; the samples it has taken
+        self._drift_prev: Optional[Tuple[np.ndarray, np.ndarray, float]] = None
         self._drift_velocity = np.zeros(2)
         self._drift_samples = 0
-        #: frames the stance drift carried the state, and the last drift speed, m/s
+        #: frames the stance drift carried the state
         self.drift_frames = 0
         self._stick_vertical = True
         #: the stick needs the residual root actuation (module docstring); the whole-body
@@ -197,12 +198,17 @@ class PhysicsCycle:
         self._reset_solvers()
         self._anchored[:] = False
         self._root_offset = np.zeros(2)
+        self._reset_drift()
 
     def reset(self) -> None:
         """Forget the state: the next frame re-initialises from its target."""
         self._q = self._v = self._stamp = self._target_prev = None
         self._reset_solvers()
         self._anchored[:] = False
+        self._reset_drift()
+
+    def _reset_drift(self) -> None:
+        self._drift_prev, self._drift_velocity, self._drift_samples = None, np.zeros(2), 0
 
     def _reset_solvers(self) -> None:
         self.grf.reset()
@@ -220,7 +226,11 @@ class PhysicsCycle:
         points moved by the change) and keeps the solvers' memory of the last forces; a
         larger one drops both. ``carry`` True / False decides that whatever the size (a
         turn about z and a shift along the floor that the world made, such as a camera's
-        motion, keeps the feet where they stand)."""
+        motion, keeps the feet where they stand). ``drift`` True: the stance drift's own
+        shift (:meth:`_follow_drift`): the target's remembered stance points stay where they
+        are (they are the lifter's, in the camera's floor frame) and the change is not
+        counted in ``stats.frame_changes``; otherwise they and the drift velocity are
+        re-expressed in the new frame too."""
         R = np.asarray(rotation, dtype=float)
         t = np.asarray(translation, dtype=float).reshape(3)
         M = pin.SE3(R, t)
@@ -236,9 +246,10 @@ class PhysicsCycle:
         angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
         if carry is None:
             carry = angle <= SMALL_FRAME_CHANGE_DEG and np.linalg.norm(t) <= SMALL_FRAME_CHANGE_M
-        if self._drift_prev is not None and not drift:
-            pts, stance = self._drift_prev
-            self._drift_prev = (pts @ R.T + t, stance)
+        if not drift:
+            if self._drift_prev is not None:
+                pts, stance, when = self._drift_prev
+                self._drift_prev = (pts @ R.T + t, stance, when)
             self._drift_velocity = R[:2, :2] @ self._drift_velocity
         if carry:
             self._anchor = self._anchor @ R[:2, :2].T + t[:2]
@@ -247,7 +258,8 @@ class PhysicsCycle:
             self._anchored[:] = False
             self._root_offset = np.zeros(2)
             self._reset_solvers()
-        self.stats.frame_changes += 1
+        if not drift:
+            self.stats.frame_changes += 1
 
     def set_skeleton(self, skeleton: Skeleton) -> bool:
         """Use ``skeleton``: builds a new model if a bone offset changed by more than
@@ -286,6 +298,7 @@ class PhysicsCycle:
         self.stats.model_builds += 1
         heels = [i for i, name in enumerate(model.contact_names) if name.endswith('_heel')]
         self._anchored[heels] = False
+        self._drift_prev = None           # the old heel points: not a drift of the new ones
         if self._dynet_net is not None:
             from .dynet import LearnedGains
             self.dynet = LearnedGains(self._dynet_net, self.model, self.params.dynet_weights)
@@ -296,6 +309,7 @@ class PhysicsCycle:
         model = PhysicsModel(skeleton, self.params.body_mass, self.flat_foot_pitch)
         self.model = model
         self.stats.model_builds += 1
+        self._drift_prev = None           # the old bones' points: not a drift of the new ones
         if self._whole_body:
             p = self.params
             self.wbid = WholeBodyID(model.nv, len(model.contact_frame_ids), p.friction,
@@ -435,8 +449,8 @@ class PhysicsCycle:
         if not np.isfinite(stamp):
             stamp = (self._stamp or 0.0) + self._period
         if p.stance_drift_s > 0.0 and self._stance_on:
-            self._follow_drift(q_hat if valid else None, mask, frame_dt, reinit is not None,
-                               camera_moving)
+            self._follow_drift(q_hat if valid else None, mask, frame_dt, stamp,
+                               reinit is not None, camera_moving)
         if valid:          # a held target (the last one) carries its offset already
             q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
         v_hat = None
@@ -491,7 +505,7 @@ class PhysicsCycle:
         return result
 
     def _follow_drift(self, q_hat: Optional[np.ndarray], mask: np.ndarray, frame_dt: float,
-                      reinit: bool, camera_moving: bool = False) -> None:
+                      stamp: float, reinit: bool, camera_moving: bool = False) -> None:
         """Stance drift (``stance_drift_s`` > 0, whole body): the floor frame rides with the
         camera, so with a moving camera a foot that stands in the world moves in it, and the
         target's stance points move with it. Their mean horizontal motion between two frames
@@ -501,35 +515,42 @@ class PhysicsCycle:
         camera motion carries them, by what its speed exceeds ``stance_drift_deadband``. The
         lifter's quick foot noise is filtered out; its slow slides are followed. Until the
         filter has as many samples as its time constant spans, the drift is their mean (no
-        start from zero); without stance points (a run's flight) the last drift is held, as
-        the camera keeps moving. Only frames whose camera may move (``camera_moving``: the
-        node passes the camera-motion estimate's states other than ``static``) drift; in
-        the others the velocity is reset and the stance anchors hold (a static camera's
-        lifter feet drift too, and holding them is right there: docs/physics.md, "Stance
-        drift")."""
+        start from zero); without stance points (a run's flight) or with an invalid (held)
+        target, the last drift is held, as the camera keeps moving. Only frames whose camera
+        may move (``camera_moving``: the node passes the camera-motion estimate's states
+        other than ``static``) drift; in the others the velocity is reset and the stance
+        anchors hold (a static camera's lifter feet drift too, and holding them is right
+        there: docs/physics.md, "Stance drift").
+
+        Args:
+            q_hat: (nq,) the target in the floor frame, or None (invalid, held).
+            mask: (4,) bool, the contact probabilities' stance mask of this frame.
+            frame_dt: this frame's step, s. stamp: its time, s.
+            reinit: the cycle re-initialises at this frame (the drift starts again).
+            camera_moving: the camera may move in this frame.
+        """
         p = self.params
-        if reinit or q_hat is None or self._q is None:
-            if reinit:
-                self._drift_prev, self._drift_velocity = None, np.zeros(2)
-                self._drift_samples = 0
+        sample_points = None
+        if q_hat is not None:
+            pts = self.model.contact_positions(q_hat)
+            sample_points = (pts, mask & (pts[:, 2] < p.stance_height), float(stamp))
+        if reinit or self._q is None or not camera_moving:
+            self._reset_drift()
+            self._drift_prev = sample_points
             return
-        pts = self.model.contact_positions(q_hat)
-        stance = mask & (pts[:, 2] < p.stance_height)
-        a = 1.0 - np.exp(-frame_dt / p.stance_drift_s)
-        if not camera_moving:
-            self._drift_velocity = np.zeros(2)
-            self._drift_samples = 0
-        elif self._drift_prev is not None:
-            prev, was = self._drift_prev
-            both = stance & was
-            if np.any(both):
-                sample = np.mean(pts[both, :2] - prev[both, :2], axis=0) / frame_dt
-                self._drift_samples += 1
-                # the mean of the samples so far until the filter's memory is that long
-                a = max(a, 1.0 / self._drift_samples)
-                self._drift_velocity = self._drift_velocity + a * (
-                    sample - self._drift_velocity)
-        self._drift_prev = (pts, stance)
+        if sample_points is not None:
+            pts, stance, now = sample_points
+            prev = self._drift_prev
+            if prev is not None and now > prev[2]:
+                both = stance & prev[1]
+                if np.any(both):
+                    sample = np.mean(pts[both, :2] - prev[0][both, :2], axis=0) / (now - prev[2])
+                    self._drift_samples += 1
+                    # the mean of the samples so far until the filter's memory is that long
+                    a = max(1.0 - np.exp(-frame_dt / p.stance_drift_s), 1.0 / self._drift_samples)
+                    self._drift_velocity = self._drift_velocity + a * (
+                        sample - self._drift_velocity)
+            self._drift_prev = sample_points
         speed = float(np.linalg.norm(self._drift_velocity))
         followed = max(0.0, 1.0 - p.stance_drift_deadband / speed) if speed > 0.0 else 0.0
         shift = followed * self._drift_velocity * frame_dt

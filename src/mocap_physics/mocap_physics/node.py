@@ -131,6 +131,9 @@ from .camera_rotation import START_FLOOR_FRAME, CameraRotations, floor_in_camera
 from .online import FloorSource, Notice, OnlinePhysics, PhysicsFrame
 
 _D = PhysicsParams()
+#: the stance drift takes the newest camera-motion state at most this much older than a
+#: frame without its own
+CAMERA_STATE_MAX_AGE_NS = 500_000_000
 _F = FloorTrackerParams()
 
 PARAMETERS = (
@@ -237,7 +240,8 @@ PARAMETERS = (
               'the stance feet sliding slowly with it back under the lifter\'s root (0: it '
               'does not fade in stance)', min_value=0.0, read_only=True),
     ParamSpec('stance_drift_s', _D.stance_drift_s, 'whole_body: > 0: in frames where the '
-              'camera-motion estimate (camera_motion_topic) says the camera moves, the floor '
+              'camera-motion estimate (camera_motion_topic) says the camera may move (any '
+              'state but static, unknown included), the floor '
               'frame (it rides with the camera) follows the drift of the target\'s stance '
               'feet, low-passed with this time constant, s: the feet then stand in the world, '
               'not in the moving camera\'s frame. 0: off; also off without an estimate, with '
@@ -375,7 +379,7 @@ class PhysicsNode(Node):
         #: the stance drift (stance_drift_s; off while the body is carried with the camera)
         #: is followed only in frames the camera-motion estimate says are not static: its
         #: state by stamp
-        self.drift = self.params.stance_drift_s > 0.0
+        self.drift = self.params.stance_drift_s > 0.0 and self.params.dynamics == 'whole_body'
         self.camera_states: 'collections.OrderedDict[int, str]' = collections.OrderedDict()
         #: the known camera pose (camera_pose_topic), for carry_with_camera
         self.known_poses: Optional[KnownCameraPoses] = None
@@ -471,6 +475,9 @@ class PhysicsNode(Node):
         if p['stance_drift_s'] > 0.0 and (self.carry or self.derotate):
             self.get_logger().info('stance_drift_s: off while the camera\'s motion is taken '
                                    'out or the body is carried with it')
+        elif p['stance_drift_s'] > 0.0 and p['floor_source'] == 'input':
+            self.get_logger().info('stance_drift_s: off with floor_source input (the input\'s '
+                                   'floor frame is not the camera\'s)')
         self.diag.set_value('stance_drift', 'off' if not self.drift else
                             f"followed ({self.params.stance_drift_s:g} s) in frames the "
                             "camera-motion estimate says the camera moves" if
@@ -699,7 +706,7 @@ class PhysicsNode(Node):
         state = self.camera_states.get(stamp)
         if state is None:
             before = next((s for s in reversed(self.camera_states) if s < stamp), None)
-            if before is not None and stamp - before <= 500_000_000:
+            if before is not None and stamp - before <= CAMERA_STATE_MAX_AGE_NS:
                 state = self.camera_states[before]
         return state is not None and state != 'static'
 
