@@ -88,6 +88,8 @@ def _configs(quick: bool, dynet: Optional[str]) -> List['EvalConfig']:
         cfgs += [EvalConfig('whole body, slide at once, stance 3 cm',
                             PhysicsParams(slide_threshold=0.05, slide_time=0.0,
                                           stance_height=0.03), 'gt'),
+                 EvalConfig('whole body, joints 90 rad/s (kp 8100, kd 180)',
+                            PhysicsParams(kp_joint=8100.0, kd_joint=180.0), 'gt'),
                  EvalConfig('whole body, k = 4 sub-steps',
                             PhysicsParams(substeps=4), 'gt'),
                  EvalConfig('whole body, full QP on OSQP (before)',
