@@ -213,6 +213,12 @@ PARAMETERS = (
               'fused root. Not for a walking camera (estimate moving: its path is the '
               'person\'s) nor a known camera pose (camera_pose_topic), followed as they are',
               min_value=0.0, read_only=True),
+    ParamSpec('transition_time_constant_s', 0.0, 'When the treatment of the root changes '
+              'between frames (GMR alone, foot lock, fusion, lock pulled towards the fusion: '
+              'the camera-motion estimate decides), the output root goes on from the last '
+              'one at its velocity and the difference to the new treatment\'s root decays '
+              'with this time constant, s; 0 = the new root at once (it jumps)',
+              min_value=0.0, read_only=True),
     ParamSpec('heading_smoothing', 7, 'With the vertical from the input: frames on each '
               'side over which the heading offset between the world and the input frame is '
               'averaged (the later ones from the look-ahead; 0 = GMR\'s heading per frame)',
@@ -460,7 +466,8 @@ class GMRNode(Node):
                                  else p['foot_plant_root_follow_s']))
                          if p['foot_plant'] else None,
                          contacts=self.contacts.setdefault(pid, {}),
-                         contact_threshold=p['contact_threshold'])
+                         contact_threshold=p['contact_threshold'],
+                         transition_time_constant_s=p['transition_time_constant_s'])
 
     def _keep_contacts(self, pid: Optional[int], stamp: int, probs: np.ndarray) -> None:
         """Keep one person's contact probabilities of a stamp (the last
@@ -861,6 +868,7 @@ class GMRNode(Node):
             fusion = online.fusion
             self.diag.set_value('segments', online.segments)
             self.diag.set_value('filled_frames', online.filled_frames)
+            self.diag.set_value('treatment_changes', online.treatment_changes)
             planter = online.planter
             if planter is not None:
                 self.diag.set_value('foot_plant', (

@@ -56,6 +56,19 @@ frame (``contacts``, matched by stamp) is at least ``contact_threshold``, or, wi
 when it is lower than ``lock_height``. What the leg cannot reach slides (measured in
 docs/global.md, "Feet planted by the legs").
 
+Treatment changes (``transition_time_constant_s`` > 0): the root comes from one of several
+treatments per frame (GMR's accumulation alone, the foot lock, a fusion, the lock pulled
+towards a fusion), chosen by the camera-motion estimate of that frame. Their roots differ:
+the lock drifts from GMR's accumulation, a fusion pulls towards the input root. Switching
+from one to another made the emitted root jump, which is where most of the world output's
+excess acceleration was (measured in docs/global.md, "Treatment changes"). When the
+treatment changes, the emitted root therefore goes on from the last emitted one at its last
+velocity, and the difference to the new treatment's root (horizontal only with a floor
+input: the height stays the input's) is carried as an offset that decays, critically damped
+from rest, with the time constant (``(o + o t / tau) exp(-t / tau)``: no velocity step).
+The treatments' own state (the lock's base, GMR's accumulation, the fusion) is not changed
+by it; only what is emitted (pose, velocity, input transform) is.
+
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
@@ -325,6 +338,10 @@ class OnlineGMR:
         foot_plant: with ``floor_input``, the settings of the legs' correction applied to
             every emitted pose (:mod:`mocap_core.foot_plant`; module docstring, foot
             planting); None: off.
+        transition_time_constant_s: > 0: when the frame's treatment (GMR alone, foot lock,
+            fusion, lock pulled towards the fusion) changes, the emitted root goes on from
+            the last one at its velocity and the difference decays with this time constant,
+            s (module docstring, treatment changes); 0: the new treatment's root at once.
         contacts: stamp (ns) -> (4,) foot contact probabilities (left heel, left toe, right
             heel, right toe; the lifter's), read when a frame is emitted: a point stands in
             the foot planting when its probability is at least ``contact_threshold``. A frame
@@ -341,7 +358,8 @@ class OnlineGMR:
                  network_rate_hz: float = 0.0,
                  foot_plant: Optional[FootPlantConfig] = None,
                  contacts: Optional[Mapping[int, np.ndarray]] = None,
-                 contact_threshold: float = 0.5) -> None:
+                 contact_threshold: float = 0.5,
+                 transition_time_constant_s: float = 0.0) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -364,6 +382,12 @@ class OnlineGMR:
         if not self.moving_lock_time_constant_s >= 0:
             raise ValueError('moving_lock_time_constant_s must be >= 0, got '
                              f'{moving_lock_time_constant_s}')
+        self.transition_time_constant_s = float(transition_time_constant_s)
+        if not self.transition_time_constant_s >= 0:
+            raise ValueError('transition_time_constant_s must be >= 0, got '
+                             f'{transition_time_constant_s}')
+        #: emitted frames whose treatment differed from the frame before (module docstring)
+        self.treatment_changes = 0
         if self.heading_smoothing < 0:
             raise ValueError(f'heading_smoothing must be >= 0, got {heading_smoothing}')
         if not (np.isfinite(network_rate_hz) and network_rate_hz >= 0):
@@ -408,6 +432,11 @@ class OnlineGMR:
         self._R_out: Optional[np.ndarray] = None     # the last emitted pose
         self._T_out: Optional[np.ndarray] = None
         self._T_gmr_prev: Optional[np.ndarray] = None
+        self._treatment: Optional[str] = None        # of the last emitted frame
+        self._offset = np.zeros(3)                   # emitted root - treatment's root, m
+        self._offset_rate = np.zeros(3)              # its rate of change, m/s
+        self._T_pub: Optional[np.ndarray] = None     # the last two emitted roots
+        self._T_pub_prev: Optional[np.ndarray] = None
         self._standing: dict = {}         # standing contact point -> its xy relative to root
         self._offsets: Deque[float] = collections.deque(maxlen=max(1, self.heading_smoothing))
         self._cache: Optional[Tuple[int, dict]] = None
@@ -695,6 +724,7 @@ class OnlineGMR:
             R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
         T_gmr = T
         self._R, self._T = R, T                         # the accumulation stays GMR's
+        treatment = 'fused' if fused else 'gmr'
         if self.floor_input:
             R, T = self._on_floor(self._heading_offset(R, out, pos), T, pose)
             anchor = self._anchors_in[pos]
@@ -708,6 +738,7 @@ class OnlineGMR:
                 g = 1.0 - math.exp(-max(dt, 0.0) / self.moving_lock_time_constant_s)
                 T = np.array([T_lock[0] + g * (T[0] - T_lock[0]),
                               T_lock[1] + g * (T[1] - T_lock[1]), T[2]])
+                treatment = 'lock pulled to fused'
             elif self.foot_lock and fused:
                 # the fused root follows the input's, whose feet are the physics' own: no
                 # lock (it would keep GMR's drift); it starts afresh when the fusion stops
@@ -715,10 +746,14 @@ class OnlineGMR:
                 self._T_gmr_prev = T_gmr.copy()
             elif self.foot_lock:
                 T = self._lock_feet(k, R, T, T_gmr, pose)
+                treatment = 'lock'
+        self._R_prev_out = self._R_out
+        self._T_out = T                                 # the treatments' own state
+        T = self._continue(k, T, treatment, dt)
         if k > 0 and dt > 0:
-            lin = R.T @ (T - self._T_out) / dt
-            ang = matrix_to_axis_angle(self._R_out.T @ R) / dt
-        self._R_out, self._T_out = R, T
+            lin = R.T @ (T - self._T_pub_prev) / dt
+            ang = matrix_to_axis_angle(self._R_prev_out.T @ R) / dt
+        self._R_out = R
         self._emitted += 1
         self.nonfinite_outputs += int(held)
         if k == 0:
@@ -735,6 +770,35 @@ class OnlineGMR:
             out_pose = self._plant(out_pose, self._stamps[pos], dt)
         return WorldFrame(self._stamps[pos], out_pose, lin, ang, k == 0, fused, held, R_wi,
                           t_wi)
+
+    def _continue(self, k: int, T: np.ndarray, treatment: str, dt: float) -> np.ndarray:
+        """The emitted root position (3,) m for the treatment's root ``T`` (module
+        docstring, treatment changes); keeps the last two emitted roots."""
+        tau = self.transition_time_constant_s
+        changed = k > 0 and self._treatment is not None and treatment != self._treatment
+        self.treatment_changes += int(changed)
+        if k == 0 or tau <= 0 or self._T_pub is None:
+            self._offset = np.zeros(3)
+            self._offset_rate = np.zeros(3)
+        elif changed:
+            step = (self._T_pub - self._T_pub_prev) if self._T_pub_prev is not None \
+                else np.zeros(3)
+            self._offset = self._T_pub + step - T
+            self._offset_rate = np.zeros(3)
+            if self.floor_input:
+                self._offset[2] = 0.0
+        elif dt > 0:
+            # critically damped decay, o(t) = (o + (o' + o / tau) t) exp(-t / tau): starting
+            # at rest, so that taking the offset up does not change the velocity at once
+            e = math.exp(-dt / tau)
+            drive = self._offset_rate + self._offset / tau
+            self._offset, self._offset_rate = ((self._offset + drive * dt) * e,
+                                               (self._offset_rate - drive * dt / tau) * e)
+        self._treatment = treatment
+        out = T + self._offset
+        self._T_pub_prev = None if k == 0 else self._T_pub
+        self._T_pub = out
+        return out
 
     def _plant(self, pose: Pose, stamp_ns: int, dt: float) -> Pose:
         """The emitted pose with its legs corrected (module docstring, foot planting)."""

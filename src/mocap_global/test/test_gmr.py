@@ -1031,3 +1031,76 @@ def test_foot_plant_keeps_the_feet_the_contacts_say_stand_under_a_fused_root():
     # the last frames have no contacts: heights (lock_height -1: nothing stands) release
     assert online.planted_with_contacts == n and online.planted_by_height == 5
     assert np.abs(fq[-1, :2] - fp[-1, :2]).max() < np.abs(fq[n - 1, :2] - fp[n - 1, :2]).max()
+
+
+def test_treatment_changes_do_not_make_the_root_jump():
+    """Blocks of frames fused towards the input root (a static camera, instant position gain)
+    alternate with blocks the estimate cannot anchor (foot lock, here under a GMR that
+    predicts no motion, so the lock alone moves the body). The locked root drifts away from
+    the input root, so every switch back to the fusion made the emitted root jump; with
+    ``transition_time_constant_s`` the root goes on at its velocity and the difference
+    decays: no jump, and by a block's end the root is the treatment's own again."""
+    from mocap_global.online import InputAnchor
+
+    n, block = 300, 60
+    R, T = circle_walk(n, turn=0.0)                     # standing, the legs swinging
+    swing = np.zeros((n, NUM_JOINTS - 1, 3))
+    swing[..., 1] = 0.3 * np.sin(0.13 * np.arange(n)[:, None]
+                                 + np.linspace(0, np.pi, NUM_JOINTS - 1)[None])
+    rot = np.zeros((n, NUM_JOINTS, 4))
+    rot[:, 0] = matrix_to_quat(R)
+    rot[:, 1:] = matrix_to_quat(axis_angle_to_matrix(swing))
+    poses = []
+    for r, t in zip(rot, T):
+        p = Pose(Skeleton.default(), r, t)
+        low = min(c[2] for c in p.contact_positions().values())
+        poses.append(Pose(p.skeleton, r, t - [0, 0, low]))
+    anchors = [InputAnchor(True, static=True) if (i // block) % 2 == 0 else InputAnchor(False)
+               for i in range(n)]
+    model = _small_model()
+    with torch.no_grad():
+        model.regression.weight.zero_()                 # no motion, up = +z
+
+    def run(tau):
+        fusion = StaticCameraFusion(30.0, input_up=EZ, static_position_time_constant_s=0.0)
+        online = OnlineGMR(model, lookahead=3, fusion=fusion, floor_input=True,
+                           foot_lock=True, lock_height=10.0,     # every point stands
+                           transition_time_constant_s=tau)
+        frames = []
+        for i, (p, a) in enumerate(zip(poses, anchors)):
+            frames += online.push(i * 33_333_333, p, a)[0]
+        frames += online.flush()
+        assert len(frames) == n
+        return online, np.array([f.pose.root_position for f in frames]), frames
+
+    raw_online, raw, _ = run(0.0)
+    online, smooth, frames = run(0.3)
+    # fused -> lock at 60 and 180, lock -> fused one frame after 120 and 240 (the fusion
+    # aligns itself on the first anchored frame)
+    assert raw_online.treatment_changes == online.treatment_changes == 4
+    acc_raw = np.linalg.norm(np.diff(raw[:, :2], 2, axis=0), axis=-1)
+    acc = np.linalg.norm(np.diff(smooth[:, :2], 2, axis=0), axis=-1)
+    jumps = [acc_raw[s - 3:s + 3].max() for s in (2 * block, 4 * block)]
+    assert min(jumps) > 0.1                            # the scenario does jump (m / frame^2)
+    for s, jump in zip((2 * block, 4 * block), jumps):
+        assert acc[s - 3:s + 3].max() < 0.15 * jump, (acc[s - 3:s + 3], jump)
+    assert acc.max() < 0.15 * min(jumps)
+    # heights are the input's, untouched
+    np.testing.assert_allclose(smooth[:, 2], raw[:, 2], atol=1e-12)
+    # the offset decays: by the end of each block (2 s, 6.7 time constants) the root is the
+    # treatment's own within 2 % of the jump it took up
+    for end in range(2 * block - 1, n, block):
+        start = end - block + 2
+        jump = np.linalg.norm(smooth[start, :2] - raw[start, :2])
+        assert np.linalg.norm(smooth[end, :2] - raw[end, :2]) < 0.02 * jump + 1e-9
+    # the treatments' own state is not changed by it, and what is published agrees with
+    # itself: the input transform maps the input root onto the emitted root, the velocity
+    # is the emitted root's
+    for f, p in zip(frames, poses):
+        np.testing.assert_allclose(f.input_rotation @ p.root_position + f.input_translation,
+                                   f.pose.root_position, atol=1e-9)
+    k = 2 * block + 2
+    v = quat_to_matrix(frames[k].pose.rotations[0]).T @ (smooth[k] - smooth[k - 1]) * 30.0
+    np.testing.assert_allclose(frames[k].linear_velocity, v, rtol=1e-6, atol=1e-9)
+    with pytest.raises(ValueError, match='transition_time_constant_s'):
+        OnlineGMR(_small_model(), lookahead=3, transition_time_constant_s=-0.1)

@@ -122,12 +122,16 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
         raise ProcessError(f"several image topics ({', '.join(images)}): choose one with "
                            '--image-topic')
     nodes = list(NODES[STAGES.index(start):])
-    feed = {
-        'images': images[:1] + [t for t in (T.IMAGE_CAMERA_INFO,) if t in topics],
-        'keypoints': [T.KEYPOINTS] + [t for t in (T.CAMERA_INFO,) if t in topics],
-        'lifter': [T.LIFTER_MOTION] + [t for t in (T.LIFTER_CONTACTS,) if t in topics],
-        'physics': [T.PHYSICS_MOTION] + [t for t in (T.PHYSICS_FLOOR,) if t in topics],
-    }[start]
+    # what the stages after the start read besides the start's own topic: the lifter's
+    # contacts (the physics stage's contact labels, the world stage's foot planting), the
+    # floor, and the same per person (several people)
+    lifter_contacts = (T.LIFTER_CONTACTS, T.bodies_topic('lifter', 'contacts'))
+    feed = [images[:1] + [T.IMAGE_CAMERA_INFO],
+            [T.KEYPOINTS, T.CAMERA_INFO],
+            [T.LIFTER_MOTION, T.bodies_topic('lifter', 'motion'), *lifter_contacts],
+            [T.PHYSICS_MOTION, T.bodies_topic('physics', 'motion'), T.PHYSICS_FLOOR,
+             *lifter_contacts]][STAGES.index(start)]
+    feed = feed[:1] + [t for t in feed[1:] if t in topics]
     if start != 'images' and T.CAMERA_MOTION in topics:    # for the world stage
         feed.append(T.CAMERA_MOTION)
     produced = [p for n in nodes for p in PRODUCED[n]]
