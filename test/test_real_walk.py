@@ -74,7 +74,7 @@ def test_the_world_path_follows_the_camera_once_it_is_measured(walk):
 
 
 @pytest.mark.xfail(strict=True, reason='the world path of a person walking away from a '
-                   'following camera: 4.1 m, straightness 0.83 (goals 6-12 m, 0.8): the first '
+                   'following camera: 4.2 m, straightness 0.82 (goals 6-12 m, 0.8): the first '
                    'second, before the physics floor exists, is GMR alone (docs/global.md)')
 def test_the_world_path_is_the_walk(walk):
     _, world, _ = walk

@@ -213,7 +213,7 @@ PARAMETERS = (
               'fused root. Not for a walking camera (estimate moving: its path is the '
               'person\'s) nor a known camera pose (camera_pose_topic), followed as they are',
               min_value=0.0, read_only=True),
-    ParamSpec('transition_time_constant_s', 0.0, 'When the treatment of the root changes '
+    ParamSpec('transition_time_constant_s', 0.3, 'When the treatment of the root changes '
               'between frames (GMR alone, foot lock, fusion, lock pulled towards the fusion: '
               'the camera-motion estimate decides), the output root goes on from the last '
               'one at its velocity and the difference to the new treatment\'s root decays '
