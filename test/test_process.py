@@ -87,6 +87,12 @@ def test_plan_starts_from_the_earliest_stage_in_the_input():
     assert plan_for(phys, start='lifter').feed_topics == [
         '/mocap/lifter/motion', '/mocap/lifter/contacts', '/mocap/lifter/bodies/contacts',
         '/mocap/camera/motion']
+    # everyone's motion without everyone's contacts: one person's, with their contacts
+    partial = dict(phys)
+    del partial['/mocap/lifter/bodies/contacts']
+    assert plan_for(partial, start='physics').feed_topics == [
+        '/mocap/physics/motion', '/mocap/physics/floor', '/mocap/lifter/contacts',
+        '/mocap/camera/motion']
 
 
 def test_params_parse_node_name_value():

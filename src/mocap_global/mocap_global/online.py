@@ -67,7 +67,8 @@ velocity, and the difference to the new treatment's root (horizontal only with a
 input: the height stays the input's) is carried as an offset that decays, critically damped
 from rest, with the time constant (``(o + o t / tau) exp(-t / tau)``: no velocity step).
 The treatments' own state (the lock's base, GMR's accumulation, the fusion) is not changed
-by it; only what is emitted (pose, velocity, input transform) is.
+by it; only what is emitted (pose, velocity, input transform) is. The first frame with a
+known camera pose is not such a change: it is placed where the pose says.
 
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
@@ -435,6 +436,9 @@ class OnlineGMR:
         self._treatment: Optional[str] = None        # of the last emitted frame
         self._offset = np.zeros(3)                   # emitted root - treatment's root, m
         self._offset_rate = np.zeros(3)              # its rate of change, m/s
+        self._dt_prev = 0.0                          # the last emitted frame's interval, s
+        self._placed = False                         # this frame placed by a known pose
+        self._R_prev_out: Optional[np.ndarray] = None
         self._T_pub: Optional[np.ndarray] = None     # the last two emitted roots
         self._T_pub_prev: Optional[np.ndarray] = None
         self._standing: dict = {}         # standing contact point -> its xy relative to root
@@ -680,6 +684,7 @@ class OnlineGMR:
                 # not pulled there over the next frames
                 first = True
                 self._known_placed = True
+                self._placed = True
         # no anchors: a camera declared static; a known camera pose moves. Only a floor
         # input (the physics output, already filtered) is taken as it is: a camera-frame
         # root carries the lifter's depth noise
@@ -718,6 +723,7 @@ class OnlineGMR:
                 corr = matrix_to_axis_angle(quat_to_matrix(quat_from_two_vectors(up, b)))
                 R = R @ axis_angle_to_matrix(self.tilt_correction * corr)
             dt = (self._stamps[pos] - self._stamps[pos - 1]) * 1e-9
+        self._placed = False
         if self.fusion is not None:
             R, T, fused = self._fuse(R, T, pose, self._anchors_in[pos], up, k == 0)
         if k % 64 == 0:
@@ -775,14 +781,21 @@ class OnlineGMR:
         """The emitted root position (3,) m for the treatment's root ``T`` (module
         docstring, treatment changes); keeps the last two emitted roots."""
         tau = self.transition_time_constant_s
-        changed = k > 0 and self._treatment is not None and treatment != self._treatment
+        changed = k > 0 and self._treatment is not None and treatment != self._treatment \
+            and not self._placed
         self.treatment_changes += int(changed)
-        if k == 0 or tau <= 0 or self._T_pub is None:
+        if k == 0 or tau <= 0 or self._T_pub is None or self._placed:
+            # a segment's first frame, or the first frame with a known camera pose, which is
+            # placed where the pose says (the frames before it are GMR's from an arbitrary
+            # origin): no offset
             self._offset = np.zeros(3)
             self._offset_rate = np.zeros(3)
         elif changed:
-            step = (self._T_pub - self._T_pub_prev) if self._T_pub_prev is not None \
-                else np.zeros(3)
+            # the last step, scaled to this frame's interval (frames need not be evenly
+            # spaced): the root goes on at its velocity
+            step = np.zeros(3)
+            if self._T_pub_prev is not None and self._dt_prev > 0 and dt > 0:
+                step = (self._T_pub - self._T_pub_prev) * (dt / self._dt_prev)
             self._offset = self._T_pub + step - T
             self._offset_rate = np.zeros(3)
             if self.floor_input:
@@ -795,6 +808,7 @@ class OnlineGMR:
             self._offset, self._offset_rate = ((self._offset + drive * dt) * e,
                                                (self._offset_rate - drive * dt / tau) * e)
         self._treatment = treatment
+        self._dt_prev = dt
         out = T + self._offset
         self._T_pub_prev = None if k == 0 else self._T_pub
         self._T_pub = out

@@ -10,8 +10,14 @@ images       an Image/CompressedImage topic (``--image-topic``)  keypoints, lift
              or a video file                                      gmr
 keypoints    ``/mocap/keypoints2d`` (+ ``/mocap/camera_info``)     lifter, physics, gmr
 lifter       ``/mocap/lifter/motion`` (+ ``/mocap/lifter/contacts``) physics, gmr
-physics      ``/mocap/physics/motion``                            gmr
+physics      ``/mocap/physics/motion`` (+ ``/mocap/physics/floor``,   gmr
+             ``/mocap/lifter/contacts``)
 ===========  ==================================================  ============================
+
+A later start is fed, besides its own topic, what the stages after it read from the bag:
+the lifter's contacts (the physics stage's contact labels, the world stage's foot planting),
+the physics floor, the camera-motion estimate, and every person's ``bodies`` motion with
+everyone's contacts (only when the bag holds those contacts).
 
 The nodes are the pipeline's own node classes (the ones ``ros2 run`` starts), wired with
 :class:`mocap_core.inprocess.InProcessGraph`: every message is delivered synchronously, in
@@ -132,6 +138,11 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
             [T.PHYSICS_MOTION, T.bodies_topic('physics', 'motion'), T.PHYSICS_FLOOR,
              *lifter_contacts]][STAGES.index(start)]
     feed = feed[:1] + [t for t in feed[1:] if t in topics]
+    if T.bodies_topic('lifter', 'contacts') not in topics:
+        # everyone's motion without everyone's contacts (a bag recorded with --topics): the
+        # one person's motion and contacts, which the stages read together
+        feed = [t for t in feed if t not in (T.bodies_topic('lifter', 'motion'),
+                                             T.bodies_topic('physics', 'motion'))]
     if start != 'images' and T.CAMERA_MOTION in topics:    # for the world stage
         feed.append(T.CAMERA_MOTION)
     produced = [p for n in nodes for p in PRODUCED[n]]
