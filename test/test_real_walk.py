@@ -74,8 +74,10 @@ def test_the_world_path_follows_the_camera_once_it_is_measured(walk):
 
 
 @pytest.mark.xfail(strict=True, reason='the world path of a person walking away from a '
-                   'following camera: 4.2 m, straightness 0.82 (goals 6-12 m, 0.8): the first '
-                   'second, before the physics floor exists, is GMR alone (docs/global.md)')
+                   'following camera: 3.6 m (goal 6-12 m; straightness 0.96 meets its 0.8): '
+                   'the clip plays about twice slowed, the camera\'s measured path is '
+                   '4.4-4.9 m, and the first second, before the physics floor exists, is GMR '
+                   'alone (docs/global.md)')
 def test_the_world_path_is_the_walk(walk):
     _, world, _ = walk
     assert 6.0 <= world['root_path_m'] <= 12.0 and world['root_straightness'] >= 0.8, world

@@ -203,9 +203,12 @@ PARAMETERS = (
               "for all outputs; GMR gives heading and horizontal path), 'gmr' (accumulated "
               "like the rest) or 'auto' ('input' unless the input frame is an optical "
               "frame)"),
-    ParamSpec('foot_lock', True, "With the vertical from the input: contact points standing "
-              "on the floor (below lock_height) stay where they touched down in the world; "
-              "GMR's translation moves the body only while no foot stands"),
+    ParamSpec('foot_lock', False, "With the vertical from the input: the root is moved so "
+              "that contact points standing on the floor (below lock_height) stay where they "
+              "touched down in the world; GMR's translation moves the body only while no foot "
+              "stands. Off by default since session 53: foot_plant keeps the standing feet by "
+              "bending the legs, and the locked root was the world output's noisiest "
+              "(docs/global.md, 'The foot lock, off')"),
     ParamSpec('fusion_moving_lock_time_constant_s', 0.5, 'With foot_lock: fused frames of a '
               'camera that turns without walking (estimate rotating, its position measured '
               'over the floor, or fuse_rotating) keep the foot lock, and the locked root is '
