@@ -32,6 +32,9 @@ would keep GMR's drift instead (measured in docs/global.md). With
 ``moving_lock_time_constant_s`` > 0, the fused frames of a camera that turns without
 walking stay locked, and the locked root is pulled towards the fused one with that time
 constant (a walking camera's frames follow the fused root: its path is the person's).
+The node leaves the lock off by default since session 53: the foot planting below keeps the
+standing feet without moving the root, and the locked root was the world path's noisiest and
+least accurate part (docs/global.md, "The foot lock, off").
 
 The network's frame rate (``network_rate_hz``, > 0): GMR reads the frames it gets as
 consecutive frames of its training rate (30 frames/s) and predicts the motion from one to
