@@ -133,6 +133,12 @@ PARAMETERS = (
     ParamSpec('person_timeout_s', 1.0, 'A person absent from the keypoints for longer than '
               'this (message stamps) is dropped: their last frames are emitted and their '
               'per-person topics removed', min_value=0.0, read_only=True),
+    ParamSpec('hold_unseen_s', 0.0, 'A keypoint unseen (confidence 0: hidden behind '
+              'someone, dropped) while its person is seen takes its last seen position and '
+              'confidence if seen at most this long ago, s; 0 = off (zeros to the network). '
+              'Opt-in: three people on the synthetic crossing scenes +7.7 -> +2.7 mm MPJPE '
+              'over alone with 0.5 (docs/multi_person.md)', min_value=0.0, max_value=10.0,
+              read_only=True),
     ParamSpec('body_mass', 70.0, 'Body mass for the URDF inertias (kg)', min_value=1.0),
     ParamSpec('horizontal_fov_deg', 60.0, 'Field of view of the approximate intrinsics used '
               'without a calibrated camera_info (image size from an uncalibrated camera_info, '
@@ -187,7 +193,7 @@ class LifterNode(Node):
         lifter = make_lifter()
         self.people = PeopleStreams(make_lifter, StreamIntrinsics(p['horizontal_fov_deg']),
                                     p['person'], p['max_gap_s'], p['person_timeout_s'],
-                                    p['max_persons'])
+                                    p['max_persons'], p['hold_unseen_s'])
         self.bodies = BodyPublishers(self, 'lifter', with_urdf=True)
         self.published_lengths: Optional[np.ndarray] = None
         self.body_lengths: Dict[int, np.ndarray] = {}
@@ -337,6 +343,9 @@ class LifterNode(Node):
         self.diag.set_value('person_ids', ' '.join(map(str, sorted(self.people.streams)))
                             or 'none')
         self.diag.set_value('persons_ignored', self.people.ignored)
+        if self.people.hold_unseen_s > 0:
+            self.diag.set_value('held_unseen_keypoints', self.people.held_ended + sum(
+                s.held_keypoints for s in self.people.streams.values()))
         filled, thinned = self.people.rate_counts()
         self.diag.set_value('filled_frames', filled)
         self.diag.set_value('thinned_frames', thinned)

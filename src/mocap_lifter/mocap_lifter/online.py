@@ -529,14 +529,25 @@ class LifterStream:
         person: row of the keypoint messages to track.
         max_gap_s: stamps jumping back by this much or more start a new stream
             (:class:`mocap_core.streams.StampOrder`); a smaller step back is dropped.
+        hold_unseen_s: > 0: a keypoint unseen in a frame where the person is (confidence 0:
+            hidden behind someone, or dropped by the detector) takes its last seen position
+            and confidence if it was seen at most this long ago (s, stamps); 0: it stays
+            unseen (zeros in the network's input).
     """
 
     def __init__(self, lifter: OnlineLifter, intrinsics: StreamIntrinsics, person: int = 0,
-                 max_gap_s: float = 1.0) -> None:
+                 max_gap_s: float = 1.0, hold_unseen_s: float = 0.0) -> None:
         self.lifter = lifter
         self.intrinsics = intrinsics
         self.person = int(person)
         self.stamps = StampOrder(max(float(max_gap_s), 1e-9))
+        if not hold_unseen_s >= 0:
+            raise ValueError(f'hold_unseen_s must be >= 0, got {hold_unseen_s}')
+        self.hold_unseen_ns = int(round(float(hold_unseen_s) * 1e9))
+        self._last_kp = np.zeros((NUM_KEYPOINTS, 3))        # last seen u, v, confidence
+        self._last_kp_ns = np.full(NUM_KEYPOINTS, np.iinfo(np.int64).min // 2, np.int64)
+        #: keypoints filled in from their last sighting (``hold_unseen_s``)
+        self.held_keypoints = 0
         # frames waiting for the intrinsics: (stamp ns, (23, 3) keypoints)
         self._held: Deque[Tuple[int, np.ndarray]] = collections.deque()
 
@@ -559,7 +570,10 @@ class LifterStream:
             self.lifter.reset()
             step.resets.append('backwards')
             self.intrinsics.restart()
+            self._last_kp_ns[:] = np.iinfo(np.int64).min // 2
         kp = self._person(people)
+        if kp is not None and self.hold_unseen_ns > 0:
+            kp = self._hold_unseen(int(stamp_ns), kp)
         if kp is None:
             step.nobody = True
             if self.lifter.frames_seen == 0 and not self._held:
@@ -579,6 +593,18 @@ class LifterStream:
         self._release(step, force=True)
         step.frames.extend(self.lifter.flush())
         return step
+
+    def _hold_unseen(self, stamp_ns: int, kp: np.ndarray) -> np.ndarray:
+        """(23, 3) keypoints with the unseen ones filled from their recent sightings
+        (``hold_unseen_s``); the sightings are remembered."""
+        kp = np.array(kp, dtype=np.float64, copy=True)
+        seen = kp[:, 2] > 0
+        self._last_kp[seen] = kp[seen]
+        self._last_kp_ns[seen] = stamp_ns
+        fill = ~seen & (stamp_ns - self._last_kp_ns <= self.hold_unseen_ns)
+        kp[fill] = self._last_kp[fill]
+        self.held_keypoints += int(fill.sum())
+        return kp
 
     def _person(self, people: np.ndarray) -> Optional[np.ndarray]:
         """The tracked person's (23, 3) keypoints, or None if absent or all unseen."""
@@ -653,10 +679,13 @@ class PeopleStreams:
         max_gap_s: as :class:`LifterStream`.
         timeout_s: a person unseen this long (s) ends their stream.
         max_persons: the most streams at once; further ids are ignored (counted).
+        hold_unseen_s: as :class:`LifterStream`, for every person.
     """
 
     def __init__(self, make_lifter, intrinsics: StreamIntrinsics, person: int = 0,
-                 max_gap_s: float = 1.0, timeout_s: float = 1.0, max_persons: int = 8) -> None:
+                 max_gap_s: float = 1.0, timeout_s: float = 1.0, max_persons: int = 8,
+                 hold_unseen_s: float = 0.0) -> None:
+        self.hold_unseen_s = float(hold_unseen_s)
         self.make_lifter = make_lifter
         self.intrinsics = intrinsics
         self.person = int(person)
@@ -669,6 +698,7 @@ class PeopleStreams:
         #: frames filled in / thinned by the lifters of persons who are gone
         self.filled_ended = 0
         self.thinned_ended = 0
+        self.held_ended = 0        # keypoints held (hold_unseen_s) by persons who are gone
         self._last_ns: Optional[int] = None
 
     @staticmethod
@@ -716,7 +746,7 @@ class PeopleStreams:
                     self.ignored += 1
                     continue
                 self.streams[pid] = LifterStream(self.make_lifter(), self.intrinsics, 0,
-                                                 self.max_gap_s)
+                                                 self.max_gap_s, self.hold_unseen_s)
             self.last_seen[pid] = int(stamp_ns)
             out.steps[pid] = self.streams[pid].push(stamp_ns, people[r:r + 1])
         empty = np.zeros((0, NUM_KEYPOINTS, 3))
@@ -747,6 +777,7 @@ class PeopleStreams:
         step = stream.flush()
         self.filled_ended += stream.lifter.filled_frames
         self.thinned_ended += stream.lifter.thinned_frames
+        self.held_ended += stream.held_keypoints
         self.last_seen.pop(pid, None)
         if pid in out.steps:
             out.steps[pid].frames.extend(step.frames)

@@ -280,3 +280,52 @@ def test_filled_gaps_lift_a_walk_seen_at_a_third_of_its_rate_better():
     print(f'PA-MPJPE as is {pa_as_is:.1f} mm, filled {pa_filled:.1f} mm')
     assert n0 == 0 and n1 == 2 * (len(kept) - 1)
     assert pa_filled < 0.6 * pa_as_is and pa_filled < 35.0
+
+
+def test_hidden_keypoints_are_held_from_their_last_sighting_for_a_while():
+    """hold_unseen_s: a keypoint of a seen person with confidence 0 (hidden behind someone)
+    takes its last seen position and confidence while that sighting is at most hold_unseen_s
+    old; later, or with the option off, it reaches the network unseen. A frame without the
+    person is not filled."""
+    import torch
+    torch.manual_seed(0)
+    model = MotioNet(LifterConfig(**SMALL)).eval()
+
+    def run(hold):
+        stream = LifterStream(OnlineLifter(model, 'windowed', skeleton_frames=20),
+                              StreamIntrinsics(60.0, warmup_frames=5), person=0,
+                              max_gap_s=1.0, hold_unseen_s=hold)
+        got = []
+        push = stream.lifter.push
+
+        def spy(stamp_ns, keypoints, *a, **k):
+            got.append(np.array(keypoints, copy=True))
+            return push(stamp_ns, keypoints, *a, **k)
+        stream.lifter.push = spy
+        people = [_people(k) for k in range(20)]
+        for k in range(10, 20):
+            people[k][0, 5] = 0.0                      # keypoint 5 hidden from frame 10 on
+        people[15] = np.zeros((1, 23, 3))              # nobody in frame 15
+        _run(stream, people)
+        stream.flush()
+        return stream, got, people
+
+    stream, got, people = run(0.1)                      # three frames at 30 frames/s
+    assert len(got) == 20
+    for k in (10, 11, 12):
+        np.testing.assert_array_equal(got[k][5], people[9][0, 5])
+    for k in range(13, 20):
+        np.testing.assert_array_equal(got[k][5], 0.0)
+    np.testing.assert_array_equal(got[15], 0.0)        # the absent person is not filled
+    for k in range(20):                                 # every other keypoint as it came
+        if k != 15:
+            np.testing.assert_array_equal(np.delete(got[k], 5, axis=0),
+                                          np.delete(people[k][0], 5, axis=0))
+    assert stream.held_keypoints == 3
+    off, got_off, _ = run(0.0)
+    assert off.held_keypoints == 0
+    for k in range(10, 20):
+        np.testing.assert_array_equal(got_off[k][5], 0.0)
+    with pytest.raises(ValueError, match='hold_unseen_s'):
+        LifterStream(OnlineLifter(model, 'windowed'), StreamIntrinsics(60.0),
+                     hold_unseen_s=-1.0)
