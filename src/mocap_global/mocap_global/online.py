@@ -441,7 +441,6 @@ class OnlineGMR:
         self._offset_rate = np.zeros(3)              # its rate of change, m/s
         self._dt_prev = 0.0                          # the last emitted frame's interval, s
         self._placed = False                         # this frame placed by a known pose
-        self._R_prev_out: Optional[np.ndarray] = None
         self._T_pub: Optional[np.ndarray] = None     # the last two emitted roots
         self._T_pub_prev: Optional[np.ndarray] = None
         self._standing: dict = {}         # standing contact point -> its xy relative to root
@@ -756,12 +755,11 @@ class OnlineGMR:
             elif self.foot_lock:
                 T = self._lock_feet(k, R, T, T_gmr, pose)
                 treatment = 'lock'
-        self._R_prev_out = self._R_out
         self._T_out = T                                 # the treatments' own state
         T = self._continue(k, T, treatment, dt)
         if k > 0 and dt > 0:
             lin = R.T @ (T - self._T_pub_prev) / dt
-            ang = matrix_to_axis_angle(self._R_prev_out.T @ R) / dt
+            ang = matrix_to_axis_angle(self._R_out.T @ R) / dt
         self._R_out = R
         self._emitted += 1
         self.nonfinite_outputs += int(held)
