@@ -73,6 +73,16 @@ The treatments' own state (the lock's base, GMR's accumulation, the fusion) is n
 by it; only what is emitted (pose, velocity, input transform) is. The first frame with a
 known camera pose is not such a change: it is placed where the pose says.
 
+The network's own pose (``network_pose`` of :meth:`OnlineGMR.add`, or
+:meth:`OnlineGMR.set_network_pose` for a frame already added): the network may read another
+local pose of the same frame than the one emitted. The world stage emits the physics output,
+whose legs the PD control and the held feet swing less than the lifter's, and GMR steps by
+what the legs do: fed the physics output it covers a shorter path than fed the lifter's
+(measured in docs/global.md, "What the network reads"). With the lifter's pose of each frame
+as the network's input, the heading and the path come from the lifter's legs and the body
+that is placed is still the physics output (its height, tilt and feet). A frame without a
+network pose uses its own.
+
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
@@ -406,6 +416,8 @@ class OnlineGMR:
         self.planted_by_height = 0
         #: frames filled in so far (run through the network, never returned)
         self.filled_frames = 0
+        #: frames whose network input was another pose than the emitted one (``network_pose``)
+        self.network_pose_frames = 0
         if self.cfg.root_input == 'up' and input_up is None:
             raise ValueError("this model needs the input frame's up direction (input_up)")
         self.input_up = None if input_up is None else np.asarray(input_up, dtype=np.float64)
@@ -483,16 +495,20 @@ class OnlineGMR:
         frames.extend(self.take())
         return frames, event
 
-    def add(self, stamp_ns: int, pose: Pose, anchor: Optional[InputAnchor] = None
-            ) -> Tuple[List[WorldFrame], str]:
+    def add(self, stamp_ns: int, pose: Pose, anchor: Optional[InputAnchor] = None,
+            network_pose: Optional[Pose] = None) -> Tuple[List[WorldFrame], str]:
         """:meth:`push` without the emission of the frames that became ready: returns the
         frames of a segment that a restart ended, and the event. Several people: ``add``
         each person's frame, :func:`prepare_outputs` (one network pass for all), then
-        :meth:`take` each."""
+        :meth:`take` each. ``network_pose``: the local pose the network reads for this
+        frame instead of ``pose``'s (module docstring; the root is not read), e.g. the
+        lifter's of the same stamp; None: ``pose``'s. Raises ValueError for a pose (either)
+        with other joints or non-finite values."""
         self.check_pose(pose)
-        if not (np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(pose.root_position))
-                and np.all(np.isfinite(pose.skeleton.offsets))):
-            raise ValueError('pose contains NaN or inf')
+        _check_finite(pose)
+        if network_pose is not None:
+            self.check_pose(network_pose)
+            _check_finite(network_pose)
         frames: List[WorldFrame] = []
         event = ''
         if self._stamps:
@@ -507,17 +523,40 @@ class OnlineGMR:
         elif self.period_ns and self._stamps \
                 and 2 * (int(stamp_ns) - self._stamps[-1]) >= 3 * self.period_ns:
             self._fill(int(stamp_ns), pose, anchor)
-        self._append(int(stamp_ns), pose, anchor)
+        self._append(int(stamp_ns), pose, anchor, network_pose)
         return frames, event
 
-    def _append(self, stamp_ns: int, pose: Pose, anchor: Optional[InputAnchor]) -> None:
+    def set_network_pose(self, stamp_ns: int, pose: Pose) -> bool:
+        """The network reads ``pose``'s local pose for the frame of ``stamp_ns`` added
+        before (module docstring: the lifter's pose may come after the physics output of
+        the same stamp). Returns False when no frame of the window has that stamp (nothing
+        changes). Raises ValueError as :meth:`add`."""
+        self.check_pose(pose)
+        _check_finite(pose)
+        for i in range(len(self._stamps) - 1, -1, -1):
+            if self._stamps[i] == stamp_ns:
+                self._feats[i] = self._features(pose)
+                self.network_pose_frames += 1
+                self._cache = None
+                return True
+            if self._stamps[i] < stamp_ns:
+                break
+        return False
+
+    def _features(self, pose: Pose) -> np.ndarray:
+        """(C,) network input of one frame's pose."""
         up = None
         if self.cfg.root_input == 'up':
             up = quat_to_matrix(pose.rotations[0]).T @ self.input_up
             up = up / np.linalg.norm(up)
-        self._feats.append(features_for(self.cfg, pose.rotations[None],
-                                        pose.skeleton.group_lengths(),
-                                        None if up is None else up[None])[0])
+        return features_for(self.cfg, pose.rotations[None], pose.skeleton.group_lengths(),
+                            None if up is None else up[None])[0]
+
+    def _append(self, stamp_ns: int, pose: Pose, anchor: Optional[InputAnchor],
+                network_pose: Optional[Pose] = None) -> None:
+        if network_pose is not None:
+            self.network_pose_frames += 1
+        self._feats.append(self._features(pose if network_pose is None else network_pose))
         self._poses.append(pose)
         self._anchors_in.append(anchor)
         self._stamps.append(stamp_ns)
@@ -830,6 +869,13 @@ class OnlineGMR:
 
 
 @torch.no_grad()
+def _check_finite(pose: Pose) -> None:
+    """Raise ValueError when the pose has a non-finite value."""
+    if not (np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(pose.root_position))
+            and np.all(np.isfinite(pose.skeleton.offsets))):
+        raise ValueError('pose contains NaN or inf')
+
+
 def prepare_outputs(states: List['OnlineGMR']) -> int:
     """Run the network once for every state in ``states`` that is :meth:`~OnlineGMR.ready`
     and has no outputs for its current window yet (several people: one pass with a batch row

@@ -1104,3 +1104,56 @@ def test_treatment_changes_do_not_make_the_root_jump():
     np.testing.assert_allclose(frames[k].linear_velocity, v, rtol=1e-6, atol=1e-9)
     with pytest.raises(ValueError, match='transition_time_constant_s'):
         OnlineGMR(_small_model(), lookahead=3, transition_time_constant_s=-0.1)
+
+
+def test_the_network_can_read_another_pose_than_the_one_emitted():
+    """``network_pose``: the world path is the one GMR gives for the network's pose (here
+    another random local pose per frame), the body emitted is the input's own; the network
+    pose given with the frame or set later (the pass runs again) are the same; a stamp not in
+    the window changes nothing; a network pose with other joints is refused."""
+    model = _small_model()
+    body, net = _poses(40, seed=0), _poses(40, seed=1)
+    stamps = [i * 33_333_333 for i in range(40)]
+
+    def run(mode):
+        online = OnlineGMR(model, lookahead=5)
+        out = []
+        for s, p, q in zip(stamps, body, net):
+            if mode == 'body':
+                out += online.add(s, p)[0]
+            elif mode == 'net':
+                out += online.add(s, q)[0]
+            elif mode == 'given':
+                out += online.add(s, p, network_pose=q)[0]
+            else:          # 'set': the network pose comes after the network's pass
+                out += online.add(s, p)[0]
+                prepare_outputs([online])
+                assert online.set_network_pose(s, q)
+            out += online.take()
+        return online, out + online.flush()
+
+    _, plain = run('body')
+    _, as_net = run('net')
+    given_state, given = run('given')
+    _, later = run('set')
+    assert given_state.network_pose_frames == 40
+    def path(frames):      # from the first frame (placed by the body's own lowest foot)
+        T = np.stack([f.pose.root_position for f in frames])
+        return T - T[0]
+
+    # the path is the network pose's, and it differs from the body's own
+    np.testing.assert_allclose(path(given), path(as_net), atol=1e-6)
+    assert np.abs(path(given) - path(plain)).max() > 1e-3
+    np.testing.assert_allclose(path(later), path(given), atol=1e-6)
+    # the emitted body is the input's local pose (not the network's)
+    for f, p in zip(given, body):
+        np.testing.assert_allclose(f.pose.rotations[1:], p.rotations[1:], atol=1e-12)
+    # a stamp the window does not hold: nothing changes, and a pose with other joints fails
+    assert not given_state.set_network_pose(stamps[-1] + 10**9, net[0])
+    assert given_state.network_pose_frames == 40
+    sk = Skeleton(np.zeros((3, 3)), joint_names=('pelvis', 'a', 'b'), parents=(-1, 0, 1))
+    other = Pose(sk, np.tile([0, 0, 0, 1.0], (3, 1)), np.zeros(3))
+    with pytest.raises(ValueError, match='joint set does not match'):
+        given_state.set_network_pose(stamps[-1], other)
+    with pytest.raises(ValueError, match='joint set does not match'):
+        OnlineGMR(model, lookahead=5).add(0, body[0], network_pose=other)

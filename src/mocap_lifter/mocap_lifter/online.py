@@ -529,10 +529,12 @@ class LifterStream:
         person: row of the keypoint messages to track.
         max_gap_s: stamps jumping back by this much or more start a new stream
             (:class:`mocap_core.streams.StampOrder`); a smaller step back is dropped.
-        hold_unseen_s: > 0: a keypoint unseen in a frame where the person is (confidence 0:
-            hidden behind someone, or dropped by the detector) takes its last seen position
-            and confidence if it was seen at most this long ago (s, stamps); 0: it stays
-            unseen (zeros in the network's input).
+        hold_unseen_s: > 0: a keypoint unseen in a frame where the person is (confidence 0)
+            and whose last sighting lies inside another person's box in this frame
+            (``occluders`` of :meth:`push`: hidden behind someone) takes its last seen
+            position and confidence if it was seen at most this long ago (s, stamps); 0, or
+            a keypoint the detector dropped with nobody in front of it: it stays unseen
+            (zeros in the network's input, as the network was trained on dropped keypoints).
     """
 
     def __init__(self, lifter: OnlineLifter, intrinsics: StreamIntrinsics, person: int = 0,
@@ -555,8 +557,12 @@ class LifterStream:
         """Frames received but not yet returned (waiting for intrinsics or look-ahead)."""
         return len(self._held) + self.lifter.pending()
 
-    def push(self, stamp_ns: int, people: np.ndarray) -> StreamStep:
-        """One keypoint message: (P, 23, 3) pixels + confidence, P >= 0 people."""
+    def push(self, stamp_ns: int, people: np.ndarray,
+             occluders: Optional[np.ndarray] = None) -> StreamStep:
+        """One keypoint message: (P, 23, 3) pixels + confidence, P >= 0 people;
+        ``occluders``: (B, 4) boxes (x0, y0, x1, y1 px) of the other people in this frame,
+        in front of whom this person's unseen keypoints may be hidden (``hold_unseen_s``;
+        None: nobody)."""
         step = StreamStep()
         last = self.stamps.last_ns
         verdict = self.stamps.check(stamp_ns)
@@ -573,7 +579,7 @@ class LifterStream:
             self._last_kp_ns[:] = np.iinfo(np.int64).min // 2
         kp = self._person(people)
         if kp is not None and self.hold_unseen_ns > 0:
-            kp = self._hold_unseen(int(stamp_ns), kp)
+            kp = self._hold_unseen(int(stamp_ns), kp, occluders)
         if kp is None:
             step.nobody = True
             if self.lifter.frames_seen == 0 and not self._held:
@@ -594,14 +600,22 @@ class LifterStream:
         step.frames.extend(self.lifter.flush())
         return step
 
-    def _hold_unseen(self, stamp_ns: int, kp: np.ndarray) -> np.ndarray:
-        """(23, 3) keypoints with the unseen ones filled from their recent sightings
-        (``hold_unseen_s``); the sightings are remembered."""
+    def _hold_unseen(self, stamp_ns: int, kp: np.ndarray,
+                     occluders: Optional[np.ndarray]) -> np.ndarray:
+        """(23, 3) keypoints with the unseen ones that someone hides filled from their
+        recent sightings (``hold_unseen_s``); the sightings are remembered."""
         kp = np.array(kp, dtype=np.float64, copy=True)
         seen = kp[:, 2] > 0
         self._last_kp[seen] = kp[seen]
         self._last_kp_ns[seen] = stamp_ns
         fill = ~seen & (stamp_ns - self._last_kp_ns <= self.hold_unseen_ns)
+        if not fill.any():
+            return kp
+        boxes = np.zeros((0, 4)) if occluders is None else \
+            np.asarray(occluders, dtype=np.float64).reshape(-1, 4)
+        u, v = self._last_kp[:, 0:1], self._last_kp[:, 1:2]
+        fill &= np.any((u >= boxes[:, 0]) & (u <= boxes[:, 2]) & (v >= boxes[:, 1])
+                       & (v <= boxes[:, 3]), axis=1)
         kp[fill] = self._last_kp[fill]
         self.held_keypoints += int(fill.sum())
         return kp
@@ -659,6 +673,30 @@ class PeopleStep:
     main: Optional[int] = None
     restarted: float = 0.0        # > 0: the stamps jumped back this far (s): a new stream
     flushed: Dict[int, StreamStep] = field(default_factory=dict)   # the old stream's last
+
+
+#: the lifter node's default ``hold_unseen_s`` (s): a keypoint hidden behind someone keeps its
+#: last sighting this long (docs/multi_person.md, "Hidden keypoints held")
+DEFAULT_HOLD_UNSEEN_S = 0.5
+
+#: margin of a person's box around their seen keypoints, as a fraction of its width and
+#: height on each side (the body reaches beyond the joints: head, hands, clothes)
+BOX_MARGIN = 0.1
+
+
+def person_boxes(people: np.ndarray, margin: float = BOX_MARGIN) -> np.ndarray:
+    """(P, 23, 3) keypoints -> (P, 4) boxes ``(x0, y0, x1, y1)`` px of each person's seen
+    keypoints (confidence > 0), grown by ``margin`` of their width and height on each side;
+    NaN for a person with no keypoint seen."""
+    people = np.asarray(people, dtype=np.float64).reshape(-1, NUM_KEYPOINTS, 3)
+    out = np.full((len(people), 4), np.nan)
+    for i, kp in enumerate(people):
+        pts = kp[kp[:, 2] > 0, :2]
+        if len(pts):
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            pad = margin * (hi - lo)
+            out[i] = np.concatenate([lo - pad, hi + pad])
+    return out
 
 
 class PeopleStreams:
@@ -748,7 +786,11 @@ class PeopleStreams:
                 self.streams[pid] = LifterStream(self.make_lifter(), self.intrinsics, 0,
                                                  self.max_gap_s, self.hold_unseen_s)
             self.last_seen[pid] = int(stamp_ns)
-            out.steps[pid] = self.streams[pid].push(stamp_ns, people[r:r + 1])
+            others = None
+            if self.hold_unseen_s > 0 and len(rows) > 1:
+                boxes = person_boxes(people[[q for p_, q in rows.items() if p_ != pid]])
+                others = boxes[np.all(np.isfinite(boxes), axis=1)]
+            out.steps[pid] = self.streams[pid].push(stamp_ns, people[r:r + 1], others)
         empty = np.zeros((0, NUM_KEYPOINTS, 3))
         for pid in list(self.streams):
             if pid in out.steps:

@@ -115,6 +115,32 @@ def test_person_leaving_ends_their_stream_and_old_clouds(two_people, model):
         few.push(T0 + DT, np.stack([a[1], b[1]]), np.array([4]))
 
 
+def test_only_keypoints_someone_hides_are_held(two_people, model):
+    """hold_unseen_s with several people: a person's keypoint that goes unseen is held from
+    its last sighting only where another person's box covers that sighting (hidden behind
+    them), not where nobody stands in front of it (the detector dropped it)."""
+    a, b, _ = two_people
+
+    def held(in_front: bool, hide: bool) -> int:
+        streams = _streams(model, two_people[2], hold_unseen_s=0.5)
+        for k in range(20):
+            bk = b[k].copy()
+            if hide and k >= 10:
+                bk[5] = 0.0                     # person 2's keypoint 5 unseen from frame 10
+            rows, ids = [a[k], bk], [1, 2]
+            if in_front:                        # a third person just in front of person 2
+                c = b[k].copy()
+                c[:, 0] += 10.0 * (c[:, 2] > 0)
+                rows, ids = rows + [c], ids + [3]
+            streams.push(T0 + k * DT, np.stack(rows), np.array(ids))
+        assert streams.streams[1].held_keypoints == 0      # nobody in front of person 1
+        return streams.streams[2].held_keypoints
+
+    # (the recorded keypoints have dropouts of their own: those under person 3 are held too)
+    assert held(in_front=False, hide=True) == 0
+    assert held(in_front=True, hide=True) - held(in_front=True, hide=False) == 10
+
+
 def test_node_publishes_each_person_and_all_together(two_people):
     """The node in process: per-person topics under /humans/bodies/body_<id>/lifter/, the
     combined joints cloud with one row per person, and the main person (row 0) on the

@@ -283,15 +283,16 @@ def test_filled_gaps_lift_a_walk_seen_at_a_third_of_its_rate_better():
 
 
 def test_hidden_keypoints_are_held_from_their_last_sighting_for_a_while():
-    """hold_unseen_s: a keypoint of a seen person with confidence 0 (hidden behind someone)
-    takes its last seen position and confidence while that sighting is at most hold_unseen_s
-    old; later, or with the option off, it reaches the network unseen. A frame without the
-    person is not filled."""
+    """hold_unseen_s: a keypoint of a seen person with confidence 0 whose last sighting lies
+    in another person's box (hidden behind someone) takes its last seen position and
+    confidence while that sighting is at most hold_unseen_s old; later, with the option off,
+    or with nobody in front of it (a keypoint the detector dropped) it reaches the network
+    unseen. A frame without the person is not filled."""
     import torch
     torch.manual_seed(0)
     model = MotioNet(LifterConfig(**SMALL)).eval()
 
-    def run(hold):
+    def run(hold, in_front=True):
         stream = LifterStream(OnlineLifter(model, 'windowed', skeleton_frames=20),
                               StreamIntrinsics(60.0, warmup_frames=5), person=0,
                               max_gap_s=1.0, hold_unseen_s=hold)
@@ -306,7 +307,12 @@ def test_hidden_keypoints_are_held_from_their_last_sighting_for_a_while():
         for k in range(10, 20):
             people[k][0, 5] = 0.0                      # keypoint 5 hidden from frame 10 on
         people[15] = np.zeros((1, 23, 3))              # nobody in frame 15
-        _run(stream, people)
+        u, v = people[9][0, 5, :2]
+        # someone whose box covers keypoint 5's last sighting, or one beside it
+        box = np.array([[u - 5, v - 5, u + 5, v + 5]]) if in_front else \
+            np.array([[u + 20, v - 5, u + 40, v + 5]])
+        for k, p in enumerate(people):
+            stream.push(T0 + k * DT, p, box)
         stream.flush()
         return stream, got, people
 
@@ -322,10 +328,11 @@ def test_hidden_keypoints_are_held_from_their_last_sighting_for_a_while():
             np.testing.assert_array_equal(np.delete(got[k], 5, axis=0),
                                           np.delete(people[k][0], 5, axis=0))
     assert stream.held_keypoints == 3
-    off, got_off, _ = run(0.0)
-    assert off.held_keypoints == 0
-    for k in range(10, 20):
-        np.testing.assert_array_equal(got_off[k][5], 0.0)
+    for hold, in_front in ((0.0, True), (0.1, False)):  # off; dropped with nobody in front
+        other, got_other, _ = run(hold, in_front)
+        assert other.held_keypoints == 0
+        for k in range(10, 20):
+            np.testing.assert_array_equal(got_other[k][5], 0.0)
     with pytest.raises(ValueError, match='hold_unseen_s'):
         LifterStream(OnlineLifter(model, 'windowed'), StreamIntrinsics(60.0),
                      hold_unseen_s=-1.0)

@@ -136,7 +136,8 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
             [T.KEYPOINTS, T.CAMERA_INFO],
             [T.LIFTER_MOTION, T.bodies_topic('lifter', 'motion'), *lifter_contacts],
             [T.PHYSICS_MOTION, T.bodies_topic('physics', 'motion'), T.PHYSICS_FLOOR,
-             *lifter_contacts]][STAGES.index(start)]
+             *lifter_contacts, T.LIFTER_MOTION,       # (the world stage's network pose)
+             T.bodies_topic('lifter', 'motion')]][STAGES.index(start)]
     feed = feed[:1] + [t for t in feed[1:] if t in topics]
     if T.bodies_topic('lifter', 'contacts') not in topics:
         # everyone's motion without everyone's contacts (a bag recorded with --topics): the
