@@ -298,3 +298,77 @@ def test_node_test_time_augmentation_parameter():
         assert np.linalg.norm(roots['none'] - roots['both'], axis=-1).max() < 0.15 * walked
     finally:
         context.try_shutdown()
+
+
+def test_node_network_reads_the_lifters_pose_matched_by_stamp():
+    """network_pose_topic: the lifter's motion of a stamp reaches GMR's network for the input
+    frame of the same stamp, whether it comes before or after that frame (diagnostics
+    network_pose_frames); the world path is then the network pose's while the body placed
+    is the input's; a network pose with other joints is dropped and counted, never fatal."""
+    import copy
+
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from mocap_core import topics
+    from mocap_core.bag_io import BagReader, deserialize
+    from mocap_core.inprocess import InProcessGraph
+    from mocap_core.ros_conversions import motion_to_pose
+
+    from mocap_global.node import GMRNode
+
+    with BagReader(BAG) as reader:
+        motions = [deserialize(m.data, m.msgtype)
+                   for m in reader.messages(topics=['/mocap/groundtruth/motion'])][:40]
+    # the "input": the same frames with the legs frozen at the first frame's (a body that
+    # does not step); the network pose: the walk itself
+    still = []
+    for m in motions:
+        s = copy.deepcopy(m)
+        for i, name in enumerate(s.joint_names):
+            if name != s.joint_names[0]:
+                s.points[0].transforms[i].rotation = motions[0].points[0].transforms[i].rotation
+        still.append(s)
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        roots = {}
+        for case in ('still', 'still + walk', 'walk'):
+            out = []
+            graph = InProcessGraph(record=lambda t, m, q, out=out: out.append((t, m)))
+            node = graph.add(GMRNode(context=context, parameter_overrides=[
+                Parameter('motion_topic', value='/in/motion'),
+                Parameter('network_pose_topic', value='/in/lifter')]))
+            for k, (m, s) in enumerate(zip(motions, still)):
+                body = m if case == 'walk' else s
+                if case == 'still + walk' and k % 2 == 0:     # the lifter's pose first
+                    graph.publish('/in/lifter', m)
+                graph.publish('/in/motion', body)
+                if case == 'still + walk' and k % 2 == 1:     # the lifter's pose after
+                    graph.publish('/in/lifter', m)
+                if case == 'still + walk' and k == 20:        # another skeleton: dropped
+                    bad = copy.deepcopy(m)
+                    bad.joint_names = bad.joint_names[:5]
+                    bad.points[0].transforms = bad.points[0].transforms[:5]
+                    graph.publish('/in/lifter', bad)
+            graph.flush()
+            world = [motion_to_pose(m) for t, m in out if t == topics.WORLD_MOTION]
+            assert len(world) == len(motions), case
+            roots[case] = np.stack([p.root_position[:2] for p in world])
+            if case == 'still + walk':
+                assert node.online.network_pose_frames == len(motions)
+                values = {kv.key: kv.value for kv in node.diag.status().values}
+                assert values['network_pose_frames'] == str(len(motions))
+                assert node.diag.errors == 1
+                # the body placed is the input's (the frozen legs), not the network's
+                first_leg = motion_to_pose(still[0]).rotations[1:]
+                np.testing.assert_allclose(world[-1].rotations[1:], first_leg, atol=1e-9)
+            node.destroy_node()
+        # the path follows the network's pose: the frozen body alone walks a different path
+        walked = np.linalg.norm(np.diff(roots['walk'], axis=0), axis=-1).sum()
+        assert walked > 0.5
+        fed = np.abs(roots['still + walk'] - roots['walk']).max()
+        alone = np.abs(roots['still'] - roots['walk']).max()
+        assert fed < 0.2 * alone, (fed, alone)      # (3 cm against 80 cm here)
+    finally:
+        context.try_shutdown()

@@ -79,7 +79,7 @@ def test_two_people_through_every_stage(two_people):
     from mocap_core.ros_conversions import motion_to_bodies, motion_to_pose
 
     a, b, info = two_people
-    both, _ = _run([(np.stack([a[k], b[k]]), [1, 2]) for k in range(FRAMES)], info, True)
+    both, nodes = _run([(np.stack([a[k], b[k]]), [1, 2]) for k in range(FRAMES)], info, True)
     alone, _ = _run([(a[k][None], [1]) for k in range(FRAMES)], info, True)
     for pid in (1, 2):
         for name in ('motion', 'joints3d', 'joint_states', 'grf/left', 'grf/right'):
@@ -115,6 +115,9 @@ def test_two_people_through_every_stage(two_people):
     w1 = motion_to_pose(both[topics.body_topic(1, 'world', 'motion')][-1])
     w2 = motion_to_pose(both[topics.body_topic(2, 'world', 'motion')][-1])
     assert np.abs(w1.rotations - w2.rotations).max() > 0.1     # a walker and a waver
+    # GMR's network read each person's own lifter pose in every frame (network_pose_topic)
+    gmr = nodes[2]
+    assert [gmr.persons[pid].online.network_pose_frames for pid in (1, 2)] == [FRAMES] * 2
     worlds = both[topics.bodies_topic('world', 'motion')]
     assert sorted({pid for m in worlds for pid, _ in motion_to_bodies(m)}) == [1, 2]
     assert len(worlds) == FRAMES
@@ -192,7 +195,7 @@ def test_tf_tree_of_two_people(two_people):
     """/tf from the world stage: every person's skeleton, frames body_<id> (in world) and
     body_<id>/<joint>, one TFMessage per person and frame."""
     a, b, info = two_people
-    both, _ = _run([(np.stack([a[k], b[k]]), [1, 2]) for k in range(FRAMES)], info, True)
+    both, nodes = _run([(np.stack([a[k], b[k]]), [1, 2]) for k in range(FRAMES)], info, True)
     tf = both['/tf']
     children = {t.child_frame_id: t.header.frame_id for m in tf for t in m.transforms}
     assert children['body_1'] == children['body_2'] == 'world'
