@@ -72,28 +72,31 @@ def test_plan_starts_from_the_earliest_stage_in_the_input():
     with pytest.raises(ProcessError, match='lacks its topic'):
         plan_for(kp, start='physics')
     # from the physics output: the world stage also reads the floor, the lifter's contacts
-    # (its foot planting) and motion (its network's pose), one person's and everyone's
+    # (its foot planting) and unsmoothed motion (its network's pose), one person's and
+    # everyone's
     phys = dict(kp, **{'/mocap/physics/motion': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
                        '/mocap/physics/floor': 'geometry_msgs/msg/TransformStamped',
                        '/mocap/physics/bodies/motion':
                            'trajectory_msgs/msg/MultiDOFJointTrajectory',
                        '/mocap/lifter/bodies/contacts': 'sensor_msgs/msg/JointState',
+                       '/mocap/lifter/unsmoothed_motion':
+                           'trajectory_msgs/msg/MultiDOFJointTrajectory',
                        '/mocap/camera/motion': 'nav_msgs/msg/Odometry'})
     plan = plan_for(phys, start='physics')
     assert plan.nodes == ['gmr']
     assert plan.feed_topics == ['/mocap/physics/motion', '/mocap/physics/bodies/motion',
                                 '/mocap/physics/floor', '/mocap/lifter/contacts',
-                                '/mocap/lifter/bodies/contacts', '/mocap/lifter/motion',
-                                '/mocap/camera/motion']
+                                '/mocap/lifter/bodies/contacts',
+                                '/mocap/lifter/unsmoothed_motion', '/mocap/camera/motion']
     assert plan_for(phys, start='lifter').feed_topics == [
         '/mocap/lifter/motion', '/mocap/lifter/contacts', '/mocap/lifter/bodies/contacts',
-        '/mocap/camera/motion']
+        '/mocap/lifter/unsmoothed_motion', '/mocap/camera/motion']
     # everyone's motion without everyone's contacts: one person's, with their contacts
     partial = dict(phys)
     del partial['/mocap/lifter/bodies/contacts']
     assert plan_for(partial, start='physics').feed_topics == [
         '/mocap/physics/motion', '/mocap/physics/floor', '/mocap/lifter/contacts',
-        '/mocap/lifter/motion', '/mocap/camera/motion']
+        '/mocap/lifter/unsmoothed_motion', '/mocap/camera/motion']
 
 
 def test_params_parse_node_name_value():

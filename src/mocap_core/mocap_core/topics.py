@@ -75,6 +75,11 @@ LIFTER_MOTION = stage_topic('lifter', 'motion')
 LIFTER_JOINTS3D = stage_topic('lifter', 'joints3d')
 LIFTER_JOINT_STATES = stage_topic('lifter', 'joint_states')
 LIFTER_MARKERS = stage_topic('lifter', 'markers')
+#: trajectory_msgs/MultiDOFJointTrajectory as ``motion``: the lifter's frames before its output
+#: smoothing, published as soon as its network releases them (up to the smoothing's radius
+#: before ``motion``), while someone listens; the world stage's network reads them
+#: (docs/global.md, "What the network reads")
+LIFTER_UNSMOOTHED_MOTION = stage_topic('lifter', 'unsmoothed_motion')
 PHYSICS_MOTION = stage_topic('physics', 'motion')
 PHYSICS_JOINTS3D = stage_topic('physics', 'joints3d')
 PHYSICS_JOINT_STATES = stage_topic('physics', 'joint_states')
@@ -131,7 +136,8 @@ ALL = [KEYPOINTS, CAMERA_INFO, CAMERA_MOTION, SKELETON_URDF, DIAGNOSTICS, LIFTER
        WORLD_FLOOR] + [
     stage_topic(stage, leaf) for stage in STAGES
     for leaf in ('motion', 'joints3d', 'joint_states', 'markers')] + [
-    BODIES_TRACKED, BODIES_BONE_LENGTHS, '/tf', bodies_topic('lifter', 'contacts')] + [
+    BODIES_TRACKED, BODIES_BONE_LENGTHS, '/tf', bodies_topic('lifter', 'contacts'),
+    LIFTER_UNSMOOTHED_MOTION, bodies_topic('lifter', 'unsmoothed_motion')] + [
     bodies_topic(stage, leaf) for stage in STAGES for leaf in ('motion', 'joints3d', 'markers')]
 #: (The per-person topics /humans/bodies/body_<id>/... come and go with the people: record them
 #: with ``ros2 bag record -a`` or by regular expression, ``-e '/humans/bodies/.*'``.)

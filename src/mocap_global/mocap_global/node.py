@@ -113,16 +113,17 @@ PARAMETERS = (
               'motion of every person (names prefixed body_<id>/); once it delivers, each '
               'person gets their own world pose and motion_topic is ignored; empty = one '
               'person only', read_only=True),
-    ParamSpec('network_pose_topic', topics.LIFTER_MOTION, 'The local pose the network '
-              'reads, matched by stamp (MultiDOFJointTrajectory, the model\'s joints), '
-              'instead of the input\'s own: the lifter\'s legs swing more than the physics '
-              'output\'s, so GMR steps farther (rendered travel set: world RTE 5.8 -> 4.8 %); '
-              'the body placed is still the input\'s. A frame without one uses the input\'s '
-              'pose; empty = always the input\'s (docs/global.md, "What the network reads")',
+    ParamSpec('network_pose_topic', topics.LIFTER_UNSMOOTHED_MOTION, 'The local pose the '
+              'network reads, matched by stamp (MultiDOFJointTrajectory, the model\'s joints), '
+              'instead of the input\'s own: the lifter\'s frames before its output smoothing, '
+              'whose legs swing more than the physics output\'s, so GMR steps farther '
+              '(rendered travel set, moving cameras: world RTE 8.0 -> 4.7 %); the body placed '
+              'is still the input\'s. A frame without one uses the input\'s pose; empty = '
+              'always the input\'s (docs/global.md, "What the network reads")',
               read_only=True),
-    ParamSpec('bodies_network_pose_topic', topics.bodies_topic('lifter', 'motion'), 'The '
-              'same for every person (names prefixed body_<id>/), with bodies_motion_topic; '
-              'empty = the input\'s', read_only=True),
+    ParamSpec('bodies_network_pose_topic', topics.bodies_topic('lifter', 'unsmoothed_motion'),
+              'The same for every person (names prefixed body_<id>/), with '
+              'bodies_motion_topic; empty = the input\'s', read_only=True),
     ParamSpec('person_timeout_s', 1.0, 'A person absent from the input for longer than this '
               '(stamps) is dropped: their last frames are emitted, their state and topics '
               'removed', min_value=0.0, read_only=True),

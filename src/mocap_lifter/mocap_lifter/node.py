@@ -205,6 +205,7 @@ class LifterNode(Node):
         self.signatures_changed = False
         self.main_id: Optional[int] = None
         self.main_last_ns = -1
+        self.main_unsmoothed_ns = -1
         self.intrinsics_said = ''
         self.pub = {
             'motion': self.create_publisher(MultiDOFJointTrajectory, topics.LIFTER_MOTION,
@@ -214,6 +215,12 @@ class LifterNode(Node):
                                                   STREAM_QOS),
             'contacts': self.create_publisher(JointState, topics.LIFTER_CONTACTS, STREAM_QOS),
             'markers': self.create_publisher(MarkerArray, topics.LIFTER_MARKERS, STREAM_QOS),
+            # the frames before the output smoothing (the world stage's network reads them)
+            'unsmoothed_motion': self.create_publisher(
+                MultiDOFJointTrajectory, topics.LIFTER_UNSMOOTHED_MOTION, STREAM_QOS),
+            'bodies_unsmoothed_motion': self.create_publisher(
+                MultiDOFJointTrajectory, topics.bodies_topic('lifter', 'unsmoothed_motion'),
+                STREAM_QOS),
             'urdf': self.create_publisher(String, topics.SKELETON_URDF, LATCHED_QOS),
             'bone_lengths': self.create_publisher(JointState, topics.BODIES_BONE_LENGTHS,
                                                   LATCHED_QOS),
@@ -322,6 +329,8 @@ class LifterNode(Node):
                 self.get_logger().error(f'frame dropped: {error}', throttle_duration_sec=2.0)
             released.append((pid, [f for f in st.frames if self._finite(f)]))
         self._report_intrinsics()
+        self.publish_unsmoothed([(pid, [f for f in st.unsmoothed if self._finite(f, quiet=True)])
+                                 for pid, st in step.steps.items()])
         for stamp, frames in by_stamp(released, self.main_id):   # the main person first
             # combined first: the next stage, which follows everybody from the combined
             # motion, hears it before the single-person topics
@@ -352,11 +361,15 @@ class LifterNode(Node):
         self.diag.set_value('filled_frames', filled)
         self.diag.set_value('thinned_frames', thinned)
 
-    def _finite(self, frame: LiftedFrame) -> bool:
+    def _finite(self, frame: LiftedFrame, quiet: bool = False) -> bool:
+        """Whether the frame is finite; if not it is counted and logged (``quiet``: only
+        dropped, for a frame that also comes out smoothed and is counted then)."""
         pose = frame.pose
         if np.all(np.isfinite(pose.rotations)) and np.all(np.isfinite(pose.root_position)) \
                 and np.all(np.isfinite(frame.contacts)):
             return True
+        if quiet:
+            return False
         self.diag.errors += 1
         self.get_logger().error('network output not finite; frame dropped',
                                 throttle_duration_sec=2.0)
@@ -384,6 +397,23 @@ class LifterNode(Node):
                             lambda: cdr.positions_to_cloud(pose.joint_positions(), header))
         self.bodies.publish(pid, 'joint_states', lambda: cdr.pose_to_joint_state(pose, header))
         self.bodies.publish(pid, 'contacts', lambda: cdr.contacts_to_msg(frame.contacts, header))
+
+    def publish_unsmoothed(self, released: List[Tuple[int, List[LiftedFrame]]]) -> None:
+        """The network's frames before the output smoothing, while someone listens: every
+        person's of a stamp in one message, and the main person's alone."""
+        combined, single = self.pub['bodies_unsmoothed_motion'], self.pub['unsmoothed_motion']
+        if combined.get_subscription_count() == 0 and single.get_subscription_count() == 0:
+            return
+        for stamp, frames in by_stamp(released, self.main_id):
+            header = rc.make_header(stamp, self.frame_id)
+            if combined.get_subscription_count():
+                combined.publish(cdr.bodies_to_motion([(pid, f.pose) for pid, f in frames],
+                                                      header))
+            main = [f for pid, f in frames if pid == self.main_id]
+            if main and stamp > self.main_unsmoothed_ns:
+                self.main_unsmoothed_ns = stamp
+                if single.get_subscription_count():
+                    single.publish(cdr.pose_to_motion(main[0].pose, header))
 
     def publish_combined(self, stamp: int, frames: List[Tuple[int, LiftedFrame]]) -> None:
         """All persons of one stamp (main person first): the lossless motion and contacts

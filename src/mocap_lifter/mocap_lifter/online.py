@@ -182,6 +182,9 @@ class OnlineLifter:
         self.filled_frames = 0
         #: frames received but not given to the network so far (outputs interpolated)
         self.thinned_frames = 0
+        #: the network's frames before the output smoothing, not yet taken
+        #: (:meth:`take_unsmoothed`; not cleared by :meth:`reset`)
+        self._unsmoothed: List[LiftedFrame] = []
         self._stream: Optional[StreamingEncoder] = None
         if streaming and self.chunk == 1 and self.smooth == 0 and device == 'cpu' \
                 and context_frames is None and isinstance(model, MotioNet):
@@ -318,8 +321,23 @@ class OnlineLifter:
                 self.lengths = lengths
         if self._unlifted() >= self.latency + self.chunk:
             lifted = self._infer([-self._unlifted() + j for j in range(self.chunk)], streamed)
+            self._keep_unsmoothed(lifted)
             frames.extend(lifted if self._smoother is None else self._smoother.push(lifted))
         return frames
+
+    def _keep_unsmoothed(self, frames: List[LiftedFrame]) -> None:
+        """Keep the network's frames (before the output smoothing) for
+        :meth:`take_unsmoothed`, without the filled-in ones."""
+        self._unsmoothed.extend(f for f in frames if f.stamp_ns not in self._filled)
+
+    def take_unsmoothed(self) -> List[LiftedFrame]:
+        """The frames the network released since the last call, before the output
+        smoothing (so up to its radius earlier than :meth:`push` returns them smoothed): the
+        legs swing as the network has them (the smoothing shortens a stride's fast knee
+        swing). Without the frames filled in and the thinned ones (``network_rate_hz``);
+        with smoothing off, the frames :meth:`push` returns."""
+        out, self._unsmoothed = self._unsmoothed, []
+        return out
 
     def pending(self) -> int:
         """Frames received but not yet returned (windowed mode waits for look-ahead, the
@@ -338,6 +356,7 @@ class OnlineLifter:
         output smoothing."""
         n = self._unlifted()
         frames = self._infer([-n + j for j in range(n)]) if n else []
+        self._keep_unsmoothed(frames)
         if self._smoother is not None:
             frames = self._smoother.push(frames) + self._smoother.flush()
         return self._received(frames, end=True)
@@ -513,6 +532,8 @@ class StreamStep:
     """What one keypoint message (or a flush) did, for the node's log and diagnostics."""
 
     frames: List[LiftedFrame] = field(default_factory=list)   # lifted frames now ready
+    #: the network's frames before the output smoothing (OnlineLifter.take_unsmoothed)
+    unsmoothed: List[LiftedFrame] = field(default_factory=list)
     resets: List[str] = field(default_factory=list)   # buffer and skeleton resets (reasons)
     errors: List[str] = field(default_factory=list)   # frames the network pass rejected
     jumped_back_s: float = 0.0    # > 0: the stamps jumped back this far, a new stream began
@@ -573,6 +594,7 @@ class LifterStream:
             step.jumped_back_s = (last - stamp_ns) * 1e-9
             self._release(step, force=True)
             step.frames.extend(self.lifter.flush())
+            step.unsmoothed.extend(self.lifter.take_unsmoothed())
             self.lifter.reset()
             step.resets.append('backwards')
             self.intrinsics.restart()
@@ -598,6 +620,7 @@ class LifterStream:
         step = StreamStep()
         self._release(step, force=True)
         step.frames.extend(self.lifter.flush())
+        step.unsmoothed.extend(self.lifter.take_unsmoothed())
         return step
 
     def _hold_unseen(self, stamp_ns: int, kp: np.ndarray,
@@ -650,6 +673,7 @@ class LifterStream:
             if event:
                 step.resets.append(event)
             step.frames.extend(frames)
+            step.unsmoothed.extend(self.lifter.take_unsmoothed())
 
 
 @dataclass
@@ -823,6 +847,7 @@ class PeopleStreams:
         self.last_seen.pop(pid, None)
         if pid in out.steps:
             out.steps[pid].frames.extend(step.frames)
+            out.steps[pid].unsmoothed.extend(step.unsmoothed)
         else:
             out.steps[pid] = step
         out.ended.append(pid)

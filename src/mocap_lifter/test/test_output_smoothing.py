@@ -186,3 +186,54 @@ def test_rotations_left_alone_with_sigma_zero():
         FrameSmoother(0.0, root_sigma=0.0)
     with pytest.raises(ValueError):
         FrameSmoother(1.0, root_sigma=-1.0)
+
+
+def test_the_unsmoothed_frames_come_earlier_and_as_the_network_gave_them():
+    """take_unsmoothed: every stamp once, in order, before the same frame comes out smoothed
+    (by the smoothing's radius), through a gap; the same frames as without smoothing; a
+    frame filled in for a dropped one (network_rate_hz) is not among them."""
+    from mocap_core.camera import CameraIntrinsics
+    from mocap_lifter.model import LifterConfig, MotioNet
+    from mocap_lifter.online import OnlineLifter
+
+    model = MotioNet(LifterConfig(channels=32, fusion_blocks=2, skeleton_channels=16,
+                                  dropout=0.0)).eval()
+    intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+    rng = np.random.default_rng(3)
+    kp = np.concatenate([rng.uniform(200, 400, (40, 23, 2)), np.ones((40, 23, 1))], -1)
+    stamps = [33_333_333 * i for i in range(20)] + [5_000_000_000 + 33_333_333 * i
+                                                    for i in range(20)]
+
+    def run(**kw):
+        online = OnlineLifter(model, 'windowed', **kw)
+        smoothed, raw, first_raw, first_smoothed = [], [], {}, {}
+        for k, (s, x) in enumerate(zip(stamps, kp)):
+            smoothed += online.push(s, x, intr)[0]
+            raw += online.take_unsmoothed()
+            for f in raw:
+                first_raw.setdefault(f.stamp_ns, k)
+            for f in smoothed:
+                first_smoothed.setdefault(f.stamp_ns, k)
+        smoothed += online.flush()
+        raw += online.take_unsmoothed()
+        return online, smoothed, raw, first_raw, first_smoothed
+
+    online, smoothed, raw, first_raw, first_smoothed = run(output_sigma=2.0)
+    assert [f.stamp_ns for f in raw] == [f.stamp_ns for f in smoothed] == stamps
+    # released earlier: by the smoothing's radius (4 frames) where no gap intervenes
+    assert first_smoothed[stamps[5]] - first_raw[stamps[5]] == online.delay - online.latency
+    _, plain, _, _, _ = run(output_sigma=0.0)
+    for a, b in zip(raw, plain):
+        np.testing.assert_allclose(a.pose.rotations, b.pose.rotations, atol=1e-6)
+    assert max(np.abs(a.pose.rotations - b.pose.rotations).max()
+               for a, b in zip(smoothed, plain)) > 1e-3
+    # a frame dropped from the stream: the network gets a filled-in one, never returned
+    online = OnlineLifter(model, 'windowed', output_sigma=2.0, network_rate_hz=30.0)
+    kept = [k for k in range(20) if k != 8]
+    raw = []
+    for k in kept:
+        online.push(stamps[k], kp[k], intr)
+        raw += online.take_unsmoothed()
+    online.flush()
+    raw += online.take_unsmoothed()
+    assert online.filled_frames == 1 and [f.stamp_ns for f in raw] == [stamps[k] for k in kept]

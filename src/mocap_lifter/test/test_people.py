@@ -190,6 +190,14 @@ def test_node_publishes_each_person_and_all_together(two_people):
             motion_to_pose(by_topic[topics.body_topic(2, 'lifter', 'motion')][-1]).root_position)
         contacts = msg_to_bodies_contacts(by_topic[topics.bodies_topic('lifter', 'contacts')][-1])
         assert sorted(pid for pid, _ in contacts) == [1, 2]
+        # the frames before the output smoothing (the world stage's network reads them):
+        # everyone's of each stamp in one message, and the main person's alone
+        stamp = lambda m: m.header.stamp.sec * 10**9 + m.header.stamp.nanosec  # noqa: E731
+        raw = by_topic[topics.bodies_topic('lifter', 'unsmoothed_motion')]
+        assert sorted(map(stamp, raw)) == sorted(map(stamp, motions))
+        assert all(sorted(pid for pid, _ in motion_to_bodies(m)) == [1, 2] for m in raw)
+        raw_main = by_topic[topics.LIFTER_UNSMOOTHED_MOTION]
+        assert list(map(stamp, raw_main)) == list(map(stamp, by_topic[topics.LIFTER_MOTION]))
         markers = by_topic[topics.bodies_topic('lifter', 'markers')][-1]
         assert {m.ns for m in markers.markers} == {'lifter/body_1', 'lifter/body_2'}
         # the single-person topics: one message per stamp, stamps increasing

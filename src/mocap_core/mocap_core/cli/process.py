@@ -16,8 +16,9 @@ physics      ``/mocap/physics/motion`` (+ ``/mocap/physics/floor``,   gmr
 
 A later start is fed, besides its own topic, what the stages after it read from the bag:
 the lifter's contacts (the physics stage's contact labels, the world stage's foot planting),
-the physics floor, the camera-motion estimate, and every person's ``bodies`` motion with
-everyone's contacts (only when the bag holds those contacts).
+its unsmoothed motion (the world stage's network pose), the physics floor, the camera-motion
+estimate, and every person's ``bodies`` motion with everyone's contacts (only when the bag
+holds those contacts).
 
 The nodes are the pipeline's own node classes (the ones ``ros2 run`` starts), wired with
 :class:`mocap_core.inprocess.InProcessGraph`: every message is delivered synchronously, in
@@ -129,21 +130,23 @@ def plan_for(topics: Dict[str, str], start: str = 'auto', image_topic: str = '',
                            '--image-topic')
     nodes = list(NODES[STAGES.index(start):])
     # what the stages after the start read besides the start's own topic: the lifter's
-    # contacts (the physics stage's contact labels, the world stage's foot planting), the
-    # floor, and the same per person (several people)
+    # contacts (the physics stage's contact labels, the world stage's foot planting), its
+    # unsmoothed motion (the world stage's network), the floor, and the same per person
     lifter_contacts = (T.LIFTER_CONTACTS, T.bodies_topic('lifter', 'contacts'))
     feed = [images[:1] + [T.IMAGE_CAMERA_INFO],
             [T.KEYPOINTS, T.CAMERA_INFO],
-            [T.LIFTER_MOTION, T.bodies_topic('lifter', 'motion'), *lifter_contacts],
+            [T.LIFTER_MOTION, T.bodies_topic('lifter', 'motion'), *lifter_contacts,
+             T.LIFTER_UNSMOOTHED_MOTION, T.bodies_topic('lifter', 'unsmoothed_motion')],
             [T.PHYSICS_MOTION, T.bodies_topic('physics', 'motion'), T.PHYSICS_FLOOR,
-             *lifter_contacts, T.LIFTER_MOTION,       # (the world stage's network pose)
-             T.bodies_topic('lifter', 'motion')]][STAGES.index(start)]
+             *lifter_contacts, T.LIFTER_UNSMOOTHED_MOTION,   # (the world stage's network
+             T.bodies_topic('lifter', 'unsmoothed_motion')]][STAGES.index(start)]   # pose)
     feed = feed[:1] + [t for t in feed[1:] if t in topics]
     if T.bodies_topic('lifter', 'contacts') not in topics:
         # everyone's motion without everyone's contacts (a bag recorded with --topics): the
         # one person's motion and contacts, which the stages read together
         feed = [t for t in feed if t not in (T.bodies_topic('lifter', 'motion'),
-                                             T.bodies_topic('physics', 'motion'))]
+                                             T.bodies_topic('physics', 'motion'),
+                                             T.bodies_topic('lifter', 'unsmoothed_motion'))]
     if start != 'images' and T.CAMERA_MOTION in topics:    # for the world stage
         feed.append(T.CAMERA_MOTION)
     produced = [p for n in nodes for p in PRODUCED[n]]
