@@ -517,44 +517,48 @@ class GMRNode(Node):
         """Every person's foot contact probabilities (``bodies_contacts_topic``)."""
         self._read_contacts(msg, rc.msg_to_bodies_contacts)
 
+    def _parsed(self, msg, parse, what: str) -> Optional[list]:
+        """``parse(msg)``: the ``(person id or None, value)`` pairs of a message, or None for
+        a malformed one (counted and logged at a limited rate)."""
+        try:
+            return parse(msg)
+        except rc.MessageError as exc:
+            self.diag.errors += 1
+            self.get_logger().warn(f'ignoring {what}: {exc}', throttle_duration_sec=5.0)
+            return None
+
     def _read_contacts(self, msg: JointState, parse) -> None:
         """Keep the ``(person id, (4,) probabilities)`` pairs ``parse(msg)`` gives; a
         malformed message is counted and dropped."""
-        try:
-            bodies = parse(msg)
-        except rc.MessageError as exc:
-            self.diag.errors += 1
-            self.get_logger().warn(f'ignoring contacts: {exc}', throttle_duration_sec=5.0)
-            return
+        bodies = self._parsed(msg, parse, 'contacts')
         stamp = rc.stamp_to_ns(msg.header.stamp)
-        for pid, probs in bodies:
+        for pid, probs in bodies or ():
             self._keep_contacts(None if pid is None else int(pid), stamp,
                                 np.asarray(probs, dtype=float))
 
     def on_network_pose(self, msg: MultiDOFJointTrajectory) -> None:
         """The single-person input's network pose (``network_pose_topic``)."""
-        try:
-            pose = rc.motion_to_pose(msg, self.model.cfg.joint_names)
-        except rc.MessageError as exc:
-            self.diag.errors += 1
-            self.get_logger().warn(f'ignoring network pose: {exc}', throttle_duration_sec=5.0)
-            return
-        self._keep_network_pose(None, self.single, rc.stamp_to_ns(msg.header.stamp), pose)
+        names = self.model.cfg.joint_names
+        self._read_network_poses(msg, lambda m: [(None, rc.motion_to_pose(m, names))])
 
     def on_bodies_network_pose(self, msg: MultiDOFJointTrajectory) -> None:
         """Every person's network pose (``bodies_network_pose_topic``)."""
-        try:
-            bodies = rc.motion_to_bodies(msg)
-            names = list(self.model.cfg.joint_names)
-            bodies = [(pid, pose if list(pose.joint_names) == names else rc.motion_to_pose(
-                rc.pose_to_motion(pose, msg.header), names)) for pid, pose in bodies]
-        except rc.MessageError as exc:
-            self.diag.errors += 1
-            self.get_logger().warn(f'ignoring network pose: {exc}', throttle_duration_sec=5.0)
-            return
+        names = list(self.model.cfg.joint_names)
+
+        def parse(m):
+            return [(pid, pose if list(pose.joint_names) == names else rc.motion_to_pose(
+                rc.pose_to_motion(pose, m.header), names)) for pid, pose in
+                rc.motion_to_bodies(m)]
+        self._read_network_poses(msg, parse)
+
+    def _read_network_poses(self, msg: MultiDOFJointTrajectory, parse) -> None:
+        """Keep the ``(person id or None, Pose)`` pairs ``parse(msg)`` gives for the input
+        frames of the same stamp; a malformed message is counted and dropped."""
         stamp = rc.stamp_to_ns(msg.header.stamp)
-        for pid, pose in bodies:
-            self._keep_network_pose(int(pid), self.persons.get(int(pid)), stamp, pose)
+        for pid, pose in self._parsed(msg, parse, 'network pose') or ():
+            key = None if pid is None else int(pid)
+            self._keep_network_pose(key, self.single if key is None else self.persons.get(key),
+                                    stamp, pose)
 
     def _keep_network_pose(self, pid: Optional[int], person: Optional['_Person'], stamp: int,
                            pose: Pose) -> None:

@@ -120,20 +120,28 @@ def test_batch_smoothing_of_sequences_shorter_than_the_window():
         assert out[0, 0] <= out[-1, 0]
 
 
-def test_online_lifter_with_output_smoothing_through_a_gap():
-    """A gap resets the lifter: the frames before it are all emitted (smoothed, window cut
-    at the gap), then the new segment starts; every stamp once, in order."""
+def _small_lifter_input(seed: int, period_ns: int):
+    """A small random MotioNet, a 640 x 480 camera, and 40 random keypoint frames whose
+    stamps have a 5-s gap after the 20th (the lifter resets there)."""
     from mocap_core.camera import CameraIntrinsics
     from mocap_lifter.model import LifterConfig, MotioNet
-    from mocap_lifter.online import OnlineLifter
 
     model = MotioNet(LifterConfig(channels=32, fusion_blocks=2, skeleton_channels=16,
                                   dropout=0.0)).eval()
     intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
-    rng = np.random.default_rng(2)
+    rng = np.random.default_rng(seed)
     kp = np.concatenate([rng.uniform(200, 400, (40, 23, 2)), np.ones((40, 23, 1))], -1)
-    stamps = [33_000_000 * i for i in range(20)] + [5_000_000_000 + 33_000_000 * i
-                                                    for i in range(20)]
+    stamps = [period_ns * i for i in range(20)] + [5_000_000_000 + period_ns * i
+                                                   for i in range(20)]
+    return model, intr, kp, stamps
+
+
+def test_online_lifter_with_output_smoothing_through_a_gap():
+    """A gap resets the lifter: the frames before it are all emitted (smoothed, window cut
+    at the gap), then the new segment starts; every stamp once, in order."""
+    from mocap_lifter.online import OnlineLifter
+
+    model, intr, kp, stamps = _small_lifter_input(2, 33_000_000)
     online = OnlineLifter(model, 'windowed', output_sigma=2.0)
     assert online.delay == online.latency + 4
     got, events = [], []
@@ -192,17 +200,9 @@ def test_the_unsmoothed_frames_come_earlier_and_as_the_network_gave_them():
     """take_unsmoothed: every stamp once, in order, before the same frame comes out smoothed
     (by the smoothing's radius), through a gap; the same frames as without smoothing; a
     frame filled in for a dropped one (network_rate_hz) is not among them."""
-    from mocap_core.camera import CameraIntrinsics
-    from mocap_lifter.model import LifterConfig, MotioNet
     from mocap_lifter.online import OnlineLifter
 
-    model = MotioNet(LifterConfig(channels=32, fusion_blocks=2, skeleton_channels=16,
-                                  dropout=0.0)).eval()
-    intr = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
-    rng = np.random.default_rng(3)
-    kp = np.concatenate([rng.uniform(200, 400, (40, 23, 2)), np.ones((40, 23, 1))], -1)
-    stamps = [33_333_333 * i for i in range(20)] + [5_000_000_000 + 33_333_333 * i
-                                                    for i in range(20)]
+    model, intr, kp, stamps = _small_lifter_input(3, 33_333_333)
 
     def run(**kw):
         online = OnlineLifter(model, 'windowed', **kw)
