@@ -40,7 +40,7 @@ topics=(/mocap/keypoints2d /mocap/camera_info /mocap/camera/motion /mocap/skelet
         /diagnostics
         /mocap/lifter/contacts /mocap/physics/grf/left /mocap/physics/grf/right
         /mocap/physics/com /mocap/physics/floor /mocap/world/floor /mocap/world/odom
-        /mocap/world/path)
+        /mocap/world/path /mocap/lifter/unsmoothed_motion)
 for stage in lifter physics world; do
   for leaf in motion joints3d joint_states markers; do topics+=("/mocap/$stage/$leaf"); done
 done

@@ -48,7 +48,8 @@ def test_launch_file_records_the_demo_topics():
                              for leaf in ('motion', 'joints3d', 'joint_states', 'markers')}
     # several people: the ids, the TF tree and every stage's combined messages
     expected |= {'/humans/bodies/tracked', '/tf', '/mocap/lifter/bodies/contacts',
-                 '/mocap/lifter/bodies/bone_lengths'} | {
+                 '/mocap/lifter/bodies/bone_lengths',
+                 '/mocap/lifter/bodies/unsmoothed_motion'} | {
         f'/mocap/{s}/bodies/{leaf}' for s in ('lifter', 'physics', 'world')
         for leaf in ('motion', 'joints3d', 'markers')}
     assert set(namespace['TOPICS']) == expected
