@@ -90,15 +90,19 @@ def test_physics_killed_and_restarted_mid_stream(processes, ros2_cmd, ros_env):
         # ('a bag restarted?'), stamps within max_gap_s before the last are dropped until they
         # advance (seen once under a CPU hog); stamps within max_gap_s after the last simply
         # continue the stream (seen once under load: the loop brought the bag back to where
-        # it was), and there is nothing to say
+        # it was), and there is nothing to say. Which of the first two GMR says depends on the
+        # last stamp *it* received before the kill, which this counter (another subscriber,
+        # which may miss the last messages of a killed publisher under load) cannot know:
+        # once, under two busy processes, the counter's last stamp was the restarted node's
+        # first while GMR had received later ones and restarted. So a discontinuity must be
+        # reported, one way or the other.
         text = gmr_log.read_text()
         last = counter.stamps('physics', 0.0, killed)[-1]
         first = counter.stamps('physics', killed, float('inf'))[0]     # physics2's first
         max_gap = 0.25                                      # GMR's max_gap_s default
-        if first > last + max_gap or first < last - max_gap:
-            assert 'restarted' in text, (last, first, text[-3000:])
-        elif first <= last:
-            assert 'did not advance' in text, (last, first, text[-3000:])
+        if not last < first <= last + max_gap:
+            assert 'restarted' in text or 'did not advance' in text, (last, first,
+                                                                      text[-3000:])
     finally:
         counter.close()
 
