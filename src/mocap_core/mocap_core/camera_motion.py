@@ -369,13 +369,14 @@ def fit_floor_motion(points: np.ndarray, pixels: np.ndarray, K: np.ndarray,
     return (R_cp.T, -R_cp.T @ np.asarray(tvec).ravel()), inl
 
 
-def person_boxes(shape: Tuple[int, int], keypoints: Optional[np.ndarray], margin: float,
-                 min_confidence: float = 0.2) -> List[Tuple[int, int, int, int]]:
+def person_boxes(shape: Optional[Tuple[int, int]], keypoints: Optional[np.ndarray],
+                 margin: float, min_confidence: float = 0.2) -> List[Tuple[int, int, int, int]]:
     """The people's boxes (x0, y0, x1, y1) in pixels, clipped to the image (H, W) =
-    ``shape``: each person's confident keypoints (``keypoints``: (P, J, 3) or (J, 3), u, v,
-    confidence), grown by ``margin`` of the box's size on every side (hair, clothes and limbs
-    beyond the joints). A person with fewer than two confident keypoints has no box."""
-    h, w = shape
+    ``shape`` (None: image size unknown, not clipped): each person's confident keypoints
+    (``keypoints``: (P, J, 3) or (J, 3), u, v, confidence), grown by ``margin`` of the box's
+    size on every side (hair, clothes and limbs beyond the joints). A person with fewer than
+    two confident keypoints has no box."""
+    lo, (h, w) = (0, shape) if shape is not None else (-np.inf, (np.inf, np.inf))
     boxes: List[Tuple[int, int, int, int]] = []
     if keypoints is None:
         return boxes
@@ -390,8 +391,8 @@ def person_boxes(shape: Tuple[int, int], keypoints: Optional[np.ndarray], margin
         bw, bh = u1 - u0, v1 - v0
         # the head reaches above the nose and eyes, the feet below the heels
         pad_u, pad_v = margin * bw + 0.1 * bh, margin * bh
-        x0, x1 = int(max(0, u0 - pad_u)), int(min(w, u1 + pad_u + 1))
-        y0, y1 = int(max(0, v0 - pad_v - 0.1 * bh)), int(min(h, v1 + pad_v + 1))
+        x0, x1 = int(max(lo, u0 - pad_u)), int(min(w, u1 + pad_u + 1))
+        y0, y1 = int(max(lo, v0 - pad_v - 0.1 * bh)), int(min(h, v1 + pad_v + 1))
         if x1 > x0 and y1 > y0:
             boxes.append((x0, y0, x1, y1))
     return boxes

@@ -6,7 +6,7 @@ import pytest
 
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
 from mocap_core.camera_motion import (CameraMotionEstimator, CameraMotionParams,
-                                           fit_rotation, person_mask)
+                                           fit_rotation, person_boxes, person_mask)
 
 W, H = 640, 480
 K = np.array([[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]])
@@ -62,6 +62,16 @@ def test_person_mask_removes_the_person_and_the_border():
     kp = _person()
     kp[:, 2] = 0.0
     assert person_mask((H, W), kp, 0.15, 4)[300, 320] == 255
+
+
+def test_person_boxes_are_clipped_to_a_known_image_only():
+    kp = _person()
+    kp[0, :2] = (-50.0, 100.0)          # a keypoint left of the image
+    (x0, y0, x1, y1), = person_boxes((H, W), kp, 0.1)
+    assert x0 == 0 and y0 >= 0 and x1 <= W and y1 <= H
+    (u0, v0, u1, v1), = person_boxes(None, kp, 0.1)
+    assert u0 < -50 and v0 < 100 and (u1, v1) >= (x1, y1)
+    assert person_boxes(None, np.zeros((23, 3)), 0.1) == []
 
 
 def test_a_static_camera_is_static_without_drift():

@@ -402,17 +402,19 @@ class LifterNode(Node):
         """The network's frames before the output smoothing, while someone listens: every
         person's of a stamp in one message, and the main person's alone."""
         combined, single = self.pub['bodies_unsmoothed_motion'], self.pub['unsmoothed_motion']
-        if combined.get_subscription_count() == 0 and single.get_subscription_count() == 0:
+        to_combined = combined.get_subscription_count() > 0
+        to_single = single.get_subscription_count() > 0
+        if not (to_combined or to_single):
             return
         for stamp, frames in by_stamp(released, self.main_id):
             header = rc.make_header(stamp, self.frame_id)
-            if combined.get_subscription_count():
+            if to_combined:
                 combined.publish(cdr.bodies_to_motion([(pid, f.pose) for pid, f in frames],
                                                       header))
             main = [f for pid, f in frames if pid == self.main_id]
             if main and stamp > self.main_unsmoothed_ns:
                 self.main_unsmoothed_ns = stamp
-                if single.get_subscription_count():
+                if to_single:
                     single.publish(cdr.pose_to_motion(main[0].pose, header))
 
     def publish_combined(self, stamp: int, frames: List[Tuple[int, LiftedFrame]]) -> None:

@@ -64,6 +64,7 @@ import numpy as np
 import torch
 
 from mocap_core.camera import CameraIntrinsics
+from mocap_core.camera_motion import person_boxes
 from mocap_core.pose import Pose
 from mocap_core.rotations import quat_slerp
 from mocap_core.skeleton import NUM_JOINTS, NUM_KEYPOINTS, Skeleton
@@ -703,24 +704,9 @@ class PeopleStep:
 #: last sighting this long (docs/multi_person.md, "Hidden keypoints held")
 DEFAULT_HOLD_UNSEEN_S = 0.5
 
-#: margin of a person's box around their seen keypoints, as a fraction of its width and
+#: margin of a person's box around their confident keypoints, as a fraction of its width and
 #: height on each side (the body reaches beyond the joints: head, hands, clothes)
 BOX_MARGIN = 0.1
-
-
-def person_boxes(people: np.ndarray, margin: float = BOX_MARGIN) -> np.ndarray:
-    """(P, 23, 3) keypoints -> (P, 4) boxes ``(x0, y0, x1, y1)`` px of each person's seen
-    keypoints (confidence > 0), grown by ``margin`` of their width and height on each side;
-    NaN for a person with no keypoint seen."""
-    people = np.asarray(people, dtype=np.float64).reshape(-1, NUM_KEYPOINTS, 3)
-    out = np.full((len(people), 4), np.nan)
-    for i, kp in enumerate(people):
-        pts = kp[kp[:, 2] > 0, :2]
-        if len(pts):
-            lo, hi = pts.min(axis=0), pts.max(axis=0)
-            pad = margin * (hi - lo)
-            out[i] = np.concatenate([lo - pad, hi + pad])
-    return out
 
 
 class PeopleStreams:
@@ -812,8 +798,9 @@ class PeopleStreams:
             self.last_seen[pid] = int(stamp_ns)
             others = None
             if self.hold_unseen_s > 0 and len(rows) > 1:
-                boxes = person_boxes(people[[q for p_, q in rows.items() if p_ != pid]])
-                others = boxes[np.all(np.isfinite(boxes), axis=1)]
+                others = np.array(person_boxes(
+                    None, people[[q for p_, q in rows.items() if p_ != pid]], BOX_MARGIN),
+                    dtype=np.float64).reshape(-1, 4)
             out.steps[pid] = self.streams[pid].push(stamp_ns, people[r:r + 1], others)
         empty = np.zeros((0, NUM_KEYPOINTS, 3))
         for pid in list(self.streams):
