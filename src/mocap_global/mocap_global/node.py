@@ -210,6 +210,17 @@ PARAMETERS = (
     ParamSpec('fusion_static_orientation_time_constant_s', 0.0, 'The orientation correction '
               'of those frames (0 = the input root orientation, turned into the world)',
               min_value=0.0),
+    ParamSpec('camera_pose_root', 'lifter', "With a known camera pose (camera_pose_topic), "
+              "where the person's horizontal position comes from: 'lifter' = the lifter's "
+              "camera-frame root of the same stamp (network_pose_topic) moved by the pose, "
+              "the height and the body staying the input's (the physics root lags the "
+              "lifter's and is moved to put the feet on its floor: docs/global.md); "
+              "'input' = the input's root", read_only=True,
+              additional_constraints='lifter or input'),
+    ParamSpec('fusion_measured_position_time_constant_s', 0.15, "Time constant of the "
+              "position correction towards a root measured apart from the input "
+              "(camera_pose_root lifter): GMR's steps between, the lifter's noise filtered",
+              min_value=0.0),
     ParamSpec('vertical', 'auto', "Where the root's height and tilt come from: 'input' (an "
               "input in a floor frame, z up, floor z = 0, e.g. the physics output: one floor "
               "for all outputs; GMR gives heading and horizontal path), 'gmr' (accumulated "
@@ -361,6 +372,11 @@ class GMRNode(Node):
         self.camera_mode = 'static' if p['static_camera'] else p['camera_mode']
         self.output_frame = p['frame_id']
         self.camera_pose_missing = 0
+        #: frames with a known pose but no lifter root of their stamp (camera_pose_root)
+        self.camera_pose_root_missing = 0
+        if p['camera_pose_root'] not in ('lifter', 'input'):
+            raise ValueError(f"camera_pose_root must be lifter or input, got "
+                             f"{p['camera_pose_root']!r}")
         if p['camera_pose_topic'] and p['camera_pose_type'] not in ('odometry', 'pose'):
             raise ValueError(f"camera_pose_type must be odometry or pose, got "
                              f"{p['camera_pose_type']!r}")
@@ -459,7 +475,9 @@ class GMRNode(Node):
                 known_world=self.camera_mode == 'known',
                 static_position_time_constant_s=p['fusion_static_position_time_constant_s'],
                 static_orientation_time_constant_s=p[
-                    'fusion_static_orientation_time_constant_s'])
+                    'fusion_static_orientation_time_constant_s'],
+                measured_position_time_constant_s=p[
+                    'fusion_measured_position_time_constant_s'])
             self.get_logger().info(
                 ('static camera: fusing' if self.camera_mode == 'static' else
                  'camera mode auto: fusing the frames of a static or turning camera')
@@ -611,9 +629,12 @@ class GMRNode(Node):
         (:class:`mocap_core.camera_pose.KnownCameraPoses`); None when there is none."""
         return self.camera_poses.at(stamp)
 
-    def _known_anchor(self, stamp: int, on_floor: bool) -> InputAnchor:
+    def _known_anchor(self, stamp: int, on_floor: bool,
+                      network_pose: Optional[Pose] = None) -> InputAnchor:
         """The input frame in the world from the known camera pose (and the physics floor
-        for a floor input); not fixed (GMR fills) without a pose near ``stamp``."""
+        for a floor input); not fixed (GMR fills) without a pose near ``stamp``. With
+        ``camera_pose_root`` lifter, the lifter's camera-frame root of this stamp
+        (``network_pose``) moved by the pose is the measured root (``InputAnchor.root``)."""
         pose = self.camera_pose_at(stamp)
         if pose is None or (on_floor and self.floor is None):
             self.camera_pose_missing += 1
@@ -621,8 +642,14 @@ class GMRNode(Node):
             return InputAnchor(False)
         self.diag.set_value('camera_pose', 'ok')
         R_wc, t_wc = pose
+        root = None
+        if self.p['camera_pose_root'] == 'lifter':
+            if network_pose is not None:
+                root = R_wc @ np.asarray(network_pose.root_position, float) + t_wc
+            else:
+                self.camera_pose_root_missing += 1
         if not on_floor:
-            return InputAnchor(True, R_wc, t_wc, known=True)
+            return InputAnchor(True, R_wc, t_wc, known=True, root=root)
         # one floor for all outputs: the physics floor is the world's z = 0 (the world frame
         # of the pose has z up, REP-103), so the known pose gives the floor frame's heading
         # and its position along the floor; the vertical and tilt stay the physics' (an
@@ -632,7 +659,7 @@ class GMRNode(Node):
         M = R_wc @ A
         origin = R_wc @ b + t_wc
         return InputAnchor(True, heading_rotation(closest_yaw(M)),
-                           np.array([origin[0], origin[1], 0.0]), known=True)
+                           np.array([origin[0], origin[1], 0.0]), known=True, root=root)
 
     def on_floor(self, msg: TransformStamped) -> None:
         """The physics floor in the camera frame: ``p_camera = A p_floor + b``."""
@@ -644,14 +671,15 @@ class GMRNode(Node):
             return
         self.floor = (rc.stamp_to_ns(msg.header.stamp), quat_to_matrix(q / n), b)
 
-    def _anchor(self, stamp: int, on_floor: bool) -> Optional[InputAnchor]:
+    def _anchor(self, stamp: int, on_floor: bool,
+                network_pose: Optional[Pose] = None) -> Optional[InputAnchor]:
         """The camera motion of this frame as an :class:`InputAnchor` (camera_mode auto;
         None otherwise): fixed for a static or turning camera, with the camera's rotation
         since the first image (in the floor frame for a floor input: ``on_floor``, an input
         frame that is not an optical frame, as the physics floor), else not fixed; with a
         known camera pose, the input frame in the world."""
         if self.camera_mode == 'known':
-            return self._known_anchor(stamp, on_floor)
+            return self._known_anchor(stamp, on_floor, network_pose)
         if self.camera_mode != 'auto':
             return None
         cm = self.camera_motion.get(stamp)
@@ -834,10 +862,11 @@ class GMRNode(Node):
         person.last_stamp = stamp
         if pid is None or pid == self.main_id:
             self._check_rate(gap)
+        network_pose = self.network_poses.get(pid, {}).pop(stamp, None)
         try:
             frames, event = person.online.add(
-                stamp, pose, self._anchor(stamp, 'optical' not in self.input_frame),
-                self.network_poses.get(pid, {}).pop(stamp, None))
+                stamp, pose, self._anchor(stamp, 'optical' not in self.input_frame,
+                                          network_pose), network_pose)
         except ValueError as exc:
             self.diag.errors += 1
             self.get_logger().error(f'dropping motion: {exc}', throttle_duration_sec=2.0)
@@ -963,6 +992,11 @@ class GMRNode(Node):
                 self.diag.set_value('fusion', 'on' if fusion.ready else 'initialising')
             if self.camera_mode == 'known':
                 self.diag.set_value('camera_pose_missing_frames', self.camera_pose_missing)
+                if self.p['camera_pose_root'] == 'lifter':
+                    self.diag.set_value('camera_pose_root', (
+                        f"the lifter's root in {online.measured_root_frames} frames, the "
+                        f'input\'s in {self.camera_pose_root_missing} (no lifter pose of '
+                        'the stamp yet)'))
             if self.camera_mode == 'auto':
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))

@@ -174,7 +174,11 @@ class InputAnchor:
     ``moving_lock_time_constant_s``. ``known``: the map comes from a known camera pose
     (no estimate noise in it, however the camera moves): with a floor input (the physics
     output, already filtered) fused with the static time constants and never locked to
-    GMR's feet, so that the world output is the input moved by the known map."""
+    GMR's feet, so that the world output is the input moved by the known map.
+    ``root``: (3,) m, the person's root in the fixed frame as measured apart from the input
+    (a known camera pose applied to the lifter's camera-frame root): its horizontal position
+    (x, y) replaces the input root's in the measurement, the height stays the input's; such
+    frames are fused with the fusion's ``measured_position_time_constant_s``."""
 
     fixed: bool
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -182,10 +186,14 @@ class InputAnchor:
     static: bool = False
     translating: bool = False
     known: bool = False
+    root: Optional[np.ndarray] = None
 
     def apply(self, R_in: np.ndarray, T_in: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """An input root pose (R (3, 3), T (3,)) in the fixed frame."""
-        return self.rotation @ R_in, self.rotation @ T_in + self.translation
+        T = self.rotation @ T_in + self.translation
+        if self.root is not None:
+            T = np.array([self.root[0], self.root[1], T[2]])
+        return self.rotation @ R_in, T
 
 
 def _anchor_between(a: Optional[InputAnchor], b: Optional[InputAnchor], t: float
@@ -197,8 +205,9 @@ def _anchor_between(a: Optional[InputAnchor], b: Optional[InputAnchor], t: float
             or a.translating != b.translating or a.known != b.known:
         return a
     q = quat_slerp(matrix_to_quat(a.rotation), matrix_to_quat(b.rotation), t)
+    root = None if a.root is None or b.root is None else (1.0 - t) * a.root + t * b.root
     return InputAnchor(True, quat_to_matrix(q), (1.0 - t) * a.translation + t * b.translation,
-                       static=a.static, translating=a.translating, known=a.known)
+                       static=a.static, translating=a.translating, known=a.known, root=root)
 
 
 class StaticCameraFusion:
@@ -227,15 +236,18 @@ class StaticCameraFusion:
     T_in)``: the position by ``1 - exp(-dt / position_time_constant_s)`` per frame, the
     orientation (geodesically) by ``1 - exp(-dt / orientation_time_constant_s)``; a frame
     of a camera that stands still (``step(..., static=True)``) by its own
-    ``static_position_time_constant_s`` and ``static_orientation_time_constant_s``. A time
-    constant of 0 takes the measurement as it is.
+    ``static_position_time_constant_s`` and ``static_orientation_time_constant_s``; a
+    frame whose position was measured apart from the input (``step(..., measured=True)``,
+    :attr:`InputAnchor.root`) by ``measured_position_time_constant_s`` (the orientation
+    as a static frame's). A time constant of 0 takes the measurement as it is.
     """
 
     def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.15,
                  orientation_time_constant_s: float = 1.0,
                  input_up: Optional[np.ndarray] = None, known_world: bool = False,
                  static_position_time_constant_s: float = 0.05,
-                 static_orientation_time_constant_s: float = 0.0) -> None:
+                 static_orientation_time_constant_s: float = 0.0,
+                 measured_position_time_constant_s: float = 0.15) -> None:
         self.known_world = bool(known_world)
         self.init_frames = max(1, int(round(init_s * fps)))
 
@@ -245,6 +257,7 @@ class StaticCameraFusion:
         self.alpha_r = gain(orientation_time_constant_s)
         self.alpha_p_static = gain(static_position_time_constant_s)
         self.alpha_r_static = gain(static_orientation_time_constant_s)
+        self.alpha_p_measured = gain(measured_position_time_constant_s)
         self.input_up = None if input_up is None else \
             np.asarray(input_up, dtype=np.float64) / np.linalg.norm(input_up)
         self.reset()
@@ -283,11 +296,14 @@ class StaticCameraFusion:
 
     def step(self, R: np.ndarray, T: np.ndarray, R_in: np.ndarray, T_in: np.ndarray,
              up_body: np.ndarray, first: bool = False,
-             static: bool = False) -> Tuple[np.ndarray, np.ndarray, bool]:
+             static: bool = False, measured: bool = False
+             ) -> Tuple[np.ndarray, np.ndarray, bool]:
         """GMR pose (R, T), input root pose, GMR's up estimate in the body frame -> fused
         (R, T) and whether the measurement was used. ``first``: the first frame of a
         segment (with a known input up, the fused pose starts at the measurement);
-        ``static``: the camera stands still in this frame (the static time constants)."""
+        ``static``: the camera stands still in this frame (the static time constants);
+        ``measured``: the position was measured apart from the input (its own time
+        constant, the orientation's as ``static`` says)."""
         if self.W_R is None:
             self._pairs.append((R, T, R_in, T_in, up_body))
             need = 1 if self._realigning and self.input_up is not None else self.init_frames
@@ -299,6 +315,8 @@ class StaticCameraFusion:
             return Rm, Tm, True
         a_p, a_r = (self.alpha_p_static, self.alpha_r_static) if static else \
             (self.alpha_p, self.alpha_r)
+        if measured:
+            a_p = self.alpha_p_measured
         T = T + a_p * (Tm - T)
         corr = matrix_to_axis_angle(R.T @ Rm)
         R = R @ axis_angle_to_matrix(a_r * corr)
@@ -428,6 +446,8 @@ class OnlineGMR:
         self.nonfinite_outputs = 0
         #: Frames not fused because their anchor said the camera translates (or is unknown).
         self.unanchored_frames = 0
+        #: Frames fused with a root measured apart from the input (:attr:`InputAnchor.root`).
+        self.measured_root_frames = 0
         #: a frame with a known camera pose was fused in this segment (``_fuse``)
         self._known_placed = False
         self.reset()
@@ -731,7 +751,11 @@ class OnlineGMR:
         # root carries the lifter's depth noise
         static = self.floor_input and (anchor.static or anchor.known if anchor is not None
                                        else not self.fusion.known_world)
-        return self.fusion.step(R, T, R_in, T_in, up, first=first, static=static)
+        measured = anchor is not None and anchor.root is not None
+        if measured:
+            self.measured_root_frames += 1
+        return self.fusion.step(R, T, R_in, T_in, up, first=first, static=static,
+                                measured=measured)
 
     def _emit(self) -> WorldFrame:
         k = self._emitted                               # segment index of the frame

@@ -256,6 +256,60 @@ def test_a_known_camera_pose_with_the_physics_floor_input(graph_node):
     assert _values(node)['camera_pose_missing_frames'] == '1'
 
 
+@pytest.mark.parametrize('root', ['lifter', 'input'])
+def test_a_known_camera_pose_places_the_lifters_root(graph_node, root):
+    """camera_pose_root lifter: with a known pose the horizontal position is the lifter's
+    camera-frame root of each stamp moved by the pose, the height the physics input's; the
+    physics root here lags 30 cm behind along the walk and stands 5 cm lower. With
+    ``input`` the physics root is taken. A stamp without a lifter pose is counted."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+    from mocap_core.data.synth2d import look_at
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
+                                  camera_pose_root=root,
+                                  fusion_static_position_time_constant_s=1e-6,
+                                  fusion_measured_position_time_constant_s=1e-6)
+    world = _poses(40)
+    t_wc = np.array([-2.0, 3.0, 1.4])
+    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T          # optical -> world
+    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
+    x = f / np.linalg.norm(f)
+    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
+    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
+    A, b = R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
+    lag = np.array([-0.3, 0.0, -0.05])
+    for i, p in enumerate(world):
+        header = rc.make_header(i * DT_NS, 'odom')
+        graph.publish('/robot/camera', rc.root_to_odometry(t_wc, matrix_to_quat(R_wc), header,
+                                                           'camera_optical_frame'))
+        graph.publish('/floor', rc.transform_stamped(
+            rc.make_header(i * DT_NS, 'camera_optical_frame'), 'floor', A, b))
+        if i != 25:     # the lifter's frame of stamp 25 is missing
+            graph.publish(topics.LIFTER_UNSMOOTHED_MOTION, rc.pose_to_motion(
+                _in_camera([p], R_wc, t_wc)[0],
+                rc.make_header(i * DT_NS, 'camera_optical_frame')))
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(R_wf.T @ quat_to_matrix(p.rotations[0]))
+        in_floor = Pose(p.skeleton, rot, R_wf.T @ (p.root_position + lag - t_wf))
+        graph.publish('/in/motion', rc.pose_to_motion(in_floor, rc.make_header(i * DT_NS,
+                                                                               'floor')))
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == 40
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])[1:]
+    T_true = np.stack([p.root_position for p in world])[1:]
+    np.testing.assert_allclose(T[:, 2], T_true[:, 2] + lag[2], atol=0.01)
+    keep = np.arange(1, 40) != 25
+    if root == 'lifter':
+        np.testing.assert_allclose(T[keep, :2], T_true[keep, :2], atol=0.02)
+        assert _values(node)['camera_pose_root'].startswith("the lifter's root in 39 frames, "
+                                                            "the input's in 1 ")
+    else:
+        np.testing.assert_allclose(T[:, :2], T_true[:, :2] + lag[:2], atol=0.02)
+        assert 'camera_pose_root' not in _values(node)
+
+
 @pytest.mark.parametrize('frame', ['floor_start', 'floor'])
 def test_a_turning_camera_taken_out_by_physics_is_fused_as_a_static_one(graph_node, frame):
     """The physics stage took the camera's rotation out (``derotate_camera``: input frame
