@@ -336,6 +336,49 @@ def fit_floor_plane(points: np.ndarray, weights: Optional[np.ndarray] = None,
                     float(np.arccos(np.clip(n @ prior, -1.0, 1.0))), 'points')
 
 
+def fit_floor_height(heights: np.ndarray, weights: Optional[np.ndarray] = None,
+                     inlier_threshold: float = 0.025, offset_quantile: float = 0.25,
+                     iterations: int = 64, rng: Optional[np.random.Generator] = None
+                     ) -> Tuple[float, int]:
+    """The floor's height along a known up direction from contact point heights (m).
+
+    The one-dimensional counterpart of :func:`fit_floor_plane` when the normal is known (a
+    known camera pose gives gravity): the candidate heights (the weighted median and
+    ``iterations`` random points) keep the points within ``inlier_threshold`` of them; the
+    largest weight of inliers wins, and the height is the ``offset_quantile`` weighted
+    quantile of its inliers (the feet rest on the floor, roll-over lifts heels and toes).
+
+    Args:
+        heights: (N,) m. weights: (N,) >= 0 (default 1).
+    Returns:
+        (floor height, inliers).
+    Raises:
+        ValueError: no finite height with a positive weight.
+    """
+    h = np.asarray(heights, dtype=float).reshape(-1)
+    w = np.ones(len(h)) if weights is None else np.asarray(weights, dtype=float).reshape(-1)
+    ok = np.isfinite(h) & np.isfinite(w) & (w > 0)
+    h, w = h[ok], w[ok]
+    if len(h) == 0:
+        raise ValueError('no finite contact point to fit a floor height to')
+    rng = np.random.default_rng(0) if rng is None else rng
+    order = np.argsort(h)
+    cw = np.cumsum(w[order])
+    cand = [h[order][min(int(np.searchsorted(cw, 0.5 * cw[-1])), len(h) - 1)]]
+    cand += list(h[rng.integers(0, len(h), min(iterations, len(h)))])
+    best, best_score = None, -1.0
+    for c in cand:
+        mask = np.abs(h - c) <= inlier_threshold
+        score = float(w[mask].sum())
+        if score > best_score:
+            best, best_score = mask, score
+    hi, wi = h[best], w[best]
+    order = np.argsort(hi)
+    cw = np.cumsum(wi[order])
+    k = min(int(np.searchsorted(cw, offset_quantile * cw[-1])), len(hi) - 1)
+    return float(hi[order][k]), int(best.sum())
+
+
 def body_up(pose: Pose) -> np.ndarray:
     """The body's up direction in the pose's frame: from the mid-ankles to the neck (a
     standing or walking person's average of it is close to vertical)."""
@@ -443,6 +486,15 @@ class FloorTracker:
         self._blend: Optional[Tuple[FloorFrame, int]] = None   # (start frame, frames done)
         self._since_fit = 0
         self._rng = np.random.default_rng(0)
+        # known gravity (update(..., world=...)): contact heights in the world, the floor's
+        # height there (current, target, blend start and frames done)
+        self.known = False
+        self._z: Deque[np.ndarray] = collections.deque(maxlen=n)
+        self._zw: Deque[np.ndarray] = collections.deque(maxlen=n)
+        self._z_lowest: Deque[float] = collections.deque(maxlen=n)
+        self._z0: Optional[float] = None
+        self._z0_target: Optional[float] = None
+        self._z0_blend: Optional[Tuple[float, int]] = None
 
     @property
     def ready(self) -> bool:
@@ -496,9 +548,19 @@ class FloorTracker:
         return fit_floor_plane(low, None, prior, p.prior_weight_m, p.inlier_threshold,
                                min_points=10 ** 9)
 
-    def update(self, pose: Pose, probabilities: Optional[Sequence[float]]
+    def update(self, pose: Pose, probabilities: Optional[Sequence[float]],
+               world: Optional[Tuple[np.ndarray, np.ndarray]] = None
                ) -> Tuple[FloorFrame, bool]:
-        """Record ``pose`` (source frame) and return (current floor frame, changed)."""
+        """Record ``pose`` (source frame) and return (current floor frame, changed).
+
+        ``world``: the source frame's pose (R (3, 3), t (3,) m; ``p_world = R p + t``) in a
+        world frame whose z is up (a known camera pose, REP-103): the floor's normal is that z
+        and only its height is fitted (:meth:`_update_known`). Once a frame came with one, a
+        frame without keeps the last floor."""
+        if world is not None:
+            return self._update_known(pose, probabilities, world)
+        if self.known:
+            return self.frame, False
         pts = contact_positions(pose, self.params.flat_foot_pitch_deg)
         try:
             up = body_up(pose)
@@ -535,3 +597,82 @@ class FloorTracker:
         self.frame = start.interpolate(self.target, u * u * (3.0 - 2.0 * u))
         self._blend = (start, done) if done < p.blend_frames else None
         return self.frame, True
+
+    def _update_known(self, pose: Pose, probabilities: Optional[Sequence[float]],
+                      world: Tuple[np.ndarray, np.ndarray]) -> Tuple[FloorFrame, bool]:
+        """:meth:`update` with the source frame's pose in a z-up world known.
+
+        The floor is the world's horizontal plane at a height fitted to the contact points,
+        each frame's moved into the world by its own pose (:func:`fit_floor_height`, every
+        ``update_every`` frames; until the first contacts, the lowest foot points). The floor
+        frame follows the camera every frame: its normal is the world's z seen from this
+        frame's camera, the camera's height above the floor comes from the pose. Such
+        changes are the camera's motion, not a new estimate of the floor: the floor stays
+        where it is in the world, so they are not reported as changes (the caller does not
+        re-express its state; the camera's turn and horizontal step are the carry's). A new
+        height is blended in over ``blend_frames`` (smoothstep), not reported either: the
+        body keeps its height above the floor, as the target does. Only the first frame with
+        a pose after frames without one is a change (the floor moved from the feet's estimate
+        to this one, in the same camera frame)."""
+        p = self.params
+        R = np.asarray(world[0], dtype=float)
+        t = np.asarray(world[1], dtype=float).reshape(3)
+        pts = contact_positions(pose, p.flat_foot_pitch_deg)
+        if not (np.all(np.isfinite(pts)) and np.all(np.isfinite(R))
+                and np.all(np.isfinite(t))):
+            return self.frame, False
+        switched = not self.known and self.frame is not None
+        self.known = True
+        z = (pts @ R.T + t)[:, 2]
+        self.frames += 1
+        self._since_fit += 1
+        self._z_lowest.append(float(z.min()))
+        if probabilities is not None:
+            prob = np.asarray(probabilities, dtype=float).reshape(-1)
+            if prob.shape == (len(z),):
+                use = np.isfinite(prob) & (prob > p.contact_threshold)
+                if use.any():
+                    self.contact_frames += 1
+                    self._z.append(z[use])
+                    self._zw.append(prob[use])
+        self.adopted = False
+        changed = switched
+        frozen = p.freeze_after > 0 and self.frames > p.freeze_after and self._z0 is not None
+        due = self._z0 is None or self._since_fit >= p.update_every or \
+            (self.fit is not None and self.fit.source == 'prior' and self.ready)
+        if due and not frozen:
+            self._since_fit = 0
+            if self._z:
+                z0, inliers = fit_floor_height(np.concatenate(list(self._z)),
+                                               np.concatenate(list(self._zw)),
+                                               p.inlier_threshold, p.offset_quantile,
+                                               rng=self._rng)
+                source, points = 'points', int(sum(len(v) for v in self._z))
+            else:
+                z0 = float(np.percentile(np.asarray(self._z_lowest), 10))
+                source, points, inliers = 'prior', len(self._z_lowest), len(self._z_lowest)
+            if self._z0 is None:
+                self._z0 = self._z0_target = z0
+                self.adopted = True
+            elif abs(z0 - self._z0_target) >= p.min_change_m:
+                self._z0_target = z0
+                self._z0_blend = (self._z0, 0) if p.blend_frames > 0 else None
+                if p.blend_frames == 0:
+                    self._z0 = z0
+                self.changes += 1
+                self.adopted = True
+            if self.adopted:
+                self.fit = PlaneFit(R[2].copy(), float(t[2] - z0), points, inliers, 0.0,
+                                    np.zeros(2), 0.0, source)
+        if self._z0_blend is not None:
+            start, done = self._z0_blend
+            done += 1
+            u = done / p.blend_frames
+            self._z0 = start + (self._z0_target - start) * u * u * (3.0 - 2.0 * u)
+            self._z0_blend = (start, done) if done < p.blend_frames else None
+        up = R[2].copy()                     # the world's z in the source frame: R^T e_z
+        self.frame = FloorFrame.from_plane(up, float(t[2] - self._z0),
+                                           source_frame=self.source_frame)
+        self.target = FloorFrame.from_plane(up, float(t[2] - self._z0_target),
+                                            source_frame=self.source_frame)
+        return self.frame, changed

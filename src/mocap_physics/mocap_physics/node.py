@@ -161,6 +161,12 @@ PARAMETERS = (
         'the simulated body is carried with it as with carry_with_camera, whatever that '
         'says (not with derotate_camera); empty = none',
         'the frame is not carried'),
+    ParamSpec('floor_from_camera_pose', False, 'With a known camera pose (camera_pose_topic) '
+              'and floor_source estimate: the floor\'s normal is the pose frame\'s z (gravity, '
+              'REP-103) seen from each frame\'s camera, and only its height is fitted to the '
+              'stance feet, each frame\'s moved into that frame by its pose; false: the floor '
+              'is fitted to the feet in the camera frame as without a pose (docs/physics.md)',
+              read_only=True),
     ParamSpec('camera_translation_coast_s', 0.5, 'carry_with_camera: a frame whose camera step '
               'was not measured moves the camera by its last measured velocity for this long '
               'after the last measurement, then not at all', min_value=0.0, max_value=10.0,
@@ -469,6 +475,8 @@ class PhysicsNode(Node):
             self.get_logger().warn('carrying the body with the camera needs floor_source '
                                    'estimate or camera_params, a camera_motion_topic or '
                                    'camera_pose_topic, and derotate_camera off: off')
+        self.diag.set_value('floor_normal', 'gravity of the known camera pose, height from '
+                            'the feet' if self.online.camera_pose_known else 'from the feet')
         self.diag.set_value('carry_with_camera', 'off' if not self.carry else
                             'with the known camera pose' if self.known_poses is not None
                             else 'with the camera-motion estimate')
@@ -497,6 +505,12 @@ class PhysicsNode(Node):
 
     def _make_online(self, contacts_topic: str) -> OnlinePhysics:
         """A new per-person streaming state (its own floor estimate)."""
+        online = self._new_online(contacts_topic)
+        online.camera_pose_known = self.known_poses is not None and \
+            bool(self.p['floor_from_camera_pose'])
+        return online
+
+    def _new_online(self, contacts_topic: str) -> OnlinePhysics:
         p = self.p
         return OnlinePhysics(
             self.params, self._floor_source(),

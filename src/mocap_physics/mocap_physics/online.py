@@ -156,6 +156,10 @@ class OnlinePhysics:
             collections.deque()
         #: the camera pose of the last frame stepped (step 4 of the module docstring)
         self._last_camera: Optional[CameraPose] = None
+        #: the camera poses given to :meth:`step` are known ones in a z-up world (a robot's
+        #: camera pose, not the estimate): the floor tracker then takes gravity from them
+        #: (:meth:`FloorTracker.update` ``world``); set by the node
+        self.camera_pose_known = False
         #: frames whose state the camera's motion carried
         self.camera_steps = 0
         #: contact probabilities (4,) by stamp (ns), oldest first
@@ -266,12 +270,15 @@ class OnlinePhysics:
         return self.process(wait=False)
 
     # -- one frame ---------------------------------------------------------------------------
-    def _update_floor(self, pose: Pose, probs: Optional[np.ndarray]) -> bool:
-        """Feed the tracker; re-express the state when the floor changed. False when there
-        is no floor yet (the frame cannot be simulated)."""
+    def _update_floor(self, pose: Pose, probs: Optional[np.ndarray],
+                      world: Optional[CameraPose] = None) -> bool:
+        """Feed the tracker (``world``: a known camera pose, z up); re-express the state when
+        the floor changed. False when there is no floor yet (the frame cannot be
+        simulated)."""
         tracker = self.tracker
         try:
-            new, changed = tracker.update(pose, probs)
+            new, changed = tracker.update(pose, probs) if world is None else \
+                tracker.update(pose, probs, world)
         except ValueError as exc:      # no finite contact point: keep the last floor
             new, changed = self.floor, False
             self._notify('floor', f'floor estimate not updated: {exc}')
@@ -341,7 +348,8 @@ class OnlinePhysics:
             self._notify('nocontacts', 'no contact probabilities for this frame: contacts from '
                          'the kinematics only', period_s=10.0)
         input_frame = frame_id or DEFAULT_INPUT_FRAME
-        if self.tracker is not None and not self._update_floor(pose, probabilities):
+        if self.tracker is not None and not self._update_floor(
+                pose, probabilities, camera if self.camera_pose_known else None):
             return None
         if self.floor is not None:
             if camera is not None and self._last_camera is not None and \

@@ -441,3 +441,27 @@ def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
                       moved, contacts[:n], None,
                       known=[(np.eye(3), side * (i / 30.0)) for i in range(n)])
     assert node.carry and not node.drift and node.online.cycle.drift_frames == 0
+
+
+@pytest.mark.parametrize('gravity', [True, False])
+def test_a_known_camera_pose_can_give_the_floor_its_normal(panning, gravity):
+    """floor_from_camera_pose: the recorded walk's static camera with its true pose in the
+    clip's z-up world. With it every published floor's normal is that world's up seen from
+    the camera (the feet give only the height); without it the normal is fitted to the feet
+    and differs."""
+    from mocap_physics.training.evaluate import load_gt_bag
+    static, _, _, contacts, _ = panning
+    A, t = load_gt_bag(BAG).to_world.rotation, load_gt_bag(BAG).to_world.translation
+    kwargs = {'camera_pose_topic': '/robot/camera', 'camera_pose_type': 'pose',
+              'floor_from_camera_pose': gravity}
+    out, floors, node = _run(kwargs, static, contacts, None, known=[(A, t)] * len(static))
+    assert len(out) == len(static) and len(floors) >= len(static) - 1
+    from mocap_core.rotations import quat_to_matrix
+    q = np.array([[m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
+                   m.transform.rotation.w] for m in floors])
+    err = np.abs(quat_to_matrix(q)[:, :, 2] - A[2]).max()
+    assert node.online.camera_pose_known == gravity
+    if gravity:
+        assert err < 1e-6
+    else:
+        assert err > 1e-3

@@ -264,3 +264,44 @@ def test_heel_points_placed_for_the_motion_s_flat_foot_give_the_floor_under_it()
         angle = np.degrees(np.arccos(np.clip(frame.normal @ true_normal, -1, 1)))
         errors[pitch] = (abs(frame.transform_points(under)[2]), angle)
     assert errors[40.0][0] < 0.01 and errors[40.0][1] < 1.0, errors
+
+
+def test_floor_height_along_a_known_normal_ignores_lifted_feet():
+    from mocap_physics.floor import fit_floor_height
+    rng = np.random.default_rng(3)
+    h = np.concatenate([0.10 + 0.004 * rng.normal(size=80), 0.25 + 0.05 * rng.random(30)])
+    z, inliers = fit_floor_height(h)
+    assert abs(z - 0.10) < 0.006 and 70 <= inliers <= 85
+    with pytest.raises(ValueError):
+        fit_floor_height(np.array([np.nan]))
+
+
+def test_a_known_camera_pose_gives_the_floor_normal_and_follows_the_camera():
+    """A camera that tilts down and rises while a person walks: with its pose known (z up),
+    every frame's floor has the world's up as its normal and the camera's height above the
+    fitted floor; a point fixed in the world keeps its floor coordinates (the frame follows
+    the camera, not reported as a change); a frame without a pose keeps the last floor."""
+    R0, c0 = _camera(20.0, 0.0)
+    poses, probs = _walk_in_camera(R0, c0, frames=90)
+    tracker = FloorTracker()
+    world_point = np.array([1.0, 0.5, 0.0])
+    seen = []
+    for k, (pose, p) in enumerate(zip(poses, probs)):
+        # the same world seen by a camera pitched down a further 0.2 deg and 1 cm higher per
+        # frame: the pose in this camera's frame
+        R, c = _camera(20.0 + 0.2 * k, 0.0, height=1.6 + 0.01 * k)
+        M = R @ R0.T
+        cam_rot = np.array(pose.rotations)
+        cam_rot[0] = quat_multiply(matrix_to_quat(M), cam_rot[0])
+        pose_k = Pose(pose.skeleton, cam_rot, R @ (R0.T @ pose.root_position + c0 - c))
+        frame, changed = tracker.update(pose_k, p, (R.T, c))
+        assert not changed
+        np.testing.assert_allclose(frame.normal, R @ np.array([0.0, 0.0, 1.0]), atol=1e-9)
+        seen.append(frame.transform_points(R @ (world_point - c)))
+    assert tracker.known and tracker.ready and tracker.fit.source == 'points'
+    # the feet stand on z = 0 (lower quartile of the stance points, jitter 3 mm)
+    assert abs(frame.height - (1.6 + 0.01 * 89)) < 0.01
+    seen = np.array(seen)
+    assert np.abs(seen[30:] - seen[30]).max() < 0.01
+    held, changed = tracker.update(poses[0], probs[0])
+    assert held is frame and not changed
