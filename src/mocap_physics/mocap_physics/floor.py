@@ -36,7 +36,8 @@ from typing import Deque, Optional, Sequence, Tuple
 import numpy as np
 
 from mocap_core.pose import Pose
-from mocap_core.rotations import matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix
+from mocap_core.rotations import (axis_angle_to_matrix, matrix_to_quat, quat_multiply,
+                                  quat_slerp, quat_to_matrix)
 
 from .foot import contact_positions
 
@@ -391,6 +392,54 @@ def body_up(pose: Pose) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # online estimate
 # ---------------------------------------------------------------------------------------------
+class UprightPrior:
+    """The target turned upright on average in a known gravity (opt-in: the physics node's
+    ``upright_from_camera_pose``).
+
+    A camera's pitch hides how far the person leans toward or away from it, and the lifted
+    body leans by a few degrees per clip (docs/lifter.md, "What the keypoints cannot tell").
+    With the camera's pose known in a z-up world, each target's body up (:func:`body_up`)
+    is moved into that world and averaged over the last ``window`` frames; the whole target
+    is turned about its root by the rotation taking that mean to the world's up, at most
+    ``max_angle_deg``. A person who bows or leans for longer than the window is turned
+    upright too: this is a prior, not a measurement.
+    """
+
+    def __init__(self, window: int = 60, max_angle_deg: float = 10.0) -> None:
+        if int(window) < 1 or not (np.isfinite(max_angle_deg) and max_angle_deg >= 0):
+            raise ValueError(f'bad upright prior: window {window}, max angle {max_angle_deg}')
+        self._ups: Deque[np.ndarray] = collections.deque(maxlen=int(window))
+        self.max_angle = float(np.radians(max_angle_deg))
+        #: the last correction, rad
+        self.angle = 0.0
+
+    def apply(self, pose: Pose, R_wc: np.ndarray) -> Pose:
+        """``pose`` (camera frame) turned about its root; ``R_wc`` (3, 3): the camera's
+        rotation into the z-up world (``p_world = R_wc p_camera + t``)."""
+        R_wc = np.asarray(R_wc, dtype=float)
+        try:
+            up = body_up(pose)
+        except ValueError:
+            return pose
+        if not (np.all(np.isfinite(up)) and np.all(np.isfinite(R_wc))):
+            return pose
+        self._ups.append(R_wc @ up)
+        m = np.mean(np.asarray(self._ups), axis=0)
+        n = float(np.linalg.norm(m))
+        if n < 1e-9:
+            return pose
+        m /= n
+        axis = np.cross(m, np.array([0.0, 0.0, 1.0]))
+        s = float(np.linalg.norm(axis))
+        self.angle = min(float(np.arctan2(s, m[2])), self.max_angle)
+        if s < 1e-12 or self.angle == 0.0:
+            return pose
+        C = R_wc.T @ axis_angle_to_matrix(axis / s * self.angle) @ R_wc
+        rot = np.array(pose.rotations)
+        rot[0] = quat_multiply(matrix_to_quat(C), rot[0])
+        return Pose(pose.skeleton, rot, pose.root_position)
+
+
 @dataclass
 class FloorTrackerParams:
     """Parameters of :class:`FloorTracker` (the node exposes them as ROS parameters)."""

@@ -123,7 +123,7 @@ from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bod
 from mocap_core.rotations import quat_to_matrix
 
 from .cycle_params import PhysicsParams
-from .floor import FloorFrame, FloorTracker, FloorTrackerParams
+from .floor import FloorFrame, FloorTracker, FloorTrackerParams, UprightPrior
 from .foot import TEMPLATE_FLAT_FOOT_PITCH_DEG, contact_positions
 from .markers import floor_transform_msg, friction_cone_spec
 from .model import revolute_efforts
@@ -135,6 +135,8 @@ _D = PhysicsParams()
 #: frame without its own
 CAMERA_STATE_MAX_AGE_NS = 500_000_000
 _F = FloorTrackerParams()
+#: frames over which upright_from_camera_pose averages the body's up (2 s at 30 fps)
+UPRIGHT_WINDOW_FRAMES = 60
 
 PARAMETERS = (
     ParamSpec('motion_topic', topics.LIFTER_MOTION, 'Input motion (kinematic target), '
@@ -167,6 +169,11 @@ PARAMETERS = (
               'stance feet, each frame\'s moved into that frame by its pose; false: the floor '
               'is fitted to the feet in the camera frame as without a pose (docs/physics.md)',
               read_only=True),
+    ParamSpec('upright_from_camera_pose', False, 'With a known camera pose '
+              '(camera_pose_topic): turn each target about its root so that its body is '
+              'upright on average over the last 60 frames in the pose frame\'s gravity (z up), at '
+              'most 10 deg: the lean toward the camera that its pitch hides '
+              '(docs/physics.md; measured, off by default)', read_only=True),
     ParamSpec('camera_translation_coast_s', 0.5, 'carry_with_camera: a frame whose camera step '
               'was not measured moves the camera by its last measured velocity for this long '
               'after the last measurement, then not at all', min_value=0.0, max_value=10.0,
@@ -476,7 +483,7 @@ class PhysicsNode(Node):
                                    'estimate or camera_params, a camera_motion_topic or '
                                    'camera_pose_topic, and derotate_camera off: off')
         self.diag.set_value('floor_normal', 'gravity of the known camera pose, height from '
-                            'the feet' if self.online.camera_pose_known else 'from the feet')
+                            'the feet' if self.online.floor_gravity else 'from the feet')
         self.diag.set_value('carry_with_camera', 'off' if not self.carry else
                             'with the known camera pose' if self.known_poses is not None
                             else 'with the camera-motion estimate')
@@ -506,8 +513,10 @@ class PhysicsNode(Node):
     def _make_online(self, contacts_topic: str) -> OnlinePhysics:
         """A new per-person streaming state (its own floor estimate)."""
         online = self._new_online(contacts_topic)
-        online.camera_pose_known = self.known_poses is not None and \
-            bool(self.p['floor_from_camera_pose'])
+        if self.known_poses is not None:
+            online.floor_gravity = bool(self.p['floor_from_camera_pose'])
+            if self.p['upright_from_camera_pose']:
+                online.upright = UprightPrior(UPRIGHT_WINDOW_FRAMES)
         return online
 
     def _new_online(self, contacts_topic: str) -> OnlinePhysics:

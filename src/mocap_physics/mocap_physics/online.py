@@ -50,7 +50,7 @@ from mocap_core.skeleton import Skeleton
 from .cycle import InvalidInput, PhysicsCycle
 from .cycle_params import PhysicsParams
 from .camera_rotation import camera_step_on_floor
-from .floor import FloorFrame, FloorTracker
+from .floor import FloorFrame, FloorTracker, UprightPrior
 from .foot import FLAT_FOOT_UPDATE_DEG, FlatFootEstimator
 from .model import SkeletonError
 from .results import FrameResult
@@ -157,9 +157,12 @@ class OnlinePhysics:
         #: the camera pose of the last frame stepped (step 4 of the module docstring)
         self._last_camera: Optional[CameraPose] = None
         #: the camera poses given to :meth:`step` are known ones in a z-up world (a robot's
-        #: camera pose, not the estimate): the floor tracker then takes gravity from them
-        #: (:meth:`FloorTracker.update` ``world``); set by the node
-        self.camera_pose_known = False
+        #: camera pose, not the estimate) and the floor tracker takes gravity from them
+        #: (:meth:`FloorTracker.update` ``world``; the node's floor_from_camera_pose)
+        self.floor_gravity = False
+        #: the same poses turn each target upright on average in their gravity
+        #: (:class:`UprightPrior`; the node's upright_from_camera_pose)
+        self.upright: Optional[UprightPrior] = None
         #: frames whose state the camera's motion carried
         self.camera_steps = 0
         #: contact probabilities (4,) by stamp (ns), oldest first
@@ -348,8 +351,10 @@ class OnlinePhysics:
             self._notify('nocontacts', 'no contact probabilities for this frame: contacts from '
                          'the kinematics only', period_s=10.0)
         input_frame = frame_id or DEFAULT_INPUT_FRAME
+        if self.upright is not None and camera is not None:
+            pose = self.upright.apply(pose, camera[0])
         if self.tracker is not None and not self._update_floor(
-                pose, probabilities, camera if self.camera_pose_known else None):
+                pose, probabilities, camera if self.floor_gravity else None):
             return None
         if self.floor is not None:
             if camera is not None and self._last_camera is not None and \

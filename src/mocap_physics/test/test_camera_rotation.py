@@ -460,7 +460,7 @@ def test_a_known_camera_pose_can_give_the_floor_its_normal(panning, gravity):
     q = np.array([[m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
                    m.transform.rotation.w] for m in floors])
     err = np.abs(quat_to_matrix(q)[:, :, 2] - A[2]).max()
-    assert node.online.camera_pose_known == gravity
+    assert node.online.floor_gravity == gravity
     if gravity:
         assert err < 1e-6
     else:

@@ -305,3 +305,27 @@ def test_a_known_camera_pose_gives_the_floor_normal_and_follows_the_camera():
     assert np.abs(seen[30:] - seen[30]).max() < 0.01
     held, changed = tracker.update(poses[0], probs[0])
     assert held is frame and not changed
+
+
+def test_the_upright_prior_turns_a_leaning_body_up_in_the_known_gravity():
+    from mocap_core.rotations import axis_angle_to_matrix
+    from mocap_physics.floor import UprightPrior
+    R, c = _camera(20.0, 0.0)                 # world -> camera
+    poses, _ = _walk_in_camera(R, c, frames=40, jitter=0.0)
+    lean = axis_angle_to_matrix(np.array([np.radians(6.0), 0.0, 0.0]))   # about camera x
+    prior, capped = UprightPrior(window=40), UprightPrior(window=40, max_angle_deg=2.0)
+    for pose in poses:
+        rot = np.array(pose.rotations)
+        rot[0] = quat_multiply(matrix_to_quat(lean), rot[0])
+        leaning = Pose(pose.skeleton, rot, pose.root_position)
+        out = prior.apply(leaning, R.T)
+        capped.apply(leaning, R.T)
+    # the walk's own mean lean (the random spine) stays: the prior undoes the added 6 deg
+    ref = UprightPrior(window=40)
+    for pose in poses:
+        ref.apply(pose, R.T)
+    assert abs(np.degrees(prior.angle) - 6.0) < 1.5 and np.degrees(ref.angle) < 1.5
+    assert np.degrees(capped.angle) == pytest.approx(2.0)
+    np.testing.assert_allclose(out.root_position, poses[-1].root_position)
+    up_after = R.T @ body_up(out)
+    assert up_after[2] > np.cos(np.radians(2.0))
