@@ -646,7 +646,8 @@ class GMRNode(Node):
         if self.p['camera_pose_root'] == 'lifter':
             if network_pose is not None:
                 root = R_wc @ np.asarray(network_pose.root_position, float) + t_wc
-            else:
+            if root is None or not np.all(np.isfinite(root)):
+                root = None
                 self.camera_pose_root_missing += 1
         if not on_floor:
             return InputAnchor(True, R_wc, t_wc, known=True, root=root)
@@ -996,7 +997,7 @@ class GMRNode(Node):
                     self.diag.set_value('camera_pose_root', (
                         f"the lifter's root in {online.measured_root_frames} frames, the "
                         f'input\'s in {self.camera_pose_root_missing} (no lifter pose of '
-                        'the stamp yet)'))
+                        'the stamp, or not finite)'))
             if self.camera_mode == 'auto':
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
