@@ -217,6 +217,9 @@ PARAMETERS = (
               "lifter's and is moved to put the feet on its floor: docs/global.md); "
               "'input' = the input's root", read_only=True,
               additional_constraints='lifter or input'),
+    ParamSpec('fusion_measured_root_half_window', 8, "A root measured apart from the input "
+              "(camera_pose_root lifter) averaged over this many frames before and after its "
+              "own, at most the look-ahead (no delay added)", read_only=True, min_value=0),
     ParamSpec('fusion_measured_position_time_constant_s', 0.15, "Time constant of the "
               "position correction towards a root measured apart from the input "
               "(camera_pose_root lifter): GMR's steps between, the lifter's noise filtered",
@@ -517,7 +520,9 @@ class GMRNode(Node):
                          if p['foot_plant'] else None,
                          contacts=self.contacts.setdefault(pid, {}),
                          contact_threshold=p['contact_threshold'],
-                         transition_time_constant_s=p['transition_time_constant_s'])
+                         transition_time_constant_s=p['transition_time_constant_s'],
+                         measured_root_half_window=min(
+                             p['fusion_measured_root_half_window'], p['lookahead']))
 
     def _keep_contacts(self, pid: Optional[int], stamp: int, probs: np.ndarray) -> None:
         """Keep one person's contact probabilities of a stamp (the last

@@ -119,6 +119,7 @@ declared static).
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Deque, List, Mapping, Optional, Tuple
@@ -391,7 +392,8 @@ class OnlineGMR:
                  foot_plant: Optional[FootPlantConfig] = None,
                  contacts: Optional[Mapping[int, np.ndarray]] = None,
                  contact_threshold: float = 0.5,
-                 transition_time_constant_s: float = 0.0) -> None:
+                 transition_time_constant_s: float = 0.0,
+                 measured_root_half_window: int = 0) -> None:
         self.model = model.eval()
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
@@ -415,6 +417,12 @@ class OnlineGMR:
             raise ValueError('moving_lock_time_constant_s must be >= 0, got '
                              f'{moving_lock_time_constant_s}')
         self.transition_time_constant_s = float(transition_time_constant_s)
+        #: a measured root (InputAnchor.root) is averaged over this many frames before and
+        #: after its own (as many on each side as the buffer holds: no delay)
+        self.measured_root_half_window = int(measured_root_half_window)
+        if self.measured_root_half_window < 0:
+            raise ValueError('measured_root_half_window must be >= 0, got '
+                             f'{measured_root_half_window}')
         if not self.transition_time_constant_s >= 0:
             raise ValueError('transition_time_constant_s must be >= 0, got '
                              f'{transition_time_constant_s}')
@@ -726,6 +734,26 @@ class OnlineGMR:
             return now
         return math.atan2(float(np.mean(np.sin(values))), float(np.mean(np.cos(values))))
 
+    def _smoothed_anchor(self, pos: int) -> Optional[InputAnchor]:
+        """The anchor of buffer position ``pos`` with its measured root averaged over the
+        ``measured_root_half_window`` frames on each side that the buffer holds, in pairs
+        (the frames j before and j after, both with a root of the same kind, or neither):
+        the mean of a steady walk is its middle, no lag."""
+        anchor = self._anchors_in[pos]
+        h = min(self.measured_root_half_window, pos, len(self._anchors_in) - 1 - pos)
+        if anchor is None or anchor.root is None or h <= 0:
+            return anchor
+
+        def root(i: int) -> Optional[np.ndarray]:
+            a = self._anchors_in[i]
+            return a.root if a is not None and a.known == anchor.known else None
+        roots = [anchor.root]
+        for j in range(1, h + 1):
+            before, after = root(pos - j), root(pos + j)
+            if before is not None and after is not None:
+                roots += [before, after]
+        return dataclasses.replace(anchor, root=np.mean(roots, axis=0))
+
     def _fuse(self, R: np.ndarray, T: np.ndarray, pose: Pose, anchor: Optional[InputAnchor],
               up: np.ndarray, first: bool) -> Tuple[np.ndarray, np.ndarray, bool]:
         """The fusion step of one frame (module docstring: static camera, camera motion)."""
@@ -790,7 +818,7 @@ class OnlineGMR:
             dt = (self._stamps[pos] - self._stamps[pos - 1]) * 1e-9
         self._placed = False
         if self.fusion is not None:
-            R, T, fused = self._fuse(R, T, pose, self._anchors_in[pos], up, k == 0)
+            R, T, fused = self._fuse(R, T, pose, self._smoothed_anchor(pos), up, k == 0)
         if k % 64 == 0:
             R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
         T_gmr = T
