@@ -54,6 +54,20 @@ def _in_camera(poses, R_wc, t_wc):
     return out
 
 
+def _camera_and_its_floor():
+    """A camera 1.4 m up looking down at the walk (optical -> world ``R_wc``, ``t_wc``) and
+    its floor frame: z up, origin on the floor below the camera, x along the optical axis
+    projected on the floor (floor -> world ``R_wf``, ``t_wf``; ``p_camera = A p_floor + b``)."""
+    from mocap_core.data.synth2d import look_at
+    t_wc = np.array([-2.0, 3.0, 1.4])
+    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T
+    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
+    x = f / np.linalg.norm(f)
+    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
+    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
+    return t_wc, R_wc, t_wf, R_wf, R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
+
+
 def _values(node):
     return {kv.key: kv.value for kv in node.diag.status().values}
 
@@ -221,20 +235,11 @@ def test_a_known_camera_pose_with_the_physics_floor_input(graph_node):
     the camera pose: with a true floor the world output is the true world pose."""
     from mocap_core import ros_conversions as rc
     from mocap_core import topics
-    from mocap_core.data.synth2d import look_at
 
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
                                   fusion_static_position_time_constant_s=1e-6)
     world = _poses(40)
-    t_wc = np.array([-2.0, 3.0, 1.4])
-    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T          # optical -> world
-    # the floor frame of this camera: z up, origin on the floor below the camera, x along
-    # the optical axis projected on the floor (p_camera = A p_floor + b)
-    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
-    x = f / np.linalg.norm(f)
-    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
-    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
-    A, b = R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
+    t_wc, R_wc, t_wf, R_wf, A, b = _camera_and_its_floor()
     for i, p in enumerate(world):
         header = rc.make_header(i * DT_NS, 'odom')
         graph.publish('/robot/camera', rc.root_to_odometry(t_wc, matrix_to_quat(R_wc), header,
@@ -267,20 +272,13 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
     1.5 cm; with no averaging it would move it by the noise."""
     from mocap_core import ros_conversions as rc
     from mocap_core import topics
-    from mocap_core.data.synth2d import look_at
 
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
                                   camera_pose_root=root, lookahead=10,
                                   fusion_static_position_time_constant_s=1e-6,
                                   fusion_measured_position_time_constant_s=1e-6)
     world = _poses(40)
-    t_wc = np.array([-2.0, 3.0, 1.4])
-    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T          # optical -> world
-    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
-    x = f / np.linalg.norm(f)
-    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
-    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
-    A, b = R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
+    t_wc, R_wc, t_wf, R_wf, A, b = _camera_and_its_floor()
     lag = np.array([-0.3, 0.0, -0.05])
     for i, p in enumerate(world):
         header = rc.make_header(i * DT_NS, 'odom')
@@ -363,16 +361,10 @@ def test_a_known_camera_pose_keeps_the_physics_floor_level(graph_node):
     height is the input's."""
     from mocap_core import ros_conversions as rc
     from mocap_core import topics
-    from mocap_core.data.synth2d import look_at
 
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor')
     world = _poses(30)
-    t_wc = np.array([-2.0, 3.0, 1.4])
-    R_wc = look_at(t_wc, np.array([1.0, 0.5, 0.9])).T
-    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
-    x = f / np.linalg.norm(f)
-    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
-    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
+    t_wc, R_wc, t_wf, R_wf, _, _ = _camera_and_its_floor()
     # the estimated floor frame: the true one tilted by 5 degrees about its x axis
     R_wf = R_wf @ axis_angle_to_matrix(np.array([np.radians(5.0), 0.0, 0.0]))
     A, b = R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
