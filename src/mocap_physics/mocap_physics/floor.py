@@ -243,6 +243,15 @@ def _regularised_plane(points: np.ndarray, weights: np.ndarray, prior: np.ndarra
     return n, float(-n @ c)
 
 
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    """The value below which a fraction ``q`` of the weight lies (the first sorted value whose
+    cumulative weight reaches it)."""
+    order = np.argsort(values)
+    cw = np.cumsum(weights[order])
+    k = min(int(np.searchsorted(cw, q * cw[-1])), len(values) - 1)
+    return float(values[order][k])
+
+
 def fit_floor_plane(points: np.ndarray, weights: Optional[np.ndarray] = None,
                     prior: np.ndarray = CAMERA_UP, prior_weight_m: float = 0.25,
                     inlier_threshold: float = 0.025, max_tilt_deg: float = 60.0,
@@ -324,11 +333,7 @@ def fit_floor_plane(points: np.ndarray, weights: Optional[np.ndarray] = None,
             break
         mask = new_mask
     # offset: weighted quantile of the inlier heights
-    h = p[mask] @ n
-    order = np.argsort(h)
-    cw = np.cumsum(w[mask][order])
-    k = min(int(np.searchsorted(cw, offset_quantile * cw[-1])), len(h) - 1)
-    off = -float(h[order][k])
+    off = -_weighted_quantile(p[mask] @ n, w[mask], offset_quantile)
     resid = p[mask] @ n + off
     d = p[mask] - p[mask].mean(axis=0)
     d = d - np.outer(d @ n, n)
@@ -363,9 +368,7 @@ def fit_floor_height(heights: np.ndarray, weights: Optional[np.ndarray] = None,
     if len(h) == 0:
         raise ValueError('no finite contact point to fit a floor height to')
     rng = np.random.default_rng(0) if rng is None else rng
-    order = np.argsort(h)
-    cw = np.cumsum(w[order])
-    cand = [h[order][min(int(np.searchsorted(cw, 0.5 * cw[-1])), len(h) - 1)]]
+    cand = [_weighted_quantile(h, w, 0.5)]
     cand += list(h[rng.integers(0, len(h), min(iterations, len(h)))])
     best, best_score = None, -1.0
     for c in cand:
@@ -373,11 +376,7 @@ def fit_floor_height(heights: np.ndarray, weights: Optional[np.ndarray] = None,
         score = float(w[mask].sum())
         if score > best_score:
             best, best_score = mask, score
-    hi, wi = h[best], w[best]
-    order = np.argsort(hi)
-    cw = np.cumsum(wi[order])
-    k = min(int(np.searchsorted(cw, offset_quantile * cw[-1])), len(hi) - 1)
-    return float(hi[order][k]), int(best.sum())
+    return _weighted_quantile(h[best], w[best], offset_quantile), int(best.sum())
 
 
 def body_up(pose: Pose) -> np.ndarray:

@@ -512,22 +512,19 @@ class PhysicsNode(Node):
 
     def _make_online(self, contacts_topic: str) -> OnlinePhysics:
         """A new per-person streaming state (its own floor estimate)."""
-        online = self._new_online(contacts_topic)
-        if self.known_poses is not None:
-            online.floor_gravity = bool(self.p['floor_from_camera_pose'])
-            if self.p['upright_from_camera_pose']:
-                online.upright = UprightPrior(UPRIGHT_WINDOW_FRAMES)
-        return online
-
-    def _new_online(self, contacts_topic: str) -> OnlinePhysics:
         p = self.p
-        return OnlinePhysics(
+        online = OnlinePhysics(
             self.params, self._floor_source(),
             frame_id=p['frame_id'] or (START_FLOOR_FRAME if self.derotate else ''),
             contacts_wait_s=p['contacts_wait_s'], contacts_max_age_s=p['contacts_max_age_s'],
             contacts_expected=((lambda: self.count_publishers(contacts_topic) > 0)
                                if contacts_topic else None),
             report=self._report, record_time=self.diag.latency.add)
+        if self.known_poses is not None:
+            online.floor_gravity = bool(p['floor_from_camera_pose'])
+            if p['upright_from_camera_pose']:
+                online.upright = UprightPrior(UPRIGHT_WINDOW_FRAMES)
+        return online
 
     def _floor_source(self) -> FloorSource:
         """The floor of ``floor_source`` (module docstring); raises ValueError."""
