@@ -23,7 +23,7 @@ root keypoint is held, then back-filled), so the root stays defined through shor
 
 from __future__ import annotations
 
-from typing import Tuple
+from typing import Dict, Tuple
 
 import numpy as np
 
@@ -70,13 +70,64 @@ def person_scale(relative: np.ndarray, seen: np.ndarray) -> np.ndarray:
     return scale[idx]
 
 
+def ray_rotations(root_2d: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) rotations of virtual cameras looking at the person, from the (T, 2)
+    canonical root keypoint (camera optical frame: x right, y down, z forward).
+
+    Each is the smallest rotation taking the optical axis (0, 0, 1) onto the root's ray
+    ``(x, y, 1) / |(x, y, 1)|`` (no roll about the ray): its third column is that ray and a
+    point ``p`` of the virtual camera's frame is ``R @ p`` in the real camera's."""
+    r = np.asarray(root_2d, dtype=np.float64)
+    d = np.concatenate([r, np.ones(r.shape[:-1] + (1,))], axis=-1)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    # Rodrigues with axis z x d: for a unit axis k and angle a, cos a = d_z, sin a = |z x d|
+    c = d[..., 2]
+    kx, ky = -d[..., 1], d[..., 0]                      # z x d = (-d_y, d_x, 0)
+    one_c = 1.0 / (1.0 + c)                             # (1 - cos a) / sin^2 a, c > -1
+    R = np.empty(r.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1.0 - one_c * ky * ky
+    R[..., 0, 1] = one_c * kx * ky
+    R[..., 0, 2] = d[..., 0]
+    R[..., 1, 0] = one_c * kx * ky
+    R[..., 1, 1] = 1.0 - one_c * kx * kx
+    R[..., 1, 2] = d[..., 1]
+    R[..., 2, 0] = -d[..., 0]
+    R[..., 2, 1] = -d[..., 1]
+    R[..., 2, 2] = c
+    return R
+
+
+def to_virtual_camera(canonical: np.ndarray, rotations: np.ndarray) -> np.ndarray:
+    """(..., T, K, 3) canonical keypoints (x, y, confidence) seen by the virtual cameras
+    ``rotations`` (..., T, 3, 3) of :func:`ray_rotations`: each point's ray ``(x, y, 1)`` is
+    expressed in the virtual camera's frame, ``R^T (x, y, 1)``, and projected again.
+    Confidences are kept, unseen points (confidence 0) stay (0, 0, 0)."""
+    kc = np.asarray(canonical, dtype=np.float64)
+    ray = np.concatenate([kc[..., :2], np.ones(kc.shape[:-1] + (1,))], axis=-1)
+    v = np.einsum('...ji,...kj->...ki', rotations, ray)  # R^T ray, per frame
+    out = np.zeros_like(kc)
+    seen = kc[..., 2] > 0
+    z = np.maximum(v[..., 2], 1e-6)
+    out[..., 0] = np.where(seen, v[..., 0] / z, 0.0)
+    out[..., 1] = np.where(seen, v[..., 1] / z, 0.0)
+    out[..., 2] = kc[..., 2]
+    return out
+
+
 def lifter_features(keypoints: np.ndarray, intr: CameraIntrinsics,
+                    virtual_camera: bool = False,
                     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Features of a keypoint window.
 
     Args:
         keypoints: (T, 23, 3) pixel u, v and confidence of one person.
         intr: the camera intrinsics of those pixels.
+        virtual_camera: take the keypoints as a camera looking at the person would see
+            them (:func:`ray_rotations`, :func:`to_virtual_camera`: the person's root is then
+            on the optical axis, at (0, 0), and the returned root keypoint is zero); the
+            root velocity stays the real camera's. The network's pose is then in that
+            virtual camera's frame: :func:`ray_rotations` of the real root keypoint
+            (:func:`root_keypoint` of the canonical keypoints) takes it back.
     Returns:
         features (T, 72) float32, root keypoint (T, 2) canonical, person scale (T,)
         canonical, root validity (T,) bool.
@@ -86,14 +137,67 @@ def lifter_features(keypoints: np.ndarray, intr: CameraIntrinsics,
         raise ValueError(f'keypoints must have shape (T, {NUM_KEYPOINTS}, 3), got {kp.shape}')
     kc = canonicalize(kp, intr)
     root, valid = root_keypoint(kc)
+    vel = np.zeros_like(root)
+    vel[1:] = root[1:] - root[:-1]
+    if virtual_camera:
+        kc = to_virtual_camera(kc, ray_rotations(root))
+        root = np.zeros_like(root)
     seen = kc[..., 2] > 0
     rel = np.where(seen[..., None], kc[..., :2] - root[:, None, :], 0.0)
     scale = person_scale(rel, seen)
-    vel = np.zeros_like(root)
-    vel[1:] = root[1:] - root[:-1]
     feats = np.concatenate([(rel / scale[:, None, None]).reshape(len(kp), -1), kc[..., 2],
                             vel / scale[:, None], np.log(scale)[:, None]], axis=1)
     return feats.astype(np.float32), root, scale, valid
+
+
+def virtual_camera_window(window: Dict[str, np.ndarray]) -> Dict[str, np.ndarray]:
+    """A training window (features in the real camera, :func:`lifter_features`) as the
+    virtual cameras looking at the person see it: the features of
+    ``lifter_features(..., virtual_camera=True)`` and the targets turned into those cameras'
+    frames.
+
+    ``window`` holds ``features`` (..., T, 72), ``root_2d`` (..., T, 2) and ``scale``
+    (..., T) and, when present, the camera-frame targets ``positions`` (..., T, J, 3),
+    ``root`` (..., T, 3) and ``rotations`` (..., T, J, 4) (x, y, z, w; row 0 the root's
+    orientation in the camera frame; the other rows are local and stay). Other entries are
+    copied. Returns a new dict; ``root_2d`` becomes zero, as the network sees it then."""
+    n = NUM_KEYPOINTS
+    f = np.asarray(window['features'], dtype=np.float64)
+    root = np.asarray(window['root_2d'], dtype=np.float64)
+    scale = np.asarray(window['scale'], dtype=np.float64)
+    rel = f[..., :2 * n].reshape(f.shape[:-1] + (n, 2)) * scale[..., None, None]
+    conf = f[..., 2 * n:3 * n]
+    seen = conf > 0
+    kc = np.concatenate([np.where(seen[..., None], rel + root[..., None, :], 0.0),
+                         conf[..., None]], axis=-1)
+    R = ray_rotations(root)
+    kv = to_virtual_camera(kc, R)
+    lead = f.shape[:-2]
+    rel_v = kv[..., :2].reshape((-1,) + kv.shape[-3:-1] + (2,))
+    s_v = np.stack([person_scale(r, m) for r, m in
+                    zip(rel_v, seen.reshape((-1,) + seen.shape[-2:]))]).reshape(scale.shape)
+    out = dict(window)
+    dtype = np.asarray(window['features']).dtype
+    feats = f.copy()
+    feats[..., :2 * n] = (kv[..., :2] / s_v[..., None, None]).reshape(lead + (-1, 2 * n))
+    feats[..., 3 * n + 2] = np.log(s_v)
+    out['features'] = feats.astype(dtype)
+    out['root_2d'] = np.zeros_like(np.asarray(window['root_2d']))
+    out['scale'] = s_v.astype(np.asarray(window['scale']).dtype)
+    Rt = np.swapaxes(R, -1, -2)
+    if 'positions' in window:
+        pos = np.asarray(window['positions'], dtype=np.float64)
+        out['positions'] = np.einsum('...ij,...kj->...ki', Rt, pos).astype(
+            np.asarray(window['positions']).dtype)
+    if 'root' in window:
+        out['root'] = np.einsum('...ij,...j->...i', Rt, np.asarray(
+            window['root'], dtype=np.float64)).astype(np.asarray(window['root']).dtype)
+    if 'rotations' in window:
+        from mocap_core.rotations import matrix_to_quat, quat_to_matrix
+        rot = np.array(window['rotations'], dtype=np.float64)
+        rot[..., 0, :] = matrix_to_quat(Rt @ np.asarray(quat_to_matrix(rot[..., 0, :])))
+        out['rotations'] = rot.astype(np.asarray(window['rotations']).dtype)
+    return out
 
 
 def mirror_features(features: np.ndarray, root_2d: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:

@@ -51,6 +51,9 @@ class LifterConfig:
     depth_prior: float = 0.5    # metres: typical RMS keypoint distance from the pelvis;
     #                             depth = exp(d) / s with d starting at log(depth_prior)
     bone_range: float = 0.35    # bone length = default * (1 + bone_range * tanh(.))
+    #: trained in the virtual camera that looks at the person (features.lifter_features with
+    #: virtual_camera, features.virtual_camera_window): its input and output must be too
+    virtual_camera: bool = False
 
     def receptive_field(self) -> int:
         """Frames that influence one output frame."""

@@ -113,6 +113,11 @@ PARAMETERS = (
               'rendered video a known stature takes the median MPJPE from 75 to 64 mm, '
               'docs/lifter.md). One value for every person in the picture', min_value=0.0,
               max_value=3.0, read_only=True),
+    ParamSpec('virtual_camera', False, 'MotioNet: lift the keypoints as a camera turned to '
+              'look at the person would see them, then turn the pose back (a person away '
+              'from the image centre is seen along an oblique ray, which the network\'s '
+              'root-relative input does not show; docs/lifter.md, "The person\'s ray")',
+              read_only=True),
     ParamSpec('network_rate_hz', 30.0, 'The frame rate the network reads its input at (the '
               'shipped weights: 30): keypoint frames missing from the stream (dropped by a '
               'busy keypoint node, a slower camera) are filled in by interpolation before '
@@ -190,7 +195,8 @@ class LifterNode(Node):
                                 smooth=p['smooth_sigma'], output_sigma=output_sigma,
                                 output_root_sigma=root_sigma,
                                 subject_height=p['subject_height'],
-                                network_rate_hz=p['network_rate_hz'])
+                                network_rate_hz=p['network_rate_hz'],
+                                virtual_camera=p['virtual_camera'])
 
         lifter = make_lifter()
         self.people = PeopleStreams(make_lifter, StreamIntrinsics(p['horizontal_fov_deg']),

@@ -65,13 +65,14 @@ import torch
 
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.camera_motion import person_boxes
+from mocap_core.keypoint_geometry import canonicalize
 from mocap_core.pose import Pose
-from mocap_core.rotations import quat_slerp
+from mocap_core.rotations import matrix_to_quat, quat_slerp, quat_to_matrix
 from mocap_core.skeleton import NUM_JOINTS, NUM_KEYPOINTS, Skeleton
 from mocap_core.streams import StampOrder
 
 from .features import (average_quaternions, lifter_features, mirror_features,
-                       smooth_keypoints, unmirror_rotations)
+                       ray_rotations, root_keypoint, smooth_keypoints, unmirror_rotations)
 from .intrinsics import StreamIntrinsics
 from .model import NUM_CONTACTS, MotioNet
 from .output_smoothing import FrameSmoother
@@ -135,6 +136,11 @@ class OnlineLifter:
             root position by the same factor along its camera ray, so the image projection
             is unchanged: a person of the same image size who is taller stands further
             away (docs/lifter.md, "What the keypoints cannot tell").
+        virtual_camera: MotioNet: lift the keypoints as a camera turned to look at the
+            person would see them (:func:`~mocap_lifter.features.lifter_features`), and turn
+            the pose back into the real camera's frame: a person away from the image centre
+            is seen along an oblique ray, which the network's root-relative input does not
+            show (docs/lifter.md, "The person's ray").
     """
 
     def __init__(self, model: MotioNet, mode: str = 'causal', latency: Optional[int] = None,
@@ -142,7 +148,8 @@ class OnlineLifter:
                  device: str = 'cpu', chunk: int = 1, flip: bool = False,
                  smooth: float = 0.0, streaming: bool = True,
                  output_sigma: float = 0.0, output_root_sigma: Optional[float] = None,
-                 subject_height: float = 0.0, network_rate_hz: float = 0.0) -> None:
+                 subject_height: float = 0.0, network_rate_hz: float = 0.0,
+                 virtual_camera: bool = False) -> None:
         if mode not in ('causal', 'windowed'):
             raise ValueError("mode must be 'causal' or 'windowed'")
         if (mode == 'causal') != bool(model.cfg.causal):
@@ -176,6 +183,14 @@ class OnlineLifter:
             raise ValueError(f'subject_height must be 0 (estimate) or a stature of 0.5-3 m, '
                              f'got {subject_height}')
         self.subject_height = float(subject_height)
+        if virtual_camera and getattr(model, 'lift_frames', None) is not None:
+            raise ValueError('virtual_camera is a MotioNet option (VTM lifts in the real '
+                             "camera's frame)")
+        # weights trained in the virtual camera need it
+        self.virtual_camera = bool(virtual_camera) or bool(
+            getattr(getattr(model, 'cfg', None), 'virtual_camera', False))
+        #: (T, 3, 3) the buffer's virtual cameras (virtual_camera; set with the features)
+        self._rays: Optional[np.ndarray] = None
         if not np.isfinite(network_rate_hz) or network_rate_hz < 0:
             raise ValueError(f'network_rate_hz must be >= 0, got {network_rate_hz}')
         self.period_ns = int(round(1e9 / network_rate_hz)) if network_rate_hz > 0 else 0
@@ -424,7 +439,6 @@ class OnlineLifter:
         rot = out['rotations'][0].cpu().numpy().astype(np.float64)
         root = out['root'][0].cpu().numpy().astype(np.float64)
         contacts = torch.sigmoid(out['contacts'][0]).cpu().numpy().astype(np.float64)
-        depth = out['depth'][0].cpu().numpy()
         if self.flip and lift_frames is None:
             rot = average_quaternions(rot, unmirror_rotations(
                 out['rotations'][1].cpu().numpy().astype(np.float64)))
@@ -432,7 +446,6 @@ class OnlineLifter:
             root = 0.5 * (root + root_m)
             contacts = 0.5 * (contacts + torch.sigmoid(out['contacts'][1]).cpu().numpy()
                               .astype(np.float64)[:, [2, 3, 0, 1]])
-            depth = 0.5 * (depth + out['depth'][1].cpu().numpy())
         stamps = list(self._stamps)
         frames = []
         for i, k, (lengths_i, fixed_i) in zip(indices, rows, per_frame):
@@ -441,9 +454,23 @@ class OnlineLifter:
                 skeletons[key] = self._sized(lengths_i)
             skeleton, size = skeletons[key]
             self._last_emitted = stamps[i]
-            frames.append(LiftedFrame(stamps[i], Pose(skeleton, rot[k], size * root[k]),
-                                      contacts[k], fixed_i, float(size * depth[k])))
+            rot_k, root_k = self._to_camera(i, rot[k], root[k])
+            frames.append(LiftedFrame(stamps[i], Pose(skeleton, rot_k, size * root_k),
+                                      contacts[k], fixed_i, float(size * root_k[2])))
         return frames
+
+    def _to_camera(self, index: int, rotations: np.ndarray, root: np.ndarray
+                   ) -> Tuple[np.ndarray, np.ndarray]:
+        """(J, 4) rotations and (3,) root of the buffer's frame ``index`` in the real
+        camera's optical frame: with ``virtual_camera`` the network's pose is in the frame of
+        a camera looking at the person (:func:`~mocap_lifter.features.ray_rotations`) and is
+        turned back with it; else unchanged."""
+        if not self.virtual_camera or self._rays is None:
+            return rotations, root
+        R = self._rays[index]
+        out = np.array(rotations, copy=True)
+        out[0] = matrix_to_quat(R @ quat_to_matrix(out[0]))
+        return out, R @ root
 
     def _emit_streamed(self, index: int, y: np.ndarray, root_2d: np.ndarray,
                        scale: np.ndarray) -> List[LiftedFrame]:
@@ -465,12 +492,11 @@ class OnlineLifter:
         depth = np.exp(np.clip(y[:, nj * 4], -5.0, 5.0)) / np.maximum(scale, 1e-4)
         root = np.concatenate([root_2d * depth[:, None], depth[:, None]], axis=1)
         contacts = 1.0 / (1.0 + np.exp(-y[:, nj * 4 + 1:nj * 4 + 1 + NUM_CONTACTS]))
-        rot, rt, ct, dp = q[0], root[0], contacts[0], depth[0]
+        rot, rt, ct = q[0], root[0], contacts[0]
         if self.flip:
             rot = average_quaternions(rot, unmirror_rotations(q[1]))
             rt = 0.5 * (rt + root[1] * [-1.0, 1.0, 1.0])
             ct = 0.5 * (ct + contacts[1][[2, 3, 0, 1]])
-            dp = 0.5 * (dp + depth[1])
         stamp = self._stamps[index]
         self._last_emitted = stamp
         cached = self._held_skeleton
@@ -480,7 +506,8 @@ class OnlineLifter:
             skeleton, size = self._sized(lengths)
             if fixed:
                 self._held_skeleton = (lengths, skeleton, size)
-        return [LiftedFrame(stamp, Pose(skeleton, rot, size * rt), ct, fixed, float(size * dp))]
+        rot, rt = self._to_camera(index, rot, rt)
+        return [LiftedFrame(stamp, Pose(skeleton, rot, size * rt), ct, fixed, float(size * rt[2]))]
 
     def _sized(self, lengths: torch.Tensor) -> Tuple[Skeleton, float]:
         """The skeleton of (1, G) estimated bone-group lengths, and the factor its root
@@ -497,7 +524,9 @@ class OnlineLifter:
         kp = np.stack(self._kp)
         if self.smooth > 0:
             kp = smooth_keypoints(kp, self.smooth)
-        feats, root_2d, scale, _ = lifter_features(kp, self._intr)
+        feats, root_2d, scale, _ = lifter_features(kp, self._intr, self.virtual_camera)
+        if self.virtual_camera:
+            self._rays = ray_rotations(root_keypoint(canonicalize(kp, self._intr))[0])
         return feats, root_2d, scale
 
     def _features(self):

@@ -47,7 +47,15 @@ def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.n
     (:mod:`mocap_lifter.output_smoothing`, sigma in frames), applied here to the positions
     and ``output_root_sigma`` (None: ``output_sigma``) to the root (the node smooths the
     rotations and the root; the two agree to the millimetre for the few degrees neighbouring
-    frames differ by)."""
+    frames differ by). Weights trained in the virtual camera (``model.cfg.virtual_camera``)
+    get the virtual camera's features (:func:`~mocap_lifter.features.virtual_camera_window`)
+    and their outputs are turned back into the real camera's frame."""
+    rays = None
+    if getattr(model.cfg, 'virtual_camera', False):
+        from ..features import ray_rotations, virtual_camera_window
+        rays = ray_rotations(root_2d)
+        w = virtual_camera_window({'features': features, 'root_2d': root_2d, 'scale': scale})
+        features, root_2d, scale = w['features'], w['root_2d'], w['scale']
     def run(f, r):
         out = model(torch.as_tensor(f[None], device=device),
                     torch.as_tensor(r[None], device=device),
@@ -65,6 +73,13 @@ def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.n
         res['positions'] = 0.5 * (res['positions'] + pos)
         res['root'] = 0.5 * (res['root'] + root)
         res['contacts'] = 0.5 * (res['contacts'] + m['contacts'][:, [2, 3, 0, 1]])
+    if rays is not None:
+        from mocap_core.rotations import matrix_to_quat, quat_to_matrix
+        res['positions'] = np.einsum('tij,tkj->tki', rays, res['positions'])
+        res['root'] = np.einsum('tij,tj->ti', rays, res['root'])
+        rot = np.array(res['rotations'], dtype=np.float64)
+        rot[:, 0] = matrix_to_quat(rays @ np.asarray(quat_to_matrix(rot[:, 0])))
+        res['rotations'] = rot.astype(res['rotations'].dtype)
     root_sigma = output_sigma if output_root_sigma is None else output_root_sigma
     from ..output_smoothing import smooth_along_time
     if output_sigma > 0:

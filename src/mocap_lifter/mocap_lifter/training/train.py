@@ -38,7 +38,7 @@ from mocap_core.data.motion import Motion
 from mocap_core.data.synth2d import CameraSampling
 from mocap_core.skeleton import END_EFFECTORS, JOINT_INDEX, NUM_JOINTS
 
-from ..features import NUM_FEATURES
+from ..features import NUM_FEATURES, virtual_camera_window
 from ..model import LifterConfig, MotioNet, RotationDiscriminator
 from ..weights import load_weights, plain_data, save_weights
 from .common import cosine_lr, plot_log, to_torch
@@ -252,6 +252,10 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     rendered_val = None
     if cfg.rendered_fraction > 0:
         sampler, rendered_val = _with_renders(sampler, cfg)
+    if cfg.model.virtual_camera:
+        val_batches = [virtual_camera_window(b) for b in val_batches]
+        if rendered_val is not None:
+            rendered_val = [virtual_camera_window(b) for b in rendered_val]
 
     model = MotioNet(cfg.model).to(device)
     disc = RotationDiscriminator().to(device) if cfg.w_adversarial > 0 else None
@@ -277,7 +281,8 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
             sampler.rng = np.random.default_rng(cfg.seed + step)
     elif cfg.init:
         init = load_weights(Path(cfg.init), device, causal=cfg.model.causal)
-        if asdict(init.cfg) != asdict(model.cfg):
+        # the same network; the frame of its input may change (virtual_camera)
+        if _network_shape(init.cfg) != _network_shape(model.cfg):
             raise ValueError(f'--init weights {cfg.init} have another network configuration: '
                              f'{asdict(init.cfg)} vs {asdict(model.cfg)}')
         model.load_state_dict(init.state_dict())
@@ -304,7 +309,10 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
         model.train(not cfg.train_reset_only)   # frozen: batch norm and dropout as at init
         for m in frozen:
             m.eval()
-        gt = to_torch(sampler.batch(cfg.batch), device)
+        batch = sampler.batch(cfg.batch)
+        if cfg.model.virtual_camera:
+            batch = virtual_camera_window(batch)
+        gt = to_torch(batch, device)
         out = model(gt['features'], gt['root_2d'], gt['scale'])
         terms = losses(out, gt, cfg, disc)
         loss = total_loss(terms, cfg)
@@ -341,6 +349,13 @@ def train(train_motions: Sequence[Motion], val_motions: Sequence[Motion], run_di
     weights = run_dir / 'lifter.pt'
     save_weights(model, weights, {'steps': step, 'train_seconds': time.time() - t0})
     return weights
+
+
+def _network_shape(cfg: LifterConfig) -> Dict:
+    """The configuration without what leaves the network's layers as they are."""
+    d = asdict(cfg)
+    d.pop('virtual_camera', None)
+    return d
 
 
 def camera_sampling(name: str) -> CameraSampling:
