@@ -44,7 +44,7 @@ def add_signatures_parser(sub) -> None:
 def cmd_eval_signatures(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from .online import OnlineLifter
+    from .online import DEFAULT_VIRTUAL_CAMERA, OnlineLifter
     from .output_smoothing import DEFAULT_OUTPUT_ROOT_SIGMA, DEFAULT_OUTPUT_SIGMA
     from .signatures import clip_signatures, summarise
     from .weights import default_weights, load_weights
@@ -63,7 +63,8 @@ def cmd_eval_signatures(args: argparse.Namespace) -> int:
     def make_lifter() -> OnlineLifter:      # the node's defaults (mocap_lifter.node)
         return OnlineLifter(model, 'windowed', None, 90, 1.0, 'cpu', flip=True,
                             output_sigma=DEFAULT_OUTPUT_SIGMA,
-                            output_root_sigma=DEFAULT_OUTPUT_ROOT_SIGMA)
+                            output_root_sigma=DEFAULT_OUTPUT_ROOT_SIGMA,
+                            virtual_camera=DEFAULT_VIRTUAL_CAMERA)
 
     got = []
     for clip in tqdm(clips, desc='mocap eval signatures', unit='clip', disable=args.quiet):

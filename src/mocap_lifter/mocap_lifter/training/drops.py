@@ -70,12 +70,13 @@ def lift_stamped(model, kp: np.ndarray, intr, stamps: Sequence[int], network_rat
                  ) -> Tuple[np.ndarray, object]:
     """The node's lifter (windowed defaults) frame by frame on keypoints (K, 23, 3) stamped
     ``stamps`` (ns): ((K, 18, 3) joints of those frames, the lifter)."""
-    from ..online import OnlineLifter
+    from ..online import DEFAULT_VIRTUAL_CAMERA, OnlineLifter
     from ..output_smoothing import DEFAULT_OUTPUT_ROOT_SIGMA, DEFAULT_OUTPUT_SIGMA
 
     lifter = OnlineLifter(model, 'windowed', flip=True, output_sigma=DEFAULT_OUTPUT_SIGMA,
                           output_root_sigma=DEFAULT_OUTPUT_ROOT_SIGMA,
-                          network_rate_hz=network_rate_hz)
+                          network_rate_hz=network_rate_hz,
+                          virtual_camera=DEFAULT_VIRTUAL_CAMERA)
     frames = []
     for stamp, k in zip(stamps, kp):
         frames += lifter.push(int(stamp), k, intr)[0]
