@@ -23,7 +23,7 @@ root keypoint is held, then back-filled), so the root stays defined through shor
 
 from __future__ import annotations
 
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 
@@ -103,13 +103,16 @@ def to_virtual_camera(canonical: np.ndarray, rotations: np.ndarray) -> np.ndarra
     expressed in the virtual camera's frame, ``R^T (x, y, 1)``, and projected again.
     Confidences are kept, unseen points (confidence 0) stay (0, 0, 0)."""
     kc = np.asarray(canonical, dtype=np.float64)
-    ray = np.concatenate([kc[..., :2], np.ones(kc.shape[:-1] + (1,))], axis=-1)
-    v = np.einsum('...ji,...kj->...ki', rotations, ray)  # R^T ray, per frame
-    out = np.zeros_like(kc)
+    R = np.asarray(rotations, dtype=np.float64)[..., None, :, :]   # per point of the frame
+    x, y = kc[..., 0], kc[..., 1]
+    # R^T (x, y, 1), written out (a batched 3x3 product is slower in NumPy)
+    vx = x * R[..., 0, 0] + y * R[..., 1, 0] + R[..., 2, 0]
+    vy = x * R[..., 0, 1] + y * R[..., 1, 1] + R[..., 2, 1]
+    vz = np.maximum(x * R[..., 0, 2] + y * R[..., 1, 2] + R[..., 2, 2], 1e-6)
     seen = kc[..., 2] > 0
-    z = np.maximum(v[..., 2], 1e-6)
-    out[..., 0] = np.where(seen, v[..., 0] / z, 0.0)
-    out[..., 1] = np.where(seen, v[..., 1] / z, 0.0)
+    out = np.empty_like(kc)
+    out[..., 0] = np.where(seen, vx / vz, 0.0)
+    out[..., 1] = np.where(seen, vy / vz, 0.0)
     out[..., 2] = kc[..., 2]
     return out
 
@@ -126,12 +129,21 @@ def lifter_features(keypoints: np.ndarray, intr: CameraIntrinsics,
             them (:func:`ray_rotations`, :func:`to_virtual_camera`: the person's root is then
             on the optical axis, at (0, 0), and the returned root keypoint is zero); the
             root velocity stays the real camera's. The network's pose is then in that
-            virtual camera's frame: :func:`ray_rotations` of the real root keypoint
-            (:func:`root_keypoint` of the canonical keypoints) takes it back.
+            virtual camera's frame, which :func:`lifter_features_and_rays` returns.
     Returns:
         features (T, 72) float32, root keypoint (T, 2) canonical, person scale (T,)
         canonical, root validity (T,) bool.
     """
+    return lifter_features_and_rays(keypoints, intr, virtual_camera)[:4]
+
+
+def lifter_features_and_rays(keypoints: np.ndarray, intr: CameraIntrinsics,
+                             virtual_camera: bool = False,
+                             ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                        Optional[np.ndarray]]:
+    """:func:`lifter_features` and, with ``virtual_camera``, the (T, 3, 3) rotations of the
+    virtual cameras (:func:`ray_rotations`; a point of a virtual camera's frame is ``R @ p``
+    in the real camera's), else None."""
     kp = np.asarray(keypoints, dtype=np.float64)
     if kp.ndim != 3 or kp.shape[1:] != (NUM_KEYPOINTS, 3):
         raise ValueError(f'keypoints must have shape (T, {NUM_KEYPOINTS}, 3), got {kp.shape}')
@@ -139,15 +151,17 @@ def lifter_features(keypoints: np.ndarray, intr: CameraIntrinsics,
     root, valid = root_keypoint(kc)
     vel = np.zeros_like(root)
     vel[1:] = root[1:] - root[:-1]
+    rays = None
     if virtual_camera:
-        kc = to_virtual_camera(kc, ray_rotations(root))
+        rays = ray_rotations(root)
+        kc = to_virtual_camera(kc, rays)
         root = np.zeros_like(root)
     seen = kc[..., 2] > 0
     rel = np.where(seen[..., None], kc[..., :2] - root[:, None, :], 0.0)
     scale = person_scale(rel, seen)
     feats = np.concatenate([(rel / scale[:, None, None]).reshape(len(kp), -1), kc[..., 2],
                             vel / scale[:, None], np.log(scale)[:, None]], axis=1)
-    return feats.astype(np.float32), root, scale, valid
+    return feats.astype(np.float32), root, scale, valid, rays
 
 
 def virtual_camera_window(window: Dict[str, np.ndarray]) -> Dict[str, np.ndarray]:

@@ -65,14 +65,13 @@ import torch
 
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.camera_motion import person_boxes
-from mocap_core.keypoint_geometry import canonicalize
 from mocap_core.pose import Pose
-from mocap_core.rotations import matrix_to_quat, quat_slerp, quat_to_matrix
+from mocap_core.rotations import quat_multiply, quat_slerp
 from mocap_core.skeleton import NUM_JOINTS, NUM_KEYPOINTS, Skeleton
 from mocap_core.streams import StampOrder
 
-from .features import (average_quaternions, lifter_features, mirror_features,
-                       ray_rotations, root_keypoint, smooth_keypoints, unmirror_rotations)
+from .features import (average_quaternions, lifter_features_and_rays, mirror_features,
+                       smooth_keypoints, unmirror_rotations)
 from .intrinsics import StreamIntrinsics
 from .model import NUM_CONTACTS, MotioNet
 from .output_smoothing import FrameSmoother
@@ -468,8 +467,10 @@ class OnlineLifter:
         if not self.virtual_camera or self._rays is None:
             return rotations, root
         R = self._rays[index]
+        d = R[:, 2]                      # the ray; the turn from (0, 0, 1) onto it, x y z w
+        turn = np.array([-d[1], d[0], 0.0, 1.0 + d[2]])
         out = np.array(rotations, copy=True)
-        out[0] = matrix_to_quat(R @ quat_to_matrix(out[0]))
+        out[0] = quat_multiply(turn / np.linalg.norm(turn), out[0])
         return out, R @ root
 
     def _emit_streamed(self, index: int, y: np.ndarray, root_2d: np.ndarray,
@@ -524,9 +525,8 @@ class OnlineLifter:
         kp = np.stack(self._kp)
         if self.smooth > 0:
             kp = smooth_keypoints(kp, self.smooth)
-        feats, root_2d, scale, _ = lifter_features(kp, self._intr, self.virtual_camera)
-        if self.virtual_camera:
-            self._rays = ray_rotations(root_keypoint(canonicalize(kp, self._intr))[0])
+        feats, root_2d, scale, _, self._rays = lifter_features_and_rays(
+            kp, self._intr, self.virtual_camera)
         return feats, root_2d, scale
 
     def _features(self):
