@@ -168,6 +168,10 @@ def add_eval_parser(sub) -> None:
                    help='Gaussian smoothing of the lifted root along time (frames; the node '
                    'parameter output_root_sigma, 3 in windowed mode by default; default: '
                    '--output-sigma)')
+    p.add_argument('--virtual-camera', action='store_true',
+                   help='lift as a camera turned to look at the person sees them and turn '
+                   'the pose back (the node parameter virtual_camera, on by default there; '
+                   'weights trained in the virtual camera use it always)')
     p.add_argument('--rendered', nargs='?', const='', default=None, metavar='DIR',
                    help='also lift the rendered validation clips (mocap data render; default '
                    'folder ~/.cache/mocap/render) from the detector, from clean projections '
@@ -300,7 +304,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     t0 = time.time()
     results = [evaluate(model, val, n, args.device, placement=pl, families=families,
                         flip=args.flip, smooth=args.smooth, output_sigma=args.output_sigma,
-                        output_root_sigma=args.output_root_sigma)
+                        output_root_sigma=args.output_root_sigma,
+                        virtual_camera=args.virtual_camera)
                for pl in placements for n in noises]
     seconds = time.time() - t0
     baseline = {n: baseline_mean_pose(train_for_baseline, val, n) for n in noises}
@@ -312,7 +317,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         real = evaluate_real(model, [Path(d) for d in real_dirs], device=args.device,
                              flip=args.flip, smooth=args.smooth,
                              output_sigma=args.output_sigma,
-                             output_root_sigma=args.output_root_sigma)
+                             output_root_sigma=args.output_root_sigma,
+                             virtual_camera=args.virtual_camera)
         real['groundtruth'] = groundtruth_plausibility(val)
         s = real['summary']
         print(f"real OpenPose ({real['sequences']} sequences, {real['frames']} frames): jitter "
@@ -322,6 +328,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"{real['groundtruth']['skating_mm']:.1f})")
     extra = {'baseline_mean_pose': baseline, 'weights': str(weights),
              'eval_seconds': round(seconds, 1), 'flip': args.flip, 'smooth': args.smooth,
+             'virtual_camera': args.virtual_camera,
              'output_sigma': args.output_sigma, 'output_root_sigma': args.output_root_sigma}
     if args.rendered is not None:
         from mocap_core.render.batch import DEFAULT_OUT
@@ -345,7 +352,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
             r = evaluate_rendered(model, dirs, inputs, args.device, flip=args.flip,
                                   smooth=args.smooth, placement=placed,
                                   output_sigma=args.output_sigma,
-                                  output_root_sigma=args.output_root_sigma)
+                                  output_root_sigma=args.output_root_sigma,
+                                  virtual_camera=args.virtual_camera)
             rendered[inputs] = {k: r[k] for k in ('clips', 'frames', 'summary')}
             s = r['summary']
             print(f"rendered ({inputs:9s}, {r['clips']} clips): MPJPE {s['mpjpe_mm']:.1f} mm "

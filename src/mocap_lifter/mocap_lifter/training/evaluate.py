@@ -39,7 +39,8 @@ def _clip_seed(name: str) -> int:
 @torch.no_grad()
 def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.ndarray,
          device: str = 'cpu', flip: bool = False, output_sigma: float = 0.0,
-         output_root_sigma: Optional[float] = None) -> Dict[str, np.ndarray]:
+         output_root_sigma: Optional[float] = None,
+         virtual_camera: bool = False) -> Dict[str, np.ndarray]:
     """Run the model on one (T, C) feature sequence -> numpy outputs without the batch axis
     (contacts as probabilities). ``flip``: test-time flip augmentation: the mirrored input is
     lifted too and its positions, root and contacts, mirrored back, averaged in (rotations
@@ -47,11 +48,12 @@ def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.n
     (:mod:`mocap_lifter.output_smoothing`, sigma in frames), applied here to the positions
     and ``output_root_sigma`` (None: ``output_sigma``) to the root (the node smooths the
     rotations and the root; the two agree to the millimetre for the few degrees neighbouring
-    frames differ by). Weights trained in the virtual camera (``model.cfg.virtual_camera``)
-    get the virtual camera's features (:func:`~mocap_lifter.features.virtual_camera_window`)
-    and their outputs are turned back into the real camera's frame."""
+    frames differ by). ``virtual_camera`` (the node's parameter), and always for weights
+    trained in it (``model.cfg.virtual_camera``): the virtual camera's features
+    (:func:`~mocap_lifter.features.virtual_camera_window`), the outputs turned back into the
+    real camera's frame."""
     rays = None
-    if getattr(model.cfg, 'virtual_camera', False):
+    if virtual_camera or getattr(model.cfg, 'virtual_camera', False):
         from ..features import ray_rotations, virtual_camera_window
         rays = ray_rotations(root_2d)
         w = virtual_camera_window({'features': features, 'root_2d': root_2d, 'scale': scale})
@@ -93,7 +95,8 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
              device: str = 'cpu', max_frames: int = 900, placement=None,
              families: Optional[Sequence[str]] = None, flip: bool = False,
              smooth: float = 0.0, output_sigma: float = 0.0,
-             output_root_sigma: Optional[float] = None) -> Dict:
+             output_root_sigma: Optional[float] = None,
+             virtual_camera: bool = False) -> Dict:
     """Metrics over validation clips (frame-weighted means); per-clip rows included.
 
     ``placement``: a ``DetectorPlacement`` puts the keypoints where the real detector puts them
@@ -111,6 +114,7 @@ def evaluate(model: MotioNet, motions: Sequence[Motion], noise: str = 'none',
         rng = np.random.default_rng(_clip_seed(m.name))
         s = make_sample(m, 0, n, rng, aug)
         out = lift(model, s['features'], s['root_2d'], s['scale'], device, flip=flip,
+                   virtual_camera=virtual_camera,
                    output_sigma=output_sigma, output_root_sigma=output_root_sigma)
         p, g = out['positions'], s['positions']
         rows.append({
@@ -228,7 +232,8 @@ def _largest_person(people: np.ndarray) -> np.ndarray:
 def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.0,
                   fov: float = 60.0, device: str = 'cpu', flip: bool = False,
                   smooth: float = 0.0, output_sigma: float = 0.0,
-                  output_root_sigma: Optional[float] = None) -> Dict:
+                  output_root_sigma: Optional[float] = None,
+                  virtual_camera: bool = False) -> Dict:
     """Lift OpenPose JSON folders (one sequence each; the most confident person per frame;
     intrinsics from ``fov`` over the inferred image size, as ``mocap data from-openpose``)
     and measure jitter (mm/s^2), foot skating (mm per frame, camera frame, during predicted
@@ -255,7 +260,7 @@ def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.
         w, h = infer_image_size(files)
         feats, root_2d, scale, _ = lifter_features(kp, CameraIntrinsics.from_fov(w, h, fov))
         out = lift(model, feats, root_2d.astype(np.float32), scale.astype(np.float32), device,
-                   flip=flip, output_sigma=output_sigma,
+                   flip=flip, output_sigma=output_sigma, virtual_camera=virtual_camera,
                    output_root_sigma=output_root_sigma)
         p = out['positions']
         rows.append({'sequence': Path(d).name, 'frames': len(kp),
@@ -273,7 +278,8 @@ def evaluate_real(model: MotioNet, directories: Sequence[Path], fps: float = 30.
 def evaluate_rendered(model: MotioNet, clip_dirs: Sequence[Path], inputs: str = 'detector',
                       device: str = 'cpu', flip: bool = False, smooth: float = 0.0,
                       placement=None, output_sigma: float = 0.0,
-                      output_root_sigma: Optional[float] = None) -> Dict:
+                      output_root_sigma: Optional[float] = None,
+                      virtual_camera: bool = False) -> Dict:
     """The lifter alone on rendered clips (``mocap data render``), against their exact joints
     (camera frame), from one of three inputs of the same frames and cameras:
 
@@ -317,7 +323,7 @@ def evaluate_rendered(model: MotioNet, clip_dirs: Sequence[Path], inputs: str = 
             kp = smooth_keypoints(kp, smooth)
         feats, root_2d, scale, _ = lifter_features(kp, intr)
         out = lift(model, feats, root_2d.astype(np.float32), scale.astype(np.float32), device,
-                   flip=flip, output_sigma=output_sigma,
+                   flip=flip, output_sigma=output_sigma, virtual_camera=virtual_camera,
                    output_root_sigma=output_root_sigma)
         p, g = out['positions'], a['joints_camera']
         rows.append({'clip': meta['clip'], 'frames': len(p), 'mpjpe_mm': M.mpjpe_mm(p, g),
