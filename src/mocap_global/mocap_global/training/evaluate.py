@@ -379,11 +379,14 @@ def _rigid_align(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
 
 
 def lifter_poses(keypoints: np.ndarray, intrinsics) -> Optional[tuple]:
-    """The shipped MotioNet lifter (windowed) on a keypoint sequence, one pass: (rotations
-    (T, J, 4) with the root in the camera frame, root positions (T, 3), bone-group lengths
-    (10,)), or None when the lifter or its weights are not installed."""
+    """The shipped MotioNet lifter (windowed) on a keypoint sequence, one pass, with the
+    node's virtual camera (``virtual_camera``): (rotations (T, J, 4) with the root in the
+    camera frame, root positions (T, 3), bone-group lengths (10,)), or None when the lifter
+    or its weights are not installed."""
     try:
         from mocap_lifter.features import lifter_features
+        from mocap_lifter.online import DEFAULT_VIRTUAL_CAMERA
+        from mocap_lifter.training.evaluate import lift
         from mocap_lifter.weights import default_weights
         from mocap_lifter.weights import load_weights as load_lifter
     except ImportError:
@@ -393,11 +396,10 @@ def lifter_poses(keypoints: np.ndarray, intrinsics) -> Optional[tuple]:
         return None
     lifter = load_lifter(path)
     feats, root, scale, _ = lifter_features(keypoints, intrinsics)
-    with torch.no_grad():
-        out = lifter(torch.as_tensor(feats[None]), torch.as_tensor(root[None]).float(),
-                     torch.as_tensor(scale[None]).float())
-    return (out['rotations'][0].double().numpy(), out['root'][0].double().numpy(),
-            out['lengths'][0].double().numpy())
+    out = lift(lifter, feats, root.astype(np.float32), scale.astype(np.float32),
+               virtual_camera=DEFAULT_VIRTUAL_CAMERA)
+    return (out['rotations'].astype(np.float64), out['root'].astype(np.float64),
+            out['lengths'].astype(np.float64))
 
 
 def evaluate_bags(model: GMR, bags: Sequence[Path], noise: str, lookahead: int,

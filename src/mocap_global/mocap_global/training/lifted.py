@@ -8,7 +8,8 @@ spot (docs/global.md, the real moving-camera walk). Here every training clip is 
 ``cameras`` random static cameras around it (the lifter's own camera sampler: any azimuth,
 so front, side and back views), its joints are put where the real detector puts its
 keypoints (``DetectorPlacement``) with the detector-like corruption (dropped points, jitter),
-and the shipped windowed MotioNet lifts the whole clip. The lifter's local rotations and
+and the shipped windowed MotioNet lifts the whole clip, in the node's virtual camera
+(``virtual_camera``). The lifter's local rotations and
 bone-group lengths are stored per clip and camera, frame-aligned with the clip, and used as
 the network input of a share of the training windows (``Augmentation.lifted_prob``); the
 targets stay the ground truth.
@@ -45,12 +46,15 @@ class LiftedClip:
     lengths: np.ndarray
 
 
-def _key(motions: Sequence[Motion], cameras: int, seed: int, weights: Path) -> str:
+def _key(motions: Sequence[Motion], cameras: int, seed: int, weights: Path,
+         virtual_camera: bool = False) -> str:
     h = hashlib.sha1()
     for m in motions:
         h.update(f'{m.name}:{m.num_frames};'.encode())
     st = weights.stat()
     h.update(f'{cameras}:{seed}:{st.st_size}:{int(st.st_mtime)}'.encode())
+    if virtual_camera:                 # keys made before the option stay valid
+        h.update(b':virtual_camera')
     return h.hexdigest()[:16]
 
 
@@ -64,6 +68,7 @@ def lift_clips(motions: Sequence[Motion], cameras: int = 2, seed: int = 0,
 
     from mocap_core.data.detector_placement import PLACEMENT_PATH, DetectorPlacement
     from mocap_core.data.synth2d import Corruption
+    from mocap_lifter.online import DEFAULT_VIRTUAL_CAMERA
     from mocap_lifter.training.evaluate import lift
     from mocap_lifter.training.samples import Augmentation as LifterAugmentation
     from mocap_lifter.training.samples import make_sample
@@ -72,7 +77,8 @@ def lift_clips(motions: Sequence[Motion], cameras: int = 2, seed: int = 0,
     weights = default_weights('windowed')
     path = None
     if cache_dir is not None:
-        path = Path(cache_dir) / f'{_key(motions, cameras, seed, weights)}.npz'
+        path = Path(cache_dir) / \
+            f'{_key(motions, cameras, seed, weights, DEFAULT_VIRTUAL_CAMERA)}.npz'
         if path.exists():
             with np.load(path) as z:
                 rot, lengths, offsets = z['rotations'], z['lengths'], z['offsets']
@@ -97,7 +103,8 @@ def lift_clips(motions: Sequence[Motion], cameras: int = 2, seed: int = 0,
                         pieces.append(pieces[-1][-1:])
                         continue
                     s = make_sample(m, s0, n, rng, aug)
-                    res = lift(model, s['features'], s['root_2d'], s['scale'], device)
+                    res = lift(model, s['features'], s['root_2d'], s['scale'], device,
+                               virtual_camera=DEFAULT_VIRTUAL_CAMERA)
                     pieces.append(res['rotations'])
                     plen.append(res['lengths'])
                 rots.append(np.concatenate(pieces))
