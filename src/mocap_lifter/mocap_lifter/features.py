@@ -97,6 +97,23 @@ def ray_rotations(root_2d: np.ndarray) -> np.ndarray:
     return R
 
 
+def turn_root_orientation(rotations: np.ndarray, rays: np.ndarray,
+                          inverse: bool = False) -> np.ndarray:
+    """(..., J, 4) rotations (x, y, z, w; row 0 the root's orientation in a camera frame, the
+    other rows local) with row 0 turned from the virtual cameras' frames into the real
+    camera's by the (..., 3, 3) ``rays`` of :func:`ray_rotations` (``inverse``: from the real
+    camera's into the virtual ones). A new array; the local rows are copied unchanged."""
+    from mocap_core.rotations import quat_multiply
+    d = np.asarray(rays, dtype=np.float64)[..., :, 2]       # the ray: the turn from (0, 0, 1)
+    turn = np.stack([-d[..., 1], d[..., 0], np.zeros_like(d[..., 0]), 1.0 + d[..., 2]], -1)
+    turn /= np.linalg.norm(turn, axis=-1, keepdims=True)
+    if inverse:
+        turn[..., :3] *= -1.0
+    out = np.array(rotations, dtype=np.float64, copy=True)
+    out[..., 0, :] = quat_multiply(turn, out[..., 0, :])
+    return out
+
+
 def to_virtual_camera(canonical: np.ndarray, rotations: np.ndarray) -> np.ndarray:
     """(..., T, K, 3) canonical keypoints (x, y, confidence) seen by the virtual cameras
     ``rotations`` (..., T, 3, 3) of :func:`ray_rotations`: each point's ray ``(x, y, 1)`` is
@@ -207,10 +224,8 @@ def virtual_camera_window(window: Dict[str, np.ndarray]) -> Dict[str, np.ndarray
         out['root'] = np.einsum('...ij,...j->...i', Rt, np.asarray(
             window['root'], dtype=np.float64)).astype(np.asarray(window['root']).dtype)
     if 'rotations' in window:
-        from mocap_core.rotations import matrix_to_quat, quat_to_matrix
-        rot = np.array(window['rotations'], dtype=np.float64)
-        rot[..., 0, :] = matrix_to_quat(Rt @ np.asarray(quat_to_matrix(rot[..., 0, :])))
-        out['rotations'] = rot.astype(np.asarray(window['rotations']).dtype)
+        out['rotations'] = turn_root_orientation(window['rotations'], R, inverse=True).astype(
+            np.asarray(window['rotations']).dtype)
     return out
 
 

@@ -66,12 +66,12 @@ import torch
 from mocap_core.camera import CameraIntrinsics
 from mocap_core.camera_motion import person_boxes
 from mocap_core.pose import Pose
-from mocap_core.rotations import quat_multiply, quat_slerp
+from mocap_core.rotations import quat_slerp
 from mocap_core.skeleton import NUM_JOINTS, NUM_KEYPOINTS, Skeleton
 from mocap_core.streams import StampOrder
 
 from .features import (average_quaternions, lifter_features_and_rays, mirror_features,
-                       smooth_keypoints, unmirror_rotations)
+                       smooth_keypoints, turn_root_orientation, unmirror_rotations)
 from .intrinsics import StreamIntrinsics
 from .model import NUM_CONTACTS, MotioNet
 from .output_smoothing import FrameSmoother
@@ -467,11 +467,7 @@ class OnlineLifter:
         if not self.virtual_camera or self._rays is None:
             return rotations, root
         R = self._rays[index]
-        d = R[:, 2]                      # the ray; the turn from (0, 0, 1) onto it, x y z w
-        turn = np.array([-d[1], d[0], 0.0, 1.0 + d[2]])
-        out = np.array(rotations, copy=True)
-        out[0] = quat_multiply(turn / np.linalg.norm(turn), out[0])
-        return out, R @ root
+        return turn_root_orientation(rotations, R), R @ root
 
     def _emit_streamed(self, index: int, y: np.ndarray, root_2d: np.ndarray,
                        scale: np.ndarray) -> List[LiftedFrame]:

@@ -76,12 +76,11 @@ def lift(model: MotioNet, features: np.ndarray, root_2d: np.ndarray, scale: np.n
         res['root'] = 0.5 * (res['root'] + root)
         res['contacts'] = 0.5 * (res['contacts'] + m['contacts'][:, [2, 3, 0, 1]])
     if rays is not None:
-        from mocap_core.rotations import matrix_to_quat, quat_to_matrix
+        from ..features import turn_root_orientation
         res['positions'] = np.einsum('tij,tkj->tki', rays, res['positions'])
         res['root'] = np.einsum('tij,tj->ti', rays, res['root'])
-        rot = np.array(res['rotations'], dtype=np.float64)
-        rot[:, 0] = matrix_to_quat(rays @ np.asarray(quat_to_matrix(rot[:, 0])))
-        res['rotations'] = rot.astype(res['rotations'].dtype)
+        res['rotations'] = turn_root_orientation(res['rotations'], rays).astype(
+            res['rotations'].dtype)
     root_sigma = output_sigma if output_root_sigma is None else output_root_sigma
     from ..output_smoothing import smooth_along_time
     if output_sigma > 0:
