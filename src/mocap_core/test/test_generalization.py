@@ -149,6 +149,20 @@ def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
     moved = gt['joints_world'][:, 0] @ Rz.T + [5.0, -2.0, 0.3]
     r = score_clip(meta['clip'], meta, gt, J, idx, {'physics': (moved, idx)}).summary()
     assert r['physics_root_error'] < 1e-6
+    # without alignment the error is split along the floor and up
+    off = gt['joints_world'][:, 0] + [0.3, -0.4, 0.12]
+    u = score_clip(meta['clip'], meta, gt, J, idx, {'physics': (off, idx)}).summary()
+    assert u['physics_root_error_unaligned'] == pytest.approx(np.hypot(500, 120))
+    assert u['physics_root_error_unaligned_horizontal'] == pytest.approx(500.0)
+    assert u['physics_root_error_unaligned_vertical'] == pytest.approx(120.0)
+    # and with the camera's pose, the lifter's own root moved into the world is split so
+    # too (here the camera frame is the world moved 3 m along z)
+    posed = dict(gt, camera_R=np.tile(np.eye(3), (len(J), 1, 1)),
+                 camera_position=np.tile([0.0, 0.0, -3.0], (len(J), 1)))
+    w = score_clip(meta['clip'], meta, posed, J + [0.2, 0.0, 0.05], idx,
+                   {'world': (np.repeat(gt['joints_world'][:, None, 0], 18, 1), idx)}).summary()
+    assert w['world_lifter_root_error_horizontal'] == pytest.approx(200.0)
+    assert w['world_lifter_root_error_vertical'] == pytest.approx(50.0)
     # a lifter whose body is turned by 20 deg about its pelvis: all of its MPJPE is the
     # global orientation's (RA-MPJPE 0, orientation error 20 deg); one also 10 % too large
     # keeps only the scale's share after the rigid alignment

@@ -224,6 +224,10 @@ PARAMETERS = (
               "position correction towards a root measured apart from the input "
               "(camera_pose_root lifter): GMR's steps between, the lifter's noise filtered",
               min_value=0.0),
+    ParamSpec('fusion_measured_velocity_correction', False, "With a root measured apart "
+              "from the input (camera_pose_root lifter): fuse it with an alpha-beta filter "
+              "that also learns the velocity GMR's steps miss, so that a walker is not "
+              "trailed by the position time constant (docs/global.md)", read_only=True),
     ParamSpec('vertical', 'auto', "Where the root's height and tilt come from: 'input' (an "
               "input in a floor frame, z up, floor z = 0, e.g. the physics output: one floor "
               "for all outputs; GMR gives heading and horizontal path), 'gmr' (accumulated "
@@ -480,7 +484,8 @@ class GMRNode(Node):
                 static_orientation_time_constant_s=p[
                     'fusion_static_orientation_time_constant_s'],
                 measured_position_time_constant_s=p[
-                    'fusion_measured_position_time_constant_s'])
+                    'fusion_measured_position_time_constant_s'],
+                measured_velocity_correction=p['fusion_measured_velocity_correction'])
             self.get_logger().info(
                 ('static camera: fusing' if self.camera_mode == 'static' else
                  'camera mode auto: fusing the frames of a static or turning camera')

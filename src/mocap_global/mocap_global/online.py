@@ -241,6 +241,15 @@ class StaticCameraFusion:
     frame whose position was measured apart from the input (``step(..., measured=True)``,
     :attr:`InputAnchor.root`) by ``measured_position_time_constant_s`` (the orientation
     as a static frame's). A time constant of 0 takes the measurement as it is.
+
+    ``measured_velocity_correction``: measured frames are fused by an alpha-beta filter
+    instead: the position predicted by GMR's step plus a learned velocity correction ``b``
+    (m per frame, fixed frame), the residual ``e = T_m - (T + b)`` corrects the position by
+    ``alpha e`` and the velocity by ``beta e``, with ``alpha`` from the time constant and
+    ``beta = alpha^2 / (2 - alpha)`` (critically damped). GMR's steps are short of a
+    walker's (docs/global.md): a first-order pull then trails the person by ``(1 - ratio) v
+    tau``; the velocity term takes that lag out. ``b`` restarts at zero with every frame
+    that is not measured.
     """
 
     def __init__(self, fps: float, init_s: float = 1.0, position_time_constant_s: float = 0.15,
@@ -248,8 +257,10 @@ class StaticCameraFusion:
                  input_up: Optional[np.ndarray] = None, known_world: bool = False,
                  static_position_time_constant_s: float = 0.05,
                  static_orientation_time_constant_s: float = 0.0,
-                 measured_position_time_constant_s: float = 0.15) -> None:
+                 measured_position_time_constant_s: float = 0.15,
+                 measured_velocity_correction: bool = False) -> None:
         self.known_world = bool(known_world)
+        self.measured_velocity_correction = bool(measured_velocity_correction)
         self.init_frames = max(1, int(round(init_s * fps)))
 
         def gain(tau: float) -> float:
@@ -259,6 +270,8 @@ class StaticCameraFusion:
         self.alpha_p_static = gain(static_position_time_constant_s)
         self.alpha_r_static = gain(static_orientation_time_constant_s)
         self.alpha_p_measured = gain(measured_position_time_constant_s)
+        a = self.alpha_p_measured
+        self.beta_p_measured = a * a / (2.0 - a)
         self.input_up = None if input_up is None else \
             np.asarray(input_up, dtype=np.float64) / np.linalg.norm(input_up)
         self.reset()
@@ -268,6 +281,8 @@ class StaticCameraFusion:
         self._pairs = []
         self.W_R, self.W_t = None, None
         self._realigning = False
+        #: (3,) m per frame: the velocity GMR's steps miss (measured_velocity_correction)
+        self.velocity_correction = np.zeros(3)
         if self.known_world:
             self.W_R, self.W_t = np.eye(3), np.zeros(3)
         elif self.input_up is not None:
@@ -312,13 +327,21 @@ class StaticCameraFusion:
                 self._estimate()
             return R, T, False
         Rm, Tm = self.measurement(R_in, T_in)
+        if first or not (measured and self.measured_velocity_correction):
+            self.velocity_correction = np.zeros(3)
         if first:
             return Rm, Tm, True
         a_p, a_r = (self.alpha_p_static, self.alpha_r_static) if static else \
             (self.alpha_p, self.alpha_r)
         if measured:
             a_p = self.alpha_p_measured
-        T = T + a_p * (Tm - T)
+        if measured and self.measured_velocity_correction:
+            T = T + self.velocity_correction
+            e = Tm - T
+            self.velocity_correction = self.velocity_correction + self.beta_p_measured * e
+            T = T + a_p * e
+        else:
+            T = T + a_p * (Tm - T)
         corr = matrix_to_axis_angle(R.T @ Rm)
         R = R @ axis_angle_to_matrix(a_r * corr)
         return R, T, True

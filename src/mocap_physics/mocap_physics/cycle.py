@@ -351,6 +351,23 @@ class PhysicsCycle:
             q[2] -= low
         return q
 
+    def _raise_sunk_target(self, q_hat: np.ndarray) -> np.ndarray:
+        """The target raised so that no foot guard point lies deeper than
+        ``target_floor_tolerance`` below the floor (counted in
+        ``stats.sunk_targets``); unchanged when the tolerance is negative. A raise moves
+        the whole body up: no joint angle changes, so the pose the PD tracks keeps its
+        shape; only its height stops asking the held feet's legs to fold."""
+        tol = self.params.target_floor_tolerance
+        if tol < 0.0:
+            return q_hat
+        low = float(self.model.guard_positions(q_hat)[:, 2].min())
+        if low >= -tol:
+            return q_hat
+        self.stats.sunk_targets += 1
+        out = q_hat.copy()
+        out[2] += -tol - low
+        return out
+
     def _stick_rows(self, Jc, xy, target, stick, zdot, vertical: bool = True):
         return stick_rows(self.model.contact_feet, Jc, xy, target, stick, zdot, vertical)
 
@@ -453,6 +470,7 @@ class PhysicsCycle:
                                reinit is not None, camera_moving)
         if valid:          # a held target (the last one) carries its offset already
             q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
+            q_hat = self._raise_sunk_target(q_hat)
         v_hat = None
         if self._target_prev is not None and reinit is None:
             v_hat = self._difference(self._target_prev, q_hat) / frame_dt

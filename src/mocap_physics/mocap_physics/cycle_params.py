@@ -60,6 +60,12 @@ class PhysicsParams:
     stance_height: float = 0.08           # m: whole body: a point the contact probability puts
     #                                       down becomes a stance point this close to the floor
     #                                       (and is pulled onto it)
+    #: m: a target whose foot (any guard point: heels, toes, ankles, soles) lies deeper
+    #: than this below the floor is raised to this depth before the PD follows it (the
+    #: lifter's depth noise and a camera that moves can put the target's feet far below the
+    #: floor frame; followed, the root pulls the body down onto its held feet and it falls
+    #: over: docs/physics.md, "A target below the floor"); negative: off
+    target_floor_tolerance: float = 0.05
     force_smoothness: float = 0.01        # w_s of the whole-body QP (forces between sub-steps)
     wbid_solver: str = 'osqp'             # 'osqp' (deterministic) or 'proxqp' (mocap_physics.wbid)
     wbid_condensed: bool = True           # the QP over forces and residual, qdd in closed form

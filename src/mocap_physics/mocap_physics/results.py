@@ -95,6 +95,8 @@ class CycleStats:
     stick_failures: int = 0
     residual_saturations: int = 0   # whole-body sub-steps whose root residual hit its bound
     sliding_substeps: int = 0       # whole-body sub-steps with a stance point sliding
+    sunk_targets: int = 0           # targets raised: a foot deeper than
+                                    # target_floor_tolerance below the floor
     last_event: str = ''
 
 

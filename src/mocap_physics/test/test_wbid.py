@@ -198,6 +198,38 @@ def test_unsupported_target_is_held_by_the_bounded_residual(skeleton, bound):
         assert r.contact_heights.min() < 0.005               # landed on its feet
 
 
+def test_a_target_sunk_below_the_floor_does_not_pull_the_body_over(skeleton):
+    """A standing target whose whole body sinks 0.6 m below the floor within half a second
+    and stays there, the feet labelled in contact (the lifter's depth noise or a moving
+    camera can do this to the floor frame; measured on rendered clips). Followed as it is,
+    the root pulls the body down onto its held feet and it falls over (the check itself can
+    fail: tolerance off). Raised to ``target_floor_tolerance`` below the floor, the body
+    stays upright with its feet on the floor, and the raises are counted."""
+    rest = Pose.rest(skeleton)
+
+    def run(tolerance):
+        cyc = PhysicsCycle(skeleton, PhysicsParams(target_floor_tolerance=tolerance))
+        tilts, heights = [], []
+        for i in range(int(4 * FPS)):
+            sink = 0.6 * min(1.0, i / (0.5 * FPS))
+            target = Pose(skeleton, rest.rotations, rest.root_position - [0.0, 0.0, sink])
+            r = cyc.step(target, i / FPS, [1, 1, 1, 1])
+            up = pin.XYZQUATToSE3(r.q[:7]).rotation[:, 2]
+            tilts.append(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
+            heights.append(r.q[2])
+            assert r.contact_heights.min() > -0.005             # never through the floor
+        return np.array(tilts), np.array(heights), cyc.stats.sunk_targets
+
+    stand = float(rest.root_position[2])
+    tilt_off, height_off, raised_off = run(-1.0)
+    tilt_on, height_on, raised_on = run(PhysicsParams().target_floor_tolerance)
+    assert raised_off == 0 and raised_on > 0.8 * len(tilt_on)
+    assert height_off.min() < stand - 0.3                       # followed: pulled down
+    assert tilt_off.max() > 30.0                                # ... and over
+    assert tilt_on.max() < 10.0                                 # raised: upright
+    assert height_on.min() > stand - PhysicsParams().target_floor_tolerance - 0.03
+
+
 def _problem(skeleton, seed: int = 0, pull: float = 0.0):
     """One sub-step's problem from a standing cycle with a perturbed velocity: (model,
     q, v, M, h, Jc, drift, pos, vel, a_des, rotation). ``pull``: a horizontal root
