@@ -373,3 +373,22 @@ def test_world_segment_errors_align_pieces_whole_or_by_their_start():
     # the 50-frame tail counts; a 30-frame clip is one piece; no frames: nothing
     assert world_segment_errors(gt[:30], np.arange(30), gt[:30])['wa_mpjpe100'] < 1e-6
     assert world_segment_errors(gt[:1], np.arange(1), gt[:30]) == {}
+
+
+def test_a_fallen_body_is_counted_only_where_the_truth_stands(walk):
+    """``fallen_share``: a stage body turned 60 deg about a horizontal axis has fallen in
+    every frame where the true body stands; an upright one in none; a true body that lies
+    down itself is not a stage's fall. The report counts the clips."""
+    from mocap_core.render.evaluate import aggregate, fallen_share
+    J = walk.fk().positions[:30]
+    turn = Rotation.from_rotvec([np.radians(60.0), 0.0, 0.0]).as_matrix()
+    down = (J - J[:, :1]) @ turn.T + J[:, :1]
+    assert fallen_share(J, J) == 0.0
+    assert fallen_share(down, J) == 1.0
+    assert fallen_share(down, down) == 0.0            # the truth lies too: not a fall
+    gt, meta, Jc = _gt(walk, F=30)
+    idx = np.arange(30)
+    clips = [score_clip(meta['clip'], meta, gt, Jc, idx, {'physics': (s, idx)})
+             for s in (J, down)]
+    pooled = aggregate(clips)['pooled']
+    assert pooled['physics_fallen_clips'] == 1 and pooled['physics_fallen'] == 0.5

@@ -449,6 +449,34 @@ def _paired_with_lifter(stage: np.ndarray, stage_idx: np.ndarray, lifter: np.nda
     return out
 
 
+#: a body whose up (pelvis -> neck) is further than this from its frame's z axis is down
+FALLEN_TILT_DEG = 45.0
+#: ... while the true body's is within this of the true world's up
+UPRIGHT_TILT_DEG = 30.0
+
+
+def body_tilt_deg(joints: np.ndarray) -> np.ndarray:
+    """(N, 18, 3) joints in a frame with z up -> (N,) angle between the body's up (pelvis
+    to neck) and z, degrees."""
+    from ..skeleton import JOINT_INDEX
+    up = joints[:, JOINT_INDEX['neck']] - joints[:, JOINT_INDEX['pelvis']]
+    cos = up[:, 2] / np.maximum(np.linalg.norm(up, axis=-1), 1e-9)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def fallen_share(stage: np.ndarray, truth_world: np.ndarray) -> float:
+    """The share of frames in which a stage's body (N, 18, 3), in its own z-up frame (the
+    physics floor frame, the world), has fallen over: tilted more than
+    :data:`FALLEN_TILT_DEG` from its frame's up while the true body (N, 18, 3, true world)
+    stands within :data:`UPRIGHT_TILT_DEG` of upright. Frames where the truth leans are
+    not counted as fallen."""
+    if not len(stage):
+        return float('nan')
+    down = (body_tilt_deg(stage) > FALLEN_TILT_DEG) & \
+        (body_tilt_deg(truth_world) < UPRIGHT_TILT_DEG)
+    return float(down.mean())
+
+
 def camera_to_world(points: np.ndarray, index: np.ndarray, gt: Dict[str, np.ndarray]
                     ) -> np.ndarray:
     """(N, J, 3) points in the optical frame of rendered frames ``index`` (N,) -> the true
@@ -540,6 +568,7 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
                 gt.get('joints_world') if world_lifter is not None else None))
             if 'contacts' in gt:
                 root[stage].update(foot_scores(full[ok], sidx[ok], gt['contacts'], fps))
+            root[stage]['fallen'] = fallen_share(full[ok], gt['joints_world'][sidx[ok]])
             if stage == 'world':
                 root[stage].update(world_segment_errors(full[ok], sidx[ok],
                                                         gt['joints_world']))
@@ -578,6 +607,15 @@ def aggregate(scores: List[ClipScore]) -> dict:
         'mrpe': float(np.concatenate([s.mrpe for s in scores]).mean()),
         'swap_rate': float((allsw[allsw >= 0]).mean()) if (allsw >= 0).any() else float('nan'),
     }
+    for st in ('physics', 'world'):
+        # bodies that fell over: the clips with any such frame, and the mean share of frames
+        # (a median over clips would hide them: most clips have none)
+        f = np.array([p[f'{st}_fallen'] for p in per if np.isfinite(p.get(f'{st}_fallen',
+                                                                           np.nan))])
+        if len(f):
+            out['pooled'][f'{st}_fallen_clips'] = int((f > 0).sum())
+            out['pooled'][f'{st}_fallen_clips_10pct'] = int((f > 0.1).sum())
+            out['pooled'][f'{st}_fallen'] = float(f.mean())
     views = np.concatenate([s.views for s in scores])
     mp = np.concatenate([s.mpjpe for s in scores])
     pa = np.concatenate([s.pa_mpjpe for s in scores])
@@ -712,6 +750,13 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                f"{_f(m.get(f'{st}_penetration_after_1s_mm'))} mm / "
                f"{_f(100 * m.get(f'{st}_frames_below_5mm', float('nan')))} % / "
                f"{_f(m.get(f'{st}_skating_mm'))} mm per frame |" for st in ('physics', 'world')],
+             *[f"| {st} body fallen over (tilted more than {FALLEN_TILT_DEG:g} deg from its "
+               f"floor's up while the truth stands within {UPRIGHT_TILT_DEG:g}): clips with "
+               f"any such frame / with more than 10 % / mean share of frames | "
+               f"{p.get(f'{st}_fallen_clips', '-')} / "
+               f"{p.get(f'{st}_fallen_clips_10pct', '-')} / "
+               f"{_f(100 * p.get(f'{st}_fallen', float('nan')))} % |"
+               for st in ('physics', 'world')],
              "| physics feet skating in contact in the true world (its joints mapped by its own "
              "floor and the true camera pose: comparable across cameras; the floor frame rides "
              f"with the camera) | {_f(m.get('physics_skating_world_mm'))} mm per frame |",
