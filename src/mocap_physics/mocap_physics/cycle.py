@@ -351,6 +351,27 @@ class PhysicsCycle:
             q[2] -= low
         return q
 
+    def _keep_within_reach(self, q_hat: np.ndarray) -> np.ndarray:
+        """``root_reach`` > 0 (whole body): the target moved horizontally so that the mean
+        offset of its anchored stance points from their anchors is at most ``root_reach``
+        (m; only the excess is taken out, so the target's own stepping within that reach is
+        left to the stance release). Counted in ``stats.reached_targets``."""
+        reach = self.params.root_reach
+        if reach <= 0.0 or not self._stance_on or self._q is None:
+            return q_hat
+        held = self._anchored
+        if not np.any(held):
+            return q_hat
+        tgt = self.model.contact_positions(q_hat)[:, :2]
+        wanted = np.mean(self._anchor[held] - tgt[held], axis=0)
+        dist = float(np.linalg.norm(wanted))
+        if dist <= reach:
+            return q_hat
+        self.stats.reached_targets += 1
+        out = q_hat.copy()
+        out[:2] += wanted * (1.0 - reach / dist)
+        return out
+
     def _raise_sunk_target(self, q_hat: np.ndarray) -> np.ndarray:
         """The target raised so that no foot guard point lies deeper than
         ``target_floor_tolerance`` below the floor (counted in
@@ -470,6 +491,8 @@ class PhysicsCycle:
                                reinit is not None, camera_moving)
         if valid:          # a held target (the last one) carries its offset already
             q_hat = self._follow_feet(q_hat, frame_dt, reinit is not None)
+            if reinit is None:
+                q_hat = self._keep_within_reach(q_hat)
             q_hat = self._raise_sunk_target(q_hat)
         v_hat = None
         if self._target_prev is not None and reinit is None:

@@ -66,6 +66,11 @@ class PhysicsParams:
     #: floor frame; followed, the root pulls the body down onto its held feet and it falls
     #: over: docs/physics.md, "A target below the floor"); negative: off
     target_floor_tolerance: float = 0.05
+    #: m, > 0: whole body: the target's root is moved horizontally, by what exceeds this, so
+    #: that the targets of the anchored stance points lie within this of their anchors (a
+    #: target carried sideways away from the held feet by depth jumps pulls the body over
+    #: them; cycle.py, ``_keep_within_reach``); 0: off
+    root_reach: float = 0.0
     force_smoothness: float = 0.01        # w_s of the whole-body QP (forces between sub-steps)
     wbid_solver: str = 'osqp'             # 'osqp' (deterministic) or 'proxqp' (mocap_physics.wbid)
     wbid_condensed: bool = True           # the QP over forces and residual, qdd in closed form
@@ -137,7 +142,7 @@ class PhysicsParams:
         for name in ('residual_bound', 'residual_moment_bound', 'force_smoothness',
                      'stance_release', 'slide_threshold', 'slide_time', 'stance_height',
                      'root_follow_gain', 'root_follow_stance_relax_s', 'stance_drift_s',
-                     'stance_drift_deadband'):
+                     'stance_drift_deadband', 'root_reach'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0):
                 bad.append(f'{name}={val} (must be >= 0)')

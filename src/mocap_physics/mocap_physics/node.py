@@ -281,6 +281,10 @@ PARAMETERS = (
               'lies deeper than this below the floor is raised to this depth before it is '
               'followed (the lifter\'s depth noise or a moving camera can sink it; followed, '
               'the body falls over onto its held feet), m; negative: off', read_only=True),
+    ParamSpec('root_reach', _D.root_reach, 'whole_body, > 0: the target\'s root is moved '
+              'horizontally, by what exceeds this, so that its anchored stance points lie '
+              'within this of their anchors (a target carried sideways from the held feet '
+              'pulls the body over them), m; 0: off', min_value=0.0, read_only=True),
     ParamSpec('wbid_solver', _D.wbid_solver, 'whole_body: QP solvers, osqp (the condensed QP '
               'on DAQP, the full one on OSQP; deterministic) or proxqp (ProxQP for both; last '
               'bits vary between runs)', read_only=True),
@@ -388,6 +392,7 @@ class PhysicsNode(Node):
             root_follow_stance_relax_s=p['root_follow_stance_relax_s'],
             stance_height=p['stance_height'], slide_time=p['slide_time'],
             target_floor_tolerance=p['target_floor_tolerance'],
+            root_reach=p['root_reach'],
             velocity_feedforward=p['velocity_feedforward'])
         self._limited = KeyedRateLimit()
         self.diag = NodeDiagnostics(self, 'physics', hardware_id='cpu')
@@ -905,6 +910,7 @@ class PhysicsNode(Node):
         d.set_value('friction_cone_violations', st.cone_violations)
         d.set_value('stick_failures', st.stick_failures)
         d.set_value('sunk_targets_raised', st.sunk_targets)
+        d.set_value('targets_kept_within_reach', st.reached_targets)
         d.set_value('dynamics', self.params.dynamics)
         if self.rotations is not None and (self.derotate or self.carry):
             d.set_value('camera_rotation_frames', f'{self.rotation_own_frames} with their own '

@@ -97,6 +97,7 @@ class CycleStats:
     sliding_substeps: int = 0       # whole-body sub-steps with a stance point sliding
     sunk_targets: int = 0           # targets raised: a foot deeper than
                                     # target_floor_tolerance below the floor
+    reached_targets: int = 0        # targets moved back within root_reach of the stance feet
     last_event: str = ''
 
 

@@ -230,6 +230,33 @@ def test_a_target_sunk_below_the_floor_does_not_pull_the_body_over(skeleton):
     assert height_on.min() > stand - PhysicsParams().target_floor_tolerance - 0.03
 
 
+def test_root_reach_keeps_a_target_carried_sideways_over_its_feet(skeleton):
+    """A standing target whose root is carried 0.5 m sideways within a sixth of a second
+    (depth jumps along a camera ray do this), the feet labelled in contact: followed, the
+    held feet stay and the body leans over them (more than 20 deg) until they slide; with
+    ``root_reach`` the target stays within reach of the feet, the body upright, and the
+    feet still get to where the target stands."""
+    rest = Pose.rest(skeleton)
+
+    def run(reach):
+        cyc = PhysicsCycle(skeleton, PhysicsParams(root_reach=reach))
+        tilts = []
+        for i in range(int(3 * FPS)):
+            side = 0.5 * min(1.0, max(0, i - 10) / 5)
+            r = cyc.step(Pose(skeleton, rest.rotations, rest.root_position + [side, 0, 0]),
+                         i / FPS, [1, 1, 1, 1])
+            up = pin.XYZQUATToSE3(r.q[:7]).rotation[:, 2]
+            tilts.append(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
+        return np.array(tilts), r.q[0], cyc.stats.reached_targets
+
+    tilt_off, x_off, n_off = run(0.0)
+    tilt_on, x_on, n_on = run(0.15)
+    assert n_off == 0 and n_on > 10
+    assert tilt_off.max() > 20.0
+    assert tilt_on.max() < 10.0
+    assert x_on == pytest.approx(0.5, abs=0.05)
+
+
 def _problem(skeleton, seed: int = 0, pull: float = 0.0):
     """One sub-step's problem from a standing cycle with a perturbed velocity: (model,
     q, v, M, h, Jc, drift, pos, vel, a_des, rotation). ``pull``: a horizontal root
