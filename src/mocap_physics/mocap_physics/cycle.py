@@ -342,14 +342,23 @@ class PhysicsCycle:
         d[3:6] = pin.log3(R0.T @ R1)
         return d
 
-    def _lift(self, q: np.ndarray) -> np.ndarray:
-        """``q`` raised so that no foot guard point (contacts, ankles, soles) is below the
-        floor."""
+    def _lift(self, q: np.ndarray, depth: float = 0.0) -> np.ndarray:
+        """``q`` raised so that no foot guard point (contacts, ankles, soles) lies deeper
+        than ``depth`` (m) below the floor (a copy)."""
         q = q.copy()
         low = float(self.model.guard_positions(q)[:, 2].min())
-        if low < 0.0:
-            q[2] -= low
+        if low < -depth:
+            q[2] += -depth - low
         return q
+
+    def _stance_offset(self, q_hat: np.ndarray) -> Optional[np.ndarray]:
+        """(2,) m: the mean horizontal offset from the target's anchored stance points to
+        their anchors (None: nothing anchored)."""
+        held = self._anchored
+        if not np.any(held):
+            return None
+        tgt = self.model.contact_positions(q_hat)[:, :2]
+        return np.mean(self._anchor[held] - tgt[held], axis=0)
 
     def _keep_within_reach(self, q_hat: np.ndarray) -> np.ndarray:
         """``root_reach`` > 0 (whole body): the target moved horizontally so that the mean
@@ -359,11 +368,9 @@ class PhysicsCycle:
         reach = self.params.root_reach
         if reach <= 0.0 or not self._stance_on or self._q is None:
             return q_hat
-        held = self._anchored
-        if not np.any(held):
+        wanted = self._stance_offset(q_hat)
+        if wanted is None:
             return q_hat
-        tgt = self.model.contact_positions(q_hat)[:, :2]
-        wanted = np.mean(self._anchor[held] - tgt[held], axis=0)
         dist = float(np.linalg.norm(wanted))
         if dist <= reach:
             return q_hat
@@ -381,12 +388,9 @@ class PhysicsCycle:
         tol = self.params.target_floor_tolerance
         if tol < 0.0:
             return q_hat
-        low = float(self.model.guard_positions(q_hat)[:, 2].min())
-        if low >= -tol:
-            return q_hat
-        self.stats.sunk_targets += 1
-        out = q_hat.copy()
-        out[2] += -tol - low
+        out = self._lift(q_hat, tol)
+        if out[2] != q_hat[2]:
+            self.stats.sunk_targets += 1
         return out
 
     def _stick_rows(self, Jc, xy, target, stick, zdot, vertical: bool = True):
@@ -619,9 +623,8 @@ class PhysicsCycle:
             self._root_offset = np.zeros(2)
             return q_hat
         held = self._anchored
-        if np.any(held):
-            tgt = self.model.contact_positions(q_hat)[:, :2]
-            wanted = np.mean(self._anchor[held] - tgt[held], axis=0)
+        wanted = self._stance_offset(q_hat)
+        if wanted is not None:
             self._root_offset = self._root_offset + p.root_follow_gain * (
                 wanted - self._root_offset)
             if p.root_follow_stance_relax_s > 0.0:
