@@ -304,6 +304,20 @@ class PhysicsCycle:
             self.dynet = LearnedGains(self._dynet_net, self.model, self.params.dynet_weights)
         return True
 
+    def _weight_scale(self, stance: np.ndarray) -> Optional[np.ndarray]:
+        """(nv,) factors on the whole-body QP's tracking weights: ``free_limb_weight`` on
+        every actuated joint but those of a leg with a point in stance (``stance``: (C,)
+        bool), 1 on the root and the stance legs; None when the factor is 1."""
+        k, k_s = self.params.free_limb_weight, self.params.stance_leg_weight
+        if k == 1.0 and k_s == 1.0:
+            return None
+        scale = np.full(self.model.nv, k)
+        scale[:6] = 1.0
+        for side, dofs in self._leg_dofs.items():
+            if any(s and f == side for s, f in zip(stance, self.model.contact_feet)):
+                scale[dofs] = k_s
+        return scale
+
     def _build(self, skeleton: Skeleton) -> None:
         old = self.model
         model = PhysicsModel(skeleton, self.params.body_mass, self.flat_foot_pitch)
@@ -321,6 +335,12 @@ class PhysicsCycle:
                                     slide_threshold=p.slide_threshold,
                                     slide_time=p.slide_time, solver=p.wbid_solver,
                                     condensed=p.wbid_condensed)
+            # velocity indices of each leg's joints (hip to toe), for free_limb_weight
+            names = skeleton.joint_names
+            self._leg_dofs = {
+                side: np.concatenate([np.arange(3) + model.idx_v[names.index(f'{side}_{j}')]
+                                      for j in ('hip', 'knee', 'ankle', 'toe')])
+                for side in ('left', 'right')}
         self._kp, self._kd = self.params.gains(model.nv)
         self.dynet = None
         if self._dynet_net is not None:
@@ -852,7 +872,8 @@ class PhysicsCycle:
             # -- whole-body inverse dynamics -------------------------------------------------
             res = self.wbid.solve(M, h, a_des, Jc, drift, stance, a_ref, pos[:, :2], vel,
                                   feet, m.body_mass, GRAVITY,
-                                  root_rotation=data.oMi[1].rotation, dt=dt)
+                                  root_rotation=data.oMi[1].rotation, dt=dt,
+                                  weight_scale=self._weight_scale(stance))
             acc['t_grf'] += res.solve_time
             if not res.ok:
                 # no consistent solution: the PD alone drives the body for this sub-step

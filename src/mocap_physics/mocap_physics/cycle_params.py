@@ -36,6 +36,14 @@ class PhysicsParams:
     dynamics: str = 'whole_body'          # 'whole_body' (mocap_physics.wbid) or 'paper' (eq. 13)
     residual_weight: float = 300.0        # w_r of the whole-body QP: vertical force, moments
     residual_horizontal_weight: float = 3000.0  # w_r of the horizontal residual force rows
+    #: whole body: factor on the QP's tracking weights of the joints that carry no stance
+    #: point (arms, trunk, head, a swinging leg): the root and the stance legs, not light
+    #: limbs, take up what the forces cannot explain (docs/physics.md, "Limbs without
+    #: stance"; 1: the inertia-scaled weights alone, before session 58)
+    free_limb_weight: float = 100.0
+    #: whole body: the same factor for the joints of a leg with a point in stance (above 1
+    #: the residual grows: docs/physics.md)
+    stance_leg_weight: float = 1.0
     residual_bound: float = 1.0           # body weights: bound of each residual force row
     residual_moment_bound: float = 0.5    # body weight x m: bound of each residual moment row
     stance_gain: float = 20.0             # 1/s: stance points return to their anchor (whole body)
@@ -69,8 +77,9 @@ class PhysicsParams:
     #: m, > 0: whole body: the target's root is moved horizontally, by what exceeds this, so
     #: that the targets of the anchored stance points lie within this of their anchors (a
     #: target carried sideways away from the held feet by depth jumps pulls the body over
-    #: them; cycle.py, ``_keep_within_reach``); 0: off
-    root_reach: float = 0.0
+    #: them; cycle.py, ``_keep_within_reach``; the default since session 58, docs/physics.md);
+    #: 0: off
+    root_reach: float = 0.15
     force_smoothness: float = 0.01        # w_s of the whole-body QP (forces between sub-steps)
     wbid_solver: str = 'osqp'             # 'osqp' (deterministic) or 'proxqp' (mocap_physics.wbid)
     wbid_condensed: bool = True           # the QP over forces and residual, qdd in closed form
@@ -134,8 +143,8 @@ class PhysicsParams:
                        'physics)')
         if self.dynamics not in DYNAMICS_MODES:
             bad.append(f"dynamics={self.dynamics!r} ('whole_body' or 'paper')")
-        for name in ('residual_weight', 'residual_horizontal_weight', 'stance_gain',
-                     'root_follow_relax_s'):
+        for name in ('residual_weight', 'residual_horizontal_weight', 'free_limb_weight',
+                     'stance_leg_weight', 'stance_gain', 'root_follow_relax_s'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val > 0):
                 bad.append(f'{name}={val} (must be > 0)')

@@ -234,6 +234,14 @@ PARAMETERS = (
     ParamSpec('residual_horizontal_weight', _D.residual_horizontal_weight, 'whole_body: '
               'weight of the horizontal root residual force (body-weight units)',
               min_value=1e-6, read_only=True),
+    ParamSpec('free_limb_weight', _D.free_limb_weight, 'whole_body: factor on the QP\'s '
+              'tracking weights of the joints that carry no stance point (arms, trunk, head, '
+              'a swinging leg): above 1 these follow the PD more closely, and the root and the '
+              'stance legs take up what the forces cannot explain (docs/physics.md)',
+              min_value=1e-6, read_only=True),
+    ParamSpec('stance_leg_weight', _D.stance_leg_weight, 'whole_body: the same factor for '
+              'the joints of a leg with a point in stance (docs/physics.md)', min_value=1e-6,
+              read_only=True),
     ParamSpec('residual_bound', _D.residual_bound, 'whole_body: bound of each residual root '
               'force component, body weights (reaching it is counted in diagnostics)',
               min_value=0.0, read_only=True),
@@ -380,7 +388,8 @@ class PhysicsNode(Node):
             gains_mode=p['gains_mode'], dynet_weights=weights if learned else '',
             dynamics=p['dynamics'], residual_weight=p['residual_weight'],
             residual_horizontal_weight=p['residual_horizontal_weight'],
-            residual_bound=p['residual_bound'],
+            free_limb_weight=p['free_limb_weight'],
+            stance_leg_weight=p['stance_leg_weight'], residual_bound=p['residual_bound'],
             residual_moment_bound=p['residual_moment_bound'], wbid_solver=p['wbid_solver'],
             wbid_condensed=p['wbid_condensed'],
             stance_release=p['stance_release'], slide_threshold=p['slide_threshold'],

@@ -226,6 +226,7 @@ class WholeBodyID:
         self.mu_pyramid = self.friction * PYRAMID_FACTOR
         self.residual_weight = float(residual_weight)
         self.residual_horizontal_weight = float(residual_horizontal_weight)
+        self._weight_scale: Optional[np.ndarray] = None
         self.residual_bound = float(residual_bound)
         self.residual_moment_bound = float(residual_moment_bound)
         self.smoothness = float(smoothness)
@@ -254,7 +255,7 @@ class WholeBodyID:
               drift: np.ndarray, stance: np.ndarray, a_ref: np.ndarray, xy: np.ndarray,
               velocity: np.ndarray, feet: Sequence[str], body_mass: float,
               gravity: float = 9.81, root_rotation: Optional[np.ndarray] = None,
-              dt: float = 0.0) -> WbidResult:
+              dt: float = 0.0, weight_scale: Optional[np.ndarray] = None) -> WbidResult:
         """Solve one sub-step.
 
         Args:
@@ -268,7 +269,11 @@ class WholeBodyID:
             root_rotation: (3, 3) root orientation (root frame -> world); the residual's
                 weights and bounds apply on world axes (identity when None).
             dt: the sub-step, s: the time base of ``slide_time`` (0: no averaging).
+            weight_scale: (nv,) factors on the tracking weights ``w_i`` (None: all 1), e.g.
+                larger on the limbs that carry no stance point, whose deviation from the
+                PD then costs more than the stance legs' and the root's.
         """
+        self._weight_scale = weight_scale
         R = np.eye(3) if root_rotation is None else np.asarray(root_rotation, dtype=float)
         t0 = time.perf_counter()
         stance = np.asarray(stance, dtype=bool)
@@ -374,6 +379,8 @@ class WholeBodyID:
         # -- the weights of qdd and of y -------------------------------------------------
         # (floored: the lightest DoFs, e.g. the toes, would make the problem ill-conditioned)
         w = np.maximum(np.diag(M) / body_mass, 1e-3)
+        if self._weight_scale is not None:
+            w = w * self._weight_scale
         hy = np.empty(ny)
         hy[:3 * k] = self.smoothness + self.force_regularization
         hy[3 * k:] = self.residual_weight

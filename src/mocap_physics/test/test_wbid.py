@@ -130,7 +130,9 @@ def test_noise_bursts_do_not_make_the_feet_slide(skeleton):
     decided per sub-step, and the old threshold (0.05) averaged, both let the feet slide and
     move them further; so does the rule of before (0.05 per sub-step). (The stance anchors'
     release is held at 15 cm in all four, so that only the slide rule differs: at the default
-    8 cm the anchors of this 5-cm jitter follow their targets now and then, in every rule.)"""
+    8 cm the anchors of this 5-cm jitter follow their targets now and then, in every rule.
+    With the free limbs' weights and the root reach of session 58 the loosest alternative
+    slides in 9 sub-steps instead of more than 10.)"""
     wide = {'stance_release': 0.15}
     cyc, step = _jittering_stand(skeleton, PhysicsParams(**wide))
     assert cyc.stats.sliding_substeps == 0
@@ -139,7 +141,7 @@ def test_noise_bursts_do_not_make_the_feet_slide(skeleton):
                   PhysicsParams(slide_threshold=0.05, **wide),
                   PhysicsParams(slide_threshold=0.05, slide_time=0.0, **wide)):
         cyc_o, step_o = _jittering_stand(skeleton, other)
-        assert cyc_o.stats.sliding_substeps > 10, other
+        assert cyc_o.stats.sliding_substeps > 5, other   # 9-47 sub-steps of 360
         assert step.mean() < 0.7 * step_o.mean(), other
 
 
@@ -228,6 +230,43 @@ def test_a_target_sunk_below_the_floor_does_not_pull_the_body_over(skeleton):
     assert tilt_off.max() > 30.0                                # ... and over
     assert tilt_on.max() < 10.0                                 # raised: upright
     assert height_on.min() > stand - PhysicsParams().target_floor_tolerance - 0.03
+
+
+def _free_limbs_on_a_jittering_stand(skeleton, free_limb_weight: float, frames: int = 60):
+    """A standing target at rest whose root jitters by 4 cm per frame (white, in all three
+    axes), feet labelled in contact. Returns the mean distance (m) of the elbows, wrists and
+    head from the target's, both relative to the pelvis, and the median residual root force
+    (body weights), over the frames after the first third of a second."""
+    from mocap_core.skeleton import JOINT_INDEX
+    free = [JOINT_INDEX[n] for n in ('left_elbow', 'left_wrist', 'right_elbow', 'right_wrist',
+                                      'head')]
+    cyc = PhysicsCycle(skeleton, PhysicsParams(free_limb_weight=free_limb_weight))
+    rest = Pose.rest(skeleton)
+    rng = np.random.default_rng(0)
+    off, residual = [], []
+    for i in range(frames):
+        jitter = rng.normal(scale=0.04, size=3)
+        target = Pose(skeleton, rest.rotations, rest.root_position + jitter)
+        r = cyc.step(target, i / FPS, [1, 1, 1, 1])
+        j = cyc.model.joint_positions(r.q)
+        t = cyc.model.joint_positions(cyc.model.pose_to_q(target))
+        off.append(np.linalg.norm((j[free] - j[0]) - (t[free] - t[0]), axis=-1).mean())
+        residual.append(r.residual_ratio)
+    return float(np.mean(off[10:])), float(np.median(residual[10:]))
+
+
+def test_limbs_without_stance_follow_their_targets(skeleton):
+    """The root rows of the equation of motion can be met by accelerating light limbs: with
+    the inertia-scaled weights alone, a target whose root jitters makes the QP swing the arms
+    and head to move the body (about 1 cm off their targets here). ``free_limb_weight``
+    makes the joints that carry no stance point costly, so the root and the stance legs take
+    that up instead: the arms stay closer to their targets, and the residual root force (what
+    no contact force explains) does not grow."""
+    off_1, res_1 = _free_limbs_on_a_jittering_stand(skeleton, 1.0)
+    off_100, res_100 = _free_limbs_on_a_jittering_stand(skeleton, 100.0)
+    assert off_1 > 0.008
+    assert off_100 < 0.7 * off_1
+    assert res_100 < 1.1 * res_1
 
 
 def test_root_reach_keeps_a_target_carried_sideways_over_its_feet(skeleton):
