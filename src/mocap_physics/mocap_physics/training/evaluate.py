@@ -520,9 +520,11 @@ _READING = '''## How to read this
 
 The ablation: the "input" column is no physics (the kinematic target fed to the cycle);
 "physics" is the default node configuration (`dynamics` whole_body: the whole-body
-inverse-dynamics QP with residual weights 3e2 / 3e3, the foot guard points, root gains
-400/40, joint gains 3600/120, stance up to 8 cm above the floor, a foot slides when it needs
-0.15 body weights of residual averaged over 0.1 s); "whole body, slide at once, stance 3 cm"
+inverse-dynamics QP with residual weights 3e2 / 3e3, the joints without a stance point
+weighted x100 (`free_limb_weight`), the target's root kept within 15 cm of the held stance
+feet (`root_reach`), the foot guard points, root gains 400/40, joint gains 3600/120, stance
+up to 8 cm above the floor, a foot slides when it needs 0.15 body weights of residual
+averaged over 0.1 s); "whole body, slide at once, stance 3 cm"
 is the same QP with the sliding and stance rules of before (0.05 body weights at once, stance
 within 3 cm); "paper (eq. 13)" is the paper's cycle (`dynamics:=paper`, the
 contact forces cancel out of the forward dynamics); the other columns vary one thing of
