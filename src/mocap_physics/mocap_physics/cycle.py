@@ -313,8 +313,8 @@ class PhysicsCycle:
             return None
         scale = np.full(self.model.nv, k)
         scale[:6] = 1.0
-        for side, dofs in self._leg_dofs.items():
-            if any(s and f == side for s, f in zip(stance, self.model.contact_feet)):
+        for points, dofs in self._leg_dofs:
+            if np.any(stance[points]):
                 scale[dofs] = k_s
         return scale
 
@@ -335,12 +335,14 @@ class PhysicsCycle:
                                     slide_threshold=p.slide_threshold,
                                     slide_time=p.slide_time, solver=p.wbid_solver,
                                     condensed=p.wbid_condensed)
-            # velocity indices of each leg's joints (hip to toe), for free_limb_weight
-            names = skeleton.joint_names
-            self._leg_dofs = {
-                side: np.concatenate([np.arange(3) + model.idx_v[names.index(f'{side}_{j}')]
-                                      for j in ('hip', 'knee', 'ankle', 'toe')])
-                for side in ('left', 'right')}
+            # per leg: its contact points (mask) and its joints' velocity indices (hip to
+            # toe), for free_limb_weight
+            names, feet = skeleton.joint_names, np.array(model.contact_feet)
+            self._leg_dofs = [
+                (feet == side,
+                 np.concatenate([np.arange(3) + model.idx_v[names.index(f'{side}_{j}')]
+                                 for j in ('hip', 'knee', 'ankle', 'toe')]))
+                for side in ('left', 'right')]
         self._kp, self._kd = self.params.gains(model.nv)
         self.dynet = None
         if self._dynet_net is not None:

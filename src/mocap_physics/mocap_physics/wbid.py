@@ -226,7 +226,6 @@ class WholeBodyID:
         self.mu_pyramid = self.friction * PYRAMID_FACTOR
         self.residual_weight = float(residual_weight)
         self.residual_horizontal_weight = float(residual_horizontal_weight)
-        self._weight_scale: Optional[np.ndarray] = None
         self.residual_bound = float(residual_bound)
         self.residual_moment_bound = float(residual_moment_bound)
         self.smoothness = float(smoothness)
@@ -273,7 +272,6 @@ class WholeBodyID:
                 larger on the limbs that carry no stance point, whose deviation from the
                 PD then costs more than the stance legs' and the root's.
         """
-        self._weight_scale = weight_scale
         R = np.eye(3) if root_rotation is None else np.asarray(root_rotation, dtype=float)
         t0 = time.perf_counter()
         stance = np.asarray(stance, dtype=bool)
@@ -282,7 +280,7 @@ class WholeBodyID:
         if not np.any(stance):
             self._need.clear()                     # flight: no foot carries a history
         res = self._solve(M, h, a_des, Jc, drift, stance, a_ref, xy, sliding, slide_dir,
-                          feet, body_mass, gravity, R)
+                          feet, body_mass, gravity, R, weight_scale)
         solves = 1
         if res is not None and np.any(stance):
             lam, r1 = res[1], res[2]
@@ -325,7 +323,7 @@ class WholeBodyID:
                         slide_dir[c] = f / max(float(np.linalg.norm(f)), 1e-12)
                 sliding = sat
                 res2 = self._solve(M, h, a_des, Jc, drift, stance, a_ref, xy, sliding,
-                                   slide_dir, feet, body_mass, gravity, R)
+                                   slide_dir, feet, body_mass, gravity, R, weight_scale)
                 solves += 1
                 if res2 is not None:
                     res = res2
@@ -359,7 +357,7 @@ class WholeBodyID:
 
     # ------------------------------------------------------------------------------------
     def _solve(self, M, h, a_des, Jc, drift, stance, a_ref, xy, sliding, slide_dir, feet,
-               body_mass, gravity, R):
+               body_mass, gravity, R, weight_scale=None):
         """Build and solve the QP; returns (qdd, lambda N, r, status) or None on failure.
 
         The problem is built in two parts: the dynamics rows ``E qdd + F y = e`` (the six
@@ -379,8 +377,8 @@ class WholeBodyID:
         # -- the weights of qdd and of y -------------------------------------------------
         # (floored: the lightest DoFs, e.g. the toes, would make the problem ill-conditioned)
         w = np.maximum(np.diag(M) / body_mass, 1e-3)
-        if self._weight_scale is not None:
-            w = w * self._weight_scale
+        if weight_scale is not None:
+            w = w * weight_scale
         hy = np.empty(ny)
         hy[:3 * k] = self.smoothness + self.force_regularization
         hy[3 * k:] = self.residual_weight
