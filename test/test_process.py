@@ -451,6 +451,11 @@ def test_process_bad_inputs_give_one_clear_line(tmp_path):
         'camera_motion_rotation must be plane or homography' in res.stderr, res.stderr
     res = _mocap('process', GT_BAG, '-o', tmp_path / 'o4', '--start', 'physics')
     assert res.returncode == 2 and 'lacks its topic' in res.stderr
+    # a misspelt parameter is refused (rclpy would drop it and run the default)
+    res = _mocap('process', GT_BAG, '-o', tmp_path / 'o6', '--param',
+                 'physics.stance_relase=0.1', '--param', 'gmr.lookahead=4')
+    assert res.returncode == 2 and 'unknown parameter of the physics node' in res.stderr \
+        and 'did you mean stance_release' in res.stderr, res.stderr
 
 
 def test_process_truncated_bag_keeps_what_came_before(tmp_path):

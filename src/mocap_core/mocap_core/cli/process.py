@@ -180,6 +180,25 @@ def _overrides(values: Dict[str, Any]) -> List[Any]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
+def unknown_params(node: Any, name: str, values: Dict[str, Any]) -> Optional[str]:
+    """The message for ``--param`` names that ``node`` (the ``name`` stage) does not declare,
+    or None when it declares all of them. rclpy drops an override of an undeclared
+    parameter without a word, so a misspelt ``--param`` would silently run the defaults."""
+    import difflib
+
+    missing = [k for k in values if not node.has_parameter(k)]
+    if not missing:
+        return None
+    declared = sorted(node._parameters)  # noqa: SLF001 - rclpy keeps no public list of names
+    hints = []
+    for k in missing:
+        close = difflib.get_close_matches(k, declared, n=3)
+        hints.append(f'{name}.{k}' + (f' (did you mean {", ".join(close)}?)' if close else ''))
+    return (f'unknown parameter{"s" if len(missing) > 1 else ""} of the {name} node: '
+            f'{"; ".join(hints)} (`ros2 param list` on the running node, or the node\'s '
+            'README, lists them)')
+
+
 class Recorder:
     """Writes every message the graph sees to the output bag (see the module doc)."""
 
@@ -339,6 +358,9 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
             except Exception as exc:  # noqa: BLE001 - e.g. a bad parameter value
                 raise ProcessError(f'cannot start the {name} node: {type(exc).__name__}: '
                                    f'{exc}') from None
+            bad = unknown_params(nodes[name], name, params.get(name, {}))
+            if bad:
+                raise ProcessError(bad)
         t0 = time.perf_counter()
         frames = 0
         if video is not None:

@@ -68,7 +68,7 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
     from ..executors import close_nodes, init_rclpy, make_executor, spin_until
     from ..guard import record_failure
     from ..inprocess import InProcessGraph
-    from .process import _overrides
+    from .process import _overrides, unknown_params
 
     writer = recorder = None
     if record is not None:
@@ -118,6 +118,9 @@ def run(params: Dict[str, Dict[str, Any]], ros_args: Optional[List[str]] = None,
             except Exception as exc:  # noqa: BLE001 - a bad parameter, missing weights, ...
                 raise RunError(f'cannot start the {name} node: {type(exc).__name__}: '
                                f'{exc}') from None
+            bad = unknown_params(nodes[name], name, params.get(name, {}))
+            if bad:
+                raise RunError(bad)
         graph.seal()
         for node in nodes.values():
             executor.add_node(node)
