@@ -251,6 +251,9 @@ PARAMETERS = (
     ParamSpec('stance_release', _D.stance_release, 'whole_body: a stance point\'s anchor '
               'follows the target point when it is farther than this, at most stick_speed, m',
               min_value=0.0, read_only=True),
+    ParamSpec('stick_speed', _D.stick_speed, 'Fastest a dragged stance / stick anchor moves '
+              'after its target point (stance_release, stick_release), m/s', min_value=0.0,
+              read_only=True),
     ParamSpec('root_follow_gain', _D.root_follow_gain, 'whole_body: per frame the target '
               'root moves this share of the way to where the stance feet\'s targets lie on '
               'their anchors (0: off): the lifter\'s disagreement between root and legs is '
@@ -384,6 +387,7 @@ class PhysicsNode(Node):
             root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
             max_frame_gap=p['max_frame_gap_s'], skeleton_tolerance=p['skeleton_tolerance'],
             foot_stick=p['foot_stick'], stick_release=p['stick_release'],
+            stick_speed=p['stick_speed'],
             flat_foot_pitch_deg=p['flat_foot_pitch_deg'],
             gains_mode=p['gains_mode'], dynet_weights=weights if learned else '',
             dynamics=p['dynamics'], residual_weight=p['residual_weight'],
