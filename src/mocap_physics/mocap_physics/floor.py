@@ -456,6 +456,10 @@ class FloorTrackerParams:
     freeze_after: int = 0             # frames after which the frame is fixed (0: never)
     blend_frames: int = 15            # frames over which a new fit is blended in (0: at once)
     flat_foot_pitch_deg: float = 30.0  # the heel points' placement (mocap_physics.foot)
+    restart_share: float = 0.3        # when the window's fit explains less than this share of
+    restart_frames: int = 30          # the last restart_frames contact frames' points and
+    #                                   their own fit twice as much, the older points are
+    #                                   forgotten (the camera tilted unseen; 0: never)
 
     def validate(self) -> None:
         bad = []
@@ -469,6 +473,10 @@ class FloorTrackerParams:
                        f'{self.update_every})')
         if not (np.isfinite(self.flat_foot_pitch_deg) and 0 <= self.flat_foot_pitch_deg <= 60):
             bad.append(f'flat_foot_pitch_deg={self.flat_foot_pitch_deg} (0 to 60)')
+        if not 0.0 <= self.restart_share <= 1.0:
+            bad.append(f'restart_share={self.restart_share} (0 to 1)')
+        if int(self.restart_frames) < 1:
+            bad.append(f'restart_frames={self.restart_frames} (>= 1)')
         if self.prior not in ('body', 'camera'):
             bad.append(f"prior={self.prior!r} ('body' or 'camera')")
         for name in ('prior_weight_m', 'inlier_threshold', 'min_change_deg', 'min_change_m'):
@@ -530,6 +538,7 @@ class FloorTracker:
         self.target: Optional[FloorFrame] = None
         self.fit: Optional[PlaneFit] = None
         self.changes = 0
+        self.restarts = 0
         self.adopted = False
         self._blend: Optional[Tuple[FloorFrame, int]] = None   # (start frame, frames done)
         self._since_fit = 0
@@ -591,10 +600,51 @@ class FloorTracker:
             fit = fit_floor_plane(pts, w, prior, p.prior_weight_m, p.inlier_threshold,
                                   offset_quantile=p.offset_quantile, rng=self._rng)
             if fit.source == 'points':
-                return fit
+                recent = self._restarted(fit)
+                return fit if recent is None else recent
         low = np.asarray(self._lowest)
         return fit_floor_plane(low, None, prior, p.prior_weight_m, p.inlier_threshold,
                                min_points=10 ** 9)
+
+    def _restarted(self, fit: PlaneFit) -> Optional[PlaneFit]:
+        """The fit of the last ``restart_frames`` contact frames when the window's ``fit``
+        explains fewer than ``restart_share`` of those recent points (by weight, within
+        ``inlier_threshold``) and their own fit explains at least twice as many; the older
+        points are then forgotten (:attr:`restarts` counts it). None otherwise.
+
+        Contact points are kept in the camera frame. A camera that tilts while its motion is
+        not known (a scene of straight edges, a texture-less wall) moves the floor in that
+        frame: the window then holds several floors, the older ones outnumber the new one,
+        and the fit stays on a floor that is no longer there (a hand-held camera pitching
+        from 17 to 60 degrees down over eight seconds left the fit 34 degrees off and the
+        body falling, docs/physics.md)."""
+        p = self.params
+        k = int(p.restart_frames)
+        if p.restart_share <= 0 or len(self._points) <= k:
+            return None
+        pts = np.concatenate(list(self._points)[-k:])
+        w = np.concatenate(list(self._weights)[-k:])
+        total = float(w.sum())
+        if total <= 0:
+            return None
+        on_fit = float(w[np.abs(pts @ fit.normal + fit.offset) <= p.inlier_threshold].sum())
+        if on_fit >= p.restart_share * total:
+            return None
+        prior = self.prior()
+        if p.prior == 'body' and self._up:
+            m = np.mean(np.asarray(list(self._up)[-k:]), axis=0)
+            prior = _unit(m) if np.linalg.norm(m) > 1e-6 else prior
+        recent = fit_floor_plane(pts, w, prior, p.prior_weight_m, p.inlier_threshold,
+                                 offset_quantile=p.offset_quantile, rng=self._rng)
+        on_recent = float(w[np.abs(pts @ recent.normal + recent.offset)
+                            <= p.inlier_threshold].sum())
+        if recent.source != 'points' or on_recent < 2.0 * on_fit:
+            return None
+        for dq in (self._points, self._weights, self._up, self._lowest):
+            while len(dq) > k:
+                dq.popleft()
+        self.restarts += 1
+        return recent
 
     def update(self, pose: Pose, probabilities: Optional[Sequence[float]],
                world: Optional[Tuple[np.ndarray, np.ndarray]] = None

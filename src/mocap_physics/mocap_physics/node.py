@@ -343,6 +343,14 @@ PARAMETERS = (
               'which a re-fitted floor replaces the last one (smoothstep; 0 = at once: the '
               'outputs, in the floor frame, then jump at every re-fit; at most '
               'floor_update_every)', min_value=0, read_only=True),
+    ParamSpec('floor_restart_share', _F.restart_share, 'floor_source estimate: when a fit '
+              'explains fewer than this share of the window\'s contact points and the last '
+              'floor_restart_frames contact frames fit better, the older points are forgotten '
+              '(the camera tilted while its motion was unknown; 0 = never)', min_value=0.0,
+              max_value=1.0, read_only=True),
+    ParamSpec('floor_restart_frames', _F.restart_frames, 'floor_source estimate: contact '
+              'frames kept when the window restarts (floor_restart_share)', min_value=1,
+              read_only=True),
     ParamSpec('camera_height', 1.5, 'floor_source camera_params: camera height above the '
               'floor, m', min_value=0.0, read_only=True),
     ParamSpec('camera_pitch_deg', 0.0, 'floor_source camera_params: camera pitch down from '
@@ -563,6 +571,8 @@ class PhysicsNode(Node):
                 contact_threshold=p['floor_contact_threshold'], prior=p['floor_prior'],
                 freeze_after=p['floor_freeze_after'],
                 blend_frames=p['floor_blend_frames'],
+                restart_share=p['floor_restart_share'],
+                restart_frames=p['floor_restart_frames'],
                 # auto (-1): the template's until the physics has estimated it
                 flat_foot_pitch_deg=p['flat_foot_pitch_deg'] if p['flat_foot_pitch_deg'] >= 0
                 else TEMPLATE_FLAT_FOOT_PITCH_DEG))     # validates them
@@ -955,6 +965,7 @@ class PhysicsNode(Node):
                 d.set_value('floor_fit', f'{tr.fit.inliers}/{tr.fit.points} inliers, rms '
                             f'{tr.fit.rms * 1e3:.1f} mm, {tr.fit.source}')
             d.set_value('floor_changes', tr.changes)
+            d.set_value('floor_window_restarts', tr.restarts)
         elif floor is not None:
             d.set_value('floor_camera_height_m', f'{floor.height:.3f}')
         r = online.last_result

@@ -58,13 +58,16 @@ def _camera(pitch_deg=20.0, roll_deg=4.0, height=1.6):
 def _walk_in_camera(R, c, frames=150, seed=0, jitter=0.003):
     """A person on the floor (z = 0) walking a curved path in the world, seen from the camera
     (R world->camera, c centre): poses in the camera frame, contact probabilities (feet
-    alternating), and the upper body leaning randomly (+-5 deg about a vertical mean)."""
+    alternating), and the upper body leaning randomly (+-5 deg about a vertical mean). ``R``
+    may be a list of per-frame rotations (a camera that turns)."""
     rng = np.random.default_rng(seed)
     sk = Skeleton.default()
     rest = Pose.rest(sk)
-    qc = matrix_to_quat(R)
+    Rs = [np.asarray(R)] * frames if np.ndim(R) == 2 else [np.asarray(r) for r in R]
     poses, probs = [], []
     for k in range(frames):
+        R = Rs[k]
+        qc = matrix_to_quat(R)
         t = k / 30.0
         root = np.array([0.6 * t, 0.4 * np.sin(0.8 * t), rest.root_position[2]])
         yaw = 0.3 * np.cos(0.8 * t)
@@ -104,6 +107,39 @@ def test_tracker_recovers_tilted_floor(pitch, roll):
                      for pose in poses])
     assert np.abs(feet[..., 2]).max() < 0.015
     assert frame.rotation[0] @ np.array([0.0, 0.0, 1.0]) > 0.8
+
+
+def _tilt_error_deg(frame, R):
+    return np.degrees(np.arccos(np.clip(frame.normal @ (R @ np.array([0.0, 0.0, 1.0])), -1, 1)))
+
+
+def test_a_camera_re_aimed_unseen_restarts_the_window():
+    """A hand-held camera re-aimed from 15 to 40 degrees down after 4 s, its motion unknown
+    to the physics: the floor moves in the camera frame. The old floor's points outnumber the
+    new one's in the window, so without the restart (``restart_share`` 0) the fit stays on
+    the old floor until they age out; with it (the default) the floor follows within a
+    second and a half (the case of a rendered travel clip, docs/physics.md). A camera that
+    holds still never restarts."""
+    frames = 270
+    Rs = [_camera(15.0 if k < 120 else 40.0, 3.0)[0] for k in range(frames)]
+    c = _camera()[1]
+    poses, probs = _walk_in_camera(Rs, c, frames=frames, seed=3)
+    result = {}
+    for share in (FloorTrackerParams().restart_share, 0.0):
+        tracker = FloorTracker(FloorTrackerParams(restart_share=share))
+        err = [_tilt_error_deg(tracker.update(pose, p)[0], R)
+               for pose, p, R in zip(poses, probs, Rs)]
+        result[share] = (float(np.median(err[180:240])), tracker.restarts)
+    on, off = result[FloorTrackerParams().restart_share], result[0.0]
+    assert FloorTrackerParams().restart_share > 0
+    assert on[1] == 1 and off[1] == 0, result
+    assert on[0] < 1.0 and off[0] > 15.0, result
+    # a steady camera: the whole window fits one plane, nothing is forgotten
+    R = _camera(30.0, 3.0)[0]
+    tracker = FloorTracker()
+    for pose, p in zip(*_walk_in_camera(R, c, frames=frames, seed=3)):
+        frame, _ = tracker.update(pose, p)
+    assert tracker.restarts == 0 and _tilt_error_deg(frame, R) < 1.0
 
 
 def test_fit_is_robust_to_outliers_and_uses_prior_when_degenerate():
