@@ -343,10 +343,11 @@ PARAMETERS = (
               'which a re-fitted floor replaces the last one (smoothstep; 0 = at once: the '
               'outputs, in the floor frame, then jump at every re-fit; at most '
               'floor_update_every)', min_value=0, read_only=True),
-    ParamSpec('floor_restart_share', _F.restart_share, 'floor_source estimate: when a fit '
-              'explains fewer than this share of the window\'s contact points and the last '
-              'floor_restart_frames contact frames fit better, the older points are forgotten '
-              '(the camera tilted while its motion was unknown; 0 = never)', min_value=0.0,
+    ParamSpec('floor_restart_share', _F.restart_share, 'floor_source estimate: when the '
+              'window\'s plane explains less than this share of the points of the last '
+              'floor_restart_frames contact frames and their own plane at least twice as '
+              'many, the older points are forgotten (a camera re-aimed while its motion was '
+              'unknown; 0 = never)', min_value=0.0,
               max_value=1.0, read_only=True),
     ParamSpec('floor_restart_frames', _F.restart_frames, 'floor_source estimate: contact '
               'frames kept when the window restarts (floor_restart_share)', min_value=1,
