@@ -246,6 +246,9 @@ def test_process_ground_truth_bag_every_topic_same_stamps_accurate(gt_run):
     # the final status is refreshed although timers do not run offline
     assert 'DoF' in run.diagnostics['physics: physics']['model'], run.diagnostics
     assert run.diagnostics['physics: physics']['dynamics'] == 'whole_body', run.diagnostics
+    # a camera that stands still: the floor window never restarts (docs/physics.md)
+    assert run.diagnostics['physics: physics']['floor_window_restarts'] == '0', \
+        run.diagnostics['physics: physics']
     # offline: 16 frames per pass over the context window (live: the streaming encoder)
     assert run.diagnostics['lifter: lifter']['inference'].startswith('window pass'), \
         run.diagnostics
