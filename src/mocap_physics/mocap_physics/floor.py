@@ -539,6 +539,7 @@ class FloorTracker:
         self.fit: Optional[PlaneFit] = None
         self.changes = 0
         self.restarts = 0
+        self._restart_allowed = True
         self.adopted = False
         self._blend: Optional[Tuple[FloorFrame, int]] = None   # (start frame, frames done)
         self._since_fit = 0
@@ -620,7 +621,7 @@ class FloorTracker:
         body falling, docs/physics.md)."""
         p = self.params
         k = int(p.restart_frames)
-        if p.restart_share <= 0 or len(self._points) <= k:
+        if p.restart_share <= 0 or not self._restart_allowed or len(self._points) <= k:
             return None
         pts = np.concatenate(list(self._points)[-k:])
         w = np.concatenate(list(self._weights)[-k:])
@@ -647,14 +648,16 @@ class FloorTracker:
         return recent
 
     def update(self, pose: Pose, probabilities: Optional[Sequence[float]],
-               world: Optional[Tuple[np.ndarray, np.ndarray]] = None
-               ) -> Tuple[FloorFrame, bool]:
+               world: Optional[Tuple[np.ndarray, np.ndarray]] = None,
+               restart: bool = True) -> Tuple[FloorFrame, bool]:
         """Record ``pose`` (source frame) and return (current floor frame, changed).
 
         ``world``: the source frame's pose (R (3, 3), t (3,) m; ``p_world = R p + t``) in a
         world frame whose z is up (a known camera pose, REP-103): the floor's normal is that z
         and only its height is fitted (:meth:`_update_known`). Once a frame came with one, a
-        frame without keeps the last floor."""
+        frame without keeps the last floor. ``restart`` False: a re-fit of this frame does
+        not restart the window (:meth:`_restarted`; the camera is known to stand still)."""
+        self._restart_allowed = bool(restart)
         if world is not None:
             return self._update_known(pose, probabilities, world)
         if self.known:

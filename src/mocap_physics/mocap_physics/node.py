@@ -672,7 +672,8 @@ class PhysicsNode(Node):
                 frames = frames + online.add_motion(stamp, self._derotated(stamp, pose),
                                                     msg.header.frame_id,
                                                     camera=self._camera(stamp),
-                                                    camera_moving=self._camera_moving(stamp))
+                                                    camera_moving=self._camera_moving(stamp),
+                                                    camera_static=self._camera_static(stamp))
             released.append((pid, frames))
         self._publish_people(released)
         timeout = int(self.p['person_timeout_s'] * 1e9)
@@ -706,7 +707,8 @@ class PhysicsNode(Node):
             return
         self._publish(self.online.add_motion(stamp, self._derotated(stamp, pose),
                                              msg.header.frame_id, camera=self._camera(stamp),
-                                             camera_moving=self._camera_moving(stamp)))
+                                             camera_moving=self._camera_moving(stamp),
+                                             camera_static=self._camera_static(stamp)))
 
     @staticmethod
     def _derotating(p) -> bool:
@@ -753,16 +755,26 @@ class PhysicsNode(Node):
         if self.known_poses.add(*camera_pose_from_msg(msg)) == 'invalid':
             self._problem('camera_pose', 'ignoring camera pose: not finite')
 
-    def _camera_moving(self, stamp: int) -> bool:
-        """Whether the camera may move at ``stamp`` for the stance drift: the camera-motion
-        estimate of that stamp (else the newest one at most 0.5 s before it) exists and is
-        not ``static``."""
+    def _camera_state(self, stamp: int) -> Optional[str]:
+        """The camera-motion estimate's state of ``stamp`` (else of the newest one at most
+        0.5 s before it), None without one."""
         state = self.camera_states.get(stamp)
         if state is None:
             before = next((s for s in reversed(self.camera_states) if s < stamp), None)
             if before is not None and stamp - before <= CAMERA_STATE_MAX_AGE_NS:
                 state = self.camera_states[before]
+        return state
+
+    def _camera_moving(self, stamp: int) -> bool:
+        """Whether the camera may move at ``stamp`` for the stance drift: its estimate
+        (:meth:`_camera_state`) exists and is not ``static``."""
+        state = self._camera_state(stamp)
         return state is not None and state != 'static'
+
+    def _camera_static(self, stamp: int) -> bool:
+        """Whether the estimate says the camera stands still at ``stamp`` (the floor window
+        then does not restart)."""
+        return self._camera_state(stamp) == 'static'
 
     def _camera(self, stamp: int):
         """The camera's pose (R, C) of ``stamp`` for carry_with_camera, else None (also

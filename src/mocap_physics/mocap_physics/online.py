@@ -152,7 +152,7 @@ class OnlinePhysics:
         self.restart_after_ns = max(self.params.max_frame_gap, 1.0) * 1e9
         #: motion frames waiting for their contacts: (stamp ns, pose, frame_id, arrival,
         #: camera pose or None, whether the camera may move)
-        self.pending: Deque[Tuple[int, Pose, str, float, Optional[CameraPose], bool]] = \
+        self.pending: Deque[Tuple[int, Pose, str, float, Optional[CameraPose], bool, bool]] = \
             collections.deque()
         #: the camera pose of the last frame stepped (step 4 of the module docstring)
         self._last_camera: Optional[CameraPose] = None
@@ -221,17 +221,19 @@ class OnlinePhysics:
 
     def add_motion(self, stamp_ns: int, pose: Pose, frame_id: str = '',
                    camera: Optional[CameraPose] = None,
-                   camera_moving: bool = False) -> List[PhysicsFrame]:
+                   camera_moving: bool = False,
+                   camera_static: bool = False) -> List[PhysicsFrame]:
         """Queue a target pose (input frame ``frame_id``; ``camera``: the camera's pose of
         this frame, module docstring 4; ``camera_moving``: the camera may move, for the
-        cycle's stance drift) and return the frames that can go now (earlier
+        cycle's stance drift; ``camera_static``: the camera is known to stand still, so the
+        floor window does not restart) and return the frames that can go now (earlier
         ones included). Runs :meth:`admit` first (a no-op when the caller already admitted
         this stamp)."""
         accepted, frames = self.admit(stamp_ns)
         if not accepted:
             return frames
         self.pending.append((int(stamp_ns), pose, frame_id, self._clock(), camera,
-                             bool(camera_moving)))
+                             bool(camera_moving), bool(camera_static)))
         return frames + self.process()
 
     def _contacts_for(self, stamp: int, waited: float) -> Tuple[bool, Optional[np.ndarray]]:
@@ -256,13 +258,14 @@ class OnlinePhysics:
         ``wait=False`` every waiting frame, with the contacts that are there."""
         frames: List[PhysicsFrame] = []
         while self.pending:
-            stamp, pose, frame_id, t_in, camera, moving = self.pending[0]
+            stamp, pose, frame_id, t_in, camera, moving, static = self.pending[0]
             waited = self._clock() - t_in if wait else float('inf')
             ready, probs = self._contacts_for(stamp, waited)
             if not ready:
                 break
             self.pending.popleft()
-            out = self.step(stamp, pose, frame_id, probs, camera=camera, camera_moving=moving)
+            out = self.step(stamp, pose, frame_id, probs, camera=camera, camera_moving=moving,
+                            camera_static=static)
             if out is not None:
                 frames.append(out)
         return frames
@@ -274,14 +277,14 @@ class OnlinePhysics:
 
     # -- one frame ---------------------------------------------------------------------------
     def _update_floor(self, pose: Pose, probs: Optional[np.ndarray],
-                      world: Optional[CameraPose] = None) -> bool:
-        """Feed the tracker (``world``: a known camera pose, z up); re-express the state when
-        the floor changed. False when there is no floor yet (the frame cannot be
-        simulated)."""
+                      world: Optional[CameraPose] = None, restart: bool = True) -> bool:
+        """Feed the tracker (``world``: a known camera pose, z up; ``restart``: the window
+        may restart); re-express the state when the floor changed. False when there is no
+        floor yet (the frame cannot be simulated)."""
         tracker = self.tracker
         try:
-            new, changed = tracker.update(pose, probs) if world is None else \
-                tracker.update(pose, probs, world)
+            new, changed = tracker.update(pose, probs, restart=restart) if world is None \
+                else tracker.update(pose, probs, world)
         except ValueError as exc:      # no finite contact point: keep the last floor
             new, changed = self.floor, False
             self._notify('floor', f'floor estimate not updated: {exc}')
@@ -328,7 +331,8 @@ class OnlinePhysics:
              probabilities: Optional[np.ndarray] = None,
              time_s: Optional[float] = None,
              camera: Optional[CameraPose] = None,
-             camera_moving: bool = False) -> Optional[PhysicsFrame]:
+             camera_moving: bool = False,
+             camera_static: bool = False) -> Optional[PhysicsFrame]:
         """Run one frame now (module docstring, 3-4), without the ordering and waiting of
         :meth:`add_motion`.
 
@@ -343,6 +347,9 @@ class OnlinePhysics:
                 docstring, 4).
             camera_moving: the camera may move in this frame (only then does the cycle
                 follow the stance drift).
+            camera_static: the camera-motion estimate says the camera stands still: the
+                floor cannot have moved in the camera frame, so the floor window does not
+                restart (:class:`~.floor.FloorTracker`).
 
         Returns:
             The frame, or None when it was dropped (reported as a Notice).
@@ -354,7 +361,8 @@ class OnlinePhysics:
         if self.upright is not None and camera is not None:
             pose = self.upright.apply(pose, camera[0])
         if self.tracker is not None and not self._update_floor(
-                pose, probabilities, camera if self.floor_gravity else None):
+                pose, probabilities, camera if self.floor_gravity else None,
+                restart=not camera_static):
             return None
         if self.floor is not None:
             if camera is not None and self._last_camera is not None and \

@@ -119,7 +119,7 @@ def test_a_camera_re_aimed_unseen_restarts_the_window():
     new one's in the window, so without the restart (``restart_share`` 0) the fit stays on
     the old floor until they age out; with it (the default) the floor follows within a
     second and a half (the case of a rendered travel clip, docs/physics.md). A camera that
-    holds still never restarts."""
+    holds still never restarts, nor does one the camera-motion estimate calls static."""
     frames = 270
     Rs = [_camera(15.0 if k < 120 else 40.0, 3.0)[0] for k in range(frames)]
     c = _camera()[1]
@@ -134,6 +134,11 @@ def test_a_camera_re_aimed_unseen_restarts_the_window():
     assert FloorTrackerParams().restart_share > 0
     assert on[1] == 1 and off[1] == 0, result
     assert on[0] < 1.0 and off[0] > 15.0, result
+    # frames whose camera is known to stand still (restart=False) never restart the window
+    tracker = FloorTracker()
+    for pose, p in zip(poses, probs):
+        tracker.update(pose, p, restart=False)
+    assert tracker.restarts == 0
     # a steady camera: the whole window fits one plane, nothing is forgotten
     R = _camera(30.0, 3.0)[0]
     tracker = FloorTracker()

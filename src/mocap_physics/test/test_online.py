@@ -95,7 +95,7 @@ def test_estimated_floor_matches_the_hand_driven_sequence(clip):
 
 def test_no_floor_drops_the_frame():
     class Broken(FloorTracker):
-        def update(self, pose, probabilities):
+        def update(self, pose, probabilities, *args, **kwargs):
             raise ValueError('no finite contact point')
 
     notices = []
@@ -104,6 +104,25 @@ def test_no_floor_drops_the_frame():
     assert [(n.key, n.level, n.dropped) for n in notices] == [
         ('floor', 'warn', False), ('floor', 'problem', True)]
     assert online.last_stamp == -1 and online.cycle.stats.frames == 0
+
+
+def test_a_static_camera_keeps_the_floor_window_from_restarting():
+    """``camera_static`` (the camera-motion estimate says the camera stands still) reaches
+    the floor tracker as ``restart=False`` through the queue; other frames may restart."""
+    seen = []
+
+    class Spy(FloorTracker):
+        def update(self, pose, probabilities, world=None, restart=True):
+            seen.append(restart)
+            return super().update(pose, probabilities, world, restart)
+
+    online = OnlinePhysics(PhysicsParams(), Spy())
+    rest = Pose.rest(Skeleton.default(), np.array([0.0, 1.0, 3.0]))
+    online.add_motion(T0, rest, 'camera_optical_frame', camera_static=True)
+    online.add_motion(T0 + DT, rest, 'camera_optical_frame', camera_moving=True)
+    online.add_motion(T0 + 2 * DT, rest, 'camera_optical_frame')
+    online.flush()
+    assert seen == [False, True, True]
 
 
 def test_contacts_matched_by_stamp_wait_and_age():
