@@ -347,7 +347,8 @@ PARAMETERS = (
               'window\'s plane explains less than this share of the points of the last '
               'floor_restart_frames contact frames and their own plane at least twice as '
               'many, the older points are forgotten (a camera re-aimed while its motion was '
-              'unknown; 0 = never)', min_value=0.0,
+              'unknown; never while the camera-motion estimate says static; 0 = never)',
+              min_value=0.0,
               max_value=1.0, read_only=True),
     ParamSpec('floor_restart_frames', _F.restart_frames, 'floor_source estimate: contact '
               'frames kept when the window restarts (floor_restart_share)', min_value=1,
