@@ -558,9 +558,12 @@ class FloorTracker:
     def ready(self) -> bool:
         return self.contact_frames >= self.params.min_frames
 
-    def prior(self) -> np.ndarray:
+    def prior(self, last: Optional[int] = None) -> np.ndarray:
+        """The up direction for what the feet cannot determine (``last``: the mean body up
+        of only the last that many frames)."""
         if self.params.prior == 'body' and self._up:
-            m = np.mean(np.asarray(self._up), axis=0)
+            ups = list(self._up)[-last:] if last else self._up
+            m = np.mean(np.asarray(ups), axis=0)
             if np.linalg.norm(m) > 1e-6:
                 return _unit(m)
         return CAMERA_UP.copy()
@@ -631,11 +634,7 @@ class FloorTracker:
         on_fit = float(w[np.abs(pts @ fit.normal + fit.offset) <= p.inlier_threshold].sum())
         if on_fit >= p.restart_share * total:
             return None
-        prior = self.prior()
-        if p.prior == 'body' and self._up:
-            m = np.mean(np.asarray(list(self._up)[-k:]), axis=0)
-            prior = _unit(m) if np.linalg.norm(m) > 1e-6 else prior
-        recent = fit_floor_plane(pts, w, prior, p.prior_weight_m, p.inlier_threshold,
+        recent = fit_floor_plane(pts, w, self.prior(last=k), p.prior_weight_m, p.inlier_threshold,
                                  offset_quantile=p.offset_quantile, rng=self._rng)
         on_recent = float(w[np.abs(pts @ recent.normal + recent.offset)
                             <= p.inlier_threshold].sum())

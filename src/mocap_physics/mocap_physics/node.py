@@ -348,8 +348,7 @@ PARAMETERS = (
               'floor_restart_frames contact frames and their own plane at least twice as '
               'many, the older points are forgotten (a camera re-aimed while its motion was '
               'unknown; never while the camera-motion estimate says static; 0 = never)',
-              min_value=0.0,
-              max_value=1.0, read_only=True),
+              min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('floor_restart_frames', _F.restart_frames, 'floor_source estimate: contact '
               'frames kept when the window restarts (floor_restart_share)', min_value=1,
               read_only=True),

@@ -151,7 +151,7 @@ class OnlinePhysics:
         #: restart threshold of :meth:`admit`, ns
         self.restart_after_ns = max(self.params.max_frame_gap, 1.0) * 1e9
         #: motion frames waiting for their contacts: (stamp ns, pose, frame_id, arrival,
-        #: camera pose or None, whether the camera may move)
+        #: camera pose or None, whether the camera may move, whether it stands still)
         self.pending: Deque[Tuple[int, Pose, str, float, Optional[CameraPose], bool, bool]] = \
             collections.deque()
         #: the camera pose of the last frame stepped (step 4 of the module docstring)
