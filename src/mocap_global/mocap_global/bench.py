@@ -8,7 +8,10 @@ pass over the window, accumulation; the ROS conversions are not included): media
 max, for the shipped weights (or, when they do not exist yet, a randomly initialised network
 of the shipped size: the time does not depend on the weights) at several look-aheads and
 window lengths, with and without the static-camera fusion and with test-time augmentation
-(2 or 4 windows per pass). The goal and past figures: ``docs/global.md``.
+(2 or 4 windows per pass), on both network engines (``inference``: NumPy, the default, and
+PyTorch; each configuration's two engines run in turn, twice, in alternating order, and the
+median of the runs' medians is reported with the ratio of the two). The goal and past
+figures: ``docs/global.md``.
 
 Writes a Markdown report (default ``docs/benchmarks/gmr.md``) and a JSON file next to it.
 """
@@ -32,12 +35,13 @@ BAG = ROOT / 'bags' / 'gt_cmu_walk_12_02'
 
 
 def run(model, poses, stamps, lookahead: int, window: Optional[int], fusion: bool,
-        warmup: int = 20) -> Dict[str, float]:
+        warmup: int = 20, inference: str = 'numpy') -> Dict[str, float]:
     """Time per push (ms) over a stream."""
     from .online import OnlineGMR, StaticCameraFusion
 
     fu = StaticCameraFusion(model.cfg.fps) if fusion else None
-    online = OnlineGMR(model, lookahead, window, max_gap_s=1e9, fusion=fu)
+    online = OnlineGMR(model, lookahead, window, max_gap_s=1e9, fusion=fu,
+                       inference=inference)
     times = []
     for i, (s, p) in enumerate(zip(stamps, poses)):
         t = time.perf_counter()
@@ -85,14 +89,28 @@ def main(argv: Optional[List[str]] = None) -> int:
             (15, 48, False, 'none'), (0, 48, False, 'none'), (15, 48, True, 'none'),
             (15, 64, False, 'none'), (31, 64, False, 'none'), (15, 32, False, 'none'),
             (15, 48, False, 'mirror'), (15, 48, False, 'both')):
-        r = run(with_tta(model, tta), poses, stamps, lookahead, window, fusion)
-        r.update({'lookahead': lookahead, 'window': window or cfg.window, 'fusion': fusion,
-                  'tta': tta})
-        rows.append(r)
-        print(f"look-ahead {lookahead:2d}, window {r['window']:3d}, fusion {fusion!s:5s}, "
-              f"test-time augmentation {tta:6s}: median {r['median_ms']:.2f} ms, "
-              f"p95 {r['p95_ms']:.2f} ms, max {r['max_ms']:.2f} ms ({r['frames']} frames)",
-              flush=True)
+        net = with_tta(model, tta)
+        # NumPy runs a plain network only (an augmented one falls back to PyTorch)
+        engines = ('numpy', 'torch') if tta == 'none' else ('torch',)
+        runs: Dict[str, list] = {e: [] for e in engines}
+        for k in range(2):
+            for engine in (engines if k % 2 == 0 else engines[::-1]):
+                runs[engine].append(run(net, poses, stamps, lookahead, window, fusion,
+                                        inference=engine))
+        for engine in engines:
+            r = {key: float(np.median([x[key] for x in runs[engine]]))
+                 for key in ('median_ms', 'p95_ms', 'max_ms')}
+            r.update({'frames': runs[engine][0]['frames'], 'lookahead': lookahead,
+                      'window': window or cfg.window, 'fusion': fusion, 'tta': tta,
+                      'inference': engine})
+            if engine != 'torch':
+                torch_median = float(np.median([x['median_ms'] for x in runs['torch']]))
+                r['vs_torch'] = r['median_ms'] / torch_median
+            rows.append(r)
+            print(f"look-ahead {lookahead:2d}, window {r['window']:3d}, fusion {fusion!s:5s}, "
+                  f"test-time augmentation {tta:6s}, {engine:5s}: median "
+                  f"{r['median_ms']:.2f} ms, p95 {r['p95_ms']:.2f} ms, max "
+                  f"{r['max_ms']:.2f} ms ({r['frames']} frames)", flush=True)
     res = {'date': datetime.datetime.now().strftime('%Y-%m-%d %H:%M'), 'weights': source,
            'model': f'{cfg.layers} x {cfg.hidden} bi-GRU, projection {cfg.projection}',
            'machine': f'{platform.machine()}, {os.cpu_count()} CPU cores, '
@@ -104,14 +122,16 @@ def main(argv: Optional[List[str]] = None) -> int:
              f"Model: {res['model']} ({source}); input: `{res['bag']}` ground-truth motion, "
              f'{args.repeat}x replayed as one stream. Time per frame of OnlineGMR.push (one '
              'GRU pass over the window + accumulation). The node\'s default: look-ahead 15, '
-             'window 48. Goal: <= 5 ms.', '',
-             '| look-ahead | window | fusion | test-time augmentation | median ms | p95 ms | '
-             'max ms | frames |',
-             '|---|---|---|---|---|---|---|---|']
+             'window 48, engine numpy. Each configuration\'s engines ran in turn, twice, in '
+             'alternating order: medians of the two runs. Goal: <= 5 ms.', '',
+             '| look-ahead | window | fusion | test-time augmentation | engine | median ms | '
+             'vs. torch | p95 ms | max ms | frames |',
+             '|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
+        ratio = f"{r['vs_torch']:.2f}x" if 'vs_torch' in r else ''
         lines.append(f"| {r['lookahead']} | {r['window']} | {r['fusion']} | {r['tta']} | "
-                     f"{r['median_ms']:.2f} | {r['p95_ms']:.2f} | {r['max_ms']:.2f} | "
-                     f"{r['frames']} |")
+                     f"{r['inference']} | {r['median_ms']:.2f} | {ratio} | "
+                     f"{r['p95_ms']:.2f} | {r['max_ms']:.2f} | {r['frames']} |")
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text('\n'.join(lines) + '\n')
     args.output.with_suffix('.json').write_text(json.dumps(res, indent=1))

@@ -93,7 +93,8 @@ from mocap_core.rotations import closest_yaw, quat_to_matrix
 from .model import TTA_MODES, with_tta
 from mocap_core.foot_plant import FootPlantConfig
 
-from .online import InputAnchor, OnlineGMR, StaticCameraFusion, WorldFrame, prepare_outputs
+from .online import (INFERENCE_ENGINES, InputAnchor, OnlineGMR, StaticCameraFusion,
+                     WorldFrame, prepare_outputs)
 from .se3 import heading_rotation
 from .weights import default_weights, load_weights
 
@@ -295,6 +296,11 @@ PARAMETERS = (
               'still waiting for look-ahead', min_value=0.0),
     ParamSpec('threads', 1, 'Torch CPU threads', read_only=True, min_value=1),
     ParamSpec('device', 'cpu', "Torch device ('cpu' or 'cuda')", read_only=True),
+    ParamSpec('inference', 'numpy', "The network's engine: 'numpy' (the same network in "
+              'NumPy, to float32 rounding; about 1.6x as fast for one window on a CPU: '
+              "mocap_global.inference; used on the CPU without test-time augmentation, else "
+              "PyTorch) or 'torch'", read_only=True,
+              additional_constraints='one of: numpy, torch'),
 )
 
 
@@ -334,6 +340,9 @@ class GMRNode(Node):
         if p['test_time_augmentation'] not in TTA_MODES:
             raise ValueError(f"test_time_augmentation must be one of {TTA_MODES}, got "
                              f"{p['test_time_augmentation']!r}")
+        if p['inference'] not in INFERENCE_ENGINES:
+            raise ValueError(f'inference must be one of {INFERENCE_ENGINES}, got '
+                             f"{p['inference']!r}")
         self.model = with_tta(load_weights(path, p['device']), p['test_time_augmentation'])
         cfg = self.model.cfg
         self.fps = cfg.fps
@@ -502,32 +511,35 @@ class GMRNode(Node):
         if on_floor:
             self.get_logger().info(f"the input '{frame_id}' is a floor frame: height and tilt "
                                    'from the input, heading and horizontal path from GMR')
-        return OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
-                         p['tilt_correction'], fusion, model_up, p['device'],
-                         chunk=p['chunk'], floor_input=on_floor,
-                         foot_lock=p['foot_lock'], lock_height=p['lock_height'],
-                         heading_smoothing=p['heading_smoothing'],
-                         # a known camera pose carries no estimate noise: followed as it is
-                         moving_lock_time_constant_s=(
-                             0.0 if self.camera_mode == 'known'
-                             else p['fusion_moving_lock_time_constant_s']),
-                         network_rate_hz=self.fps if p['fill_missing_frames'] else 0.0,
-                         foot_plant=FootPlantConfig(
-                             lock_height=p['lock_height'],
-                             release_time_constant_s=p['foot_plant_release_s'],
-                             max_correction=p['foot_plant_max_correction'],
-                             reach=p['foot_plant_reach'],
-                             double_stance_time_constant_s=p['foot_plant_double_stance_s'],
-                             # a known camera pose measures the root: it is not moved
-                             root_follow_time_constant_s=(
-                                 0.0 if self.camera_mode == 'known'
-                                 else p['foot_plant_root_follow_s']))
-                         if p['foot_plant'] else None,
-                         contacts=self.contacts.setdefault(pid, {}),
-                         contact_threshold=p['contact_threshold'],
-                         transition_time_constant_s=p['transition_time_constant_s'],
-                         measured_root_half_window=min(
-                             p['fusion_measured_root_half_window'], p['lookahead']))
+        state = OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
+                          p['tilt_correction'], fusion, model_up, p['device'],
+                          chunk=p['chunk'], floor_input=on_floor,
+                          foot_lock=p['foot_lock'], lock_height=p['lock_height'],
+                          heading_smoothing=p['heading_smoothing'],
+                          # a known camera pose carries no estimate noise: followed as it is
+                          moving_lock_time_constant_s=(
+                              0.0 if self.camera_mode == 'known'
+                              else p['fusion_moving_lock_time_constant_s']),
+                          network_rate_hz=self.fps if p['fill_missing_frames'] else 0.0,
+                          inference=p['inference'],
+                          foot_plant=FootPlantConfig(
+                              lock_height=p['lock_height'],
+                              release_time_constant_s=p['foot_plant_release_s'],
+                              max_correction=p['foot_plant_max_correction'],
+                              reach=p['foot_plant_reach'],
+                              double_stance_time_constant_s=p['foot_plant_double_stance_s'],
+                              # a known camera pose measures the root: it is not moved
+                              root_follow_time_constant_s=(
+                                  0.0 if self.camera_mode == 'known'
+                                  else p['foot_plant_root_follow_s']))
+                          if p['foot_plant'] else None,
+                          contacts=self.contacts.setdefault(pid, {}),
+                          contact_threshold=p['contact_threshold'],
+                          transition_time_constant_s=p['transition_time_constant_s'],
+                          measured_root_half_window=min(
+                              p['fusion_measured_root_half_window'], p['lookahead']))
+        self.diag.set_value('inference', state.inference)
+        return state
 
     def _keep_contacts(self, pid: Optional[int], stamp: int, probs: np.ndarray) -> None:
         """Keep one person's contact probabilities of a stamp (the last

@@ -14,13 +14,14 @@ from mocap_core.skeleton import CONTACT_POINT_NAMES, NUM_JOINTS, Skeleton
 
 from mocap_global import features as F
 from mocap_global.model import GMR, GMRConfig, TTA_MODES, reverse_padded, with_tta
-from mocap_global.online import OnlineGMR, StaticCameraFusion, prepare_outputs
+from mocap_global.inference import NumpyGMR
+from mocap_global.online import INFERENCE_ENGINES, OnlineGMR, StaticCameraFusion, prepare_outputs
 from mocap_global.se3 import (accumulate, align_yaw_translation, compose_steps, invert_motion,
                               relative_motion, time_reverse_motion, tilt_rotation, up_in_body)
 from mocap_global.training import metrics as M
 from mocap_global.training.samples import Augmentation, WindowSampler
 from mocap_global.training.train import TrainConfig, losses, total_loss
-from mocap_global.weights import load_weights, save_weights
+from mocap_global.weights import default_weights, load_weights, save_weights
 
 EZ = np.array([0.0, 0.0, 1.0])
 
@@ -177,7 +178,7 @@ def test_features_and_noise():
 
 def _small_model(**kw) -> GMR:
     torch.manual_seed(0)
-    return GMR(GMRConfig(layers=1, hidden=16, projection=16, window=24, **kw)).eval()
+    return GMR(GMRConfig(**{**dict(layers=1, hidden=16, projection=16, window=24), **kw})).eval()
 
 
 def test_model_shapes_padding_and_weights_roundtrip(tmp_path):
@@ -311,6 +312,53 @@ def test_motion_metrics():
     assert traj['rte_pct'] < 1e-9 and traj['ate_mm'] < 1e-6
     Rz, t = align_yaw_translation(T, T @ rz(0.7).T + [1.0, 2.0, 0.0])
     np.testing.assert_allclose(Rz, rz(0.7), atol=1e-12)
+
+
+@pytest.mark.parametrize('cfg', [dict(layers=2, velocity_input=True),
+                                 dict(layers=1, velocity_input=False, pose_input='quat')])
+def test_numpy_inference_is_the_network(cfg):
+    """NumpyGMR = the PyTorch pass to float32 rounding, for one window and a batch; the
+    shipped weights too; an augmented model is refused."""
+    model = _small_model(**cfg)
+    engine = NumpyGMR(model)
+    shipped = load_weights(default_weights())
+    rng = np.random.default_rng(1)
+    for net, eng, shape in ((model, engine, (1, 24)), (model, engine, (3, 17)),
+                            (shipped, NumpyGMR(shipped), (2, shipped.cfg.window))):
+        x = rng.normal(size=shape + (net.cfg.num_features,)).astype(np.float32)
+        with torch.no_grad():
+            ref = {k: v.double().numpy() for k, v in net(torch.as_tensor(x)).items()}
+        got = eng(x)
+        assert set(got) == set(ref)
+        for k in ref:
+            assert got[k].shape == ref[k].shape and got[k].dtype == np.float64
+            np.testing.assert_allclose(got[k], ref[k], atol=2e-5, err_msg=k)
+    with pytest.raises(TypeError):
+        NumpyGMR(with_tta(model, 'mirror'))
+    with pytest.raises(ValueError, match='features'):
+        engine(np.zeros((1, 24, 5), np.float32))
+
+
+def test_online_engines_give_the_same_frames():
+    """OnlineGMR with the NumPy engine emits the PyTorch engine's frames; an augmented model
+    runs on PyTorch; an unknown engine is refused."""
+    model = _small_model()
+    poses = _poses(50)
+    runs = {}
+    for engine in INFERENCE_ENGINES:
+        online = OnlineGMR(model, lookahead=5, inference=engine)
+        assert online.inference == engine
+        frames = []
+        for i, p in enumerate(poses):
+            frames += online.push(i * 33_333_333, p)[0]
+        runs[engine] = frames + online.flush()
+    assert len(runs['numpy']) == len(runs['torch']) == 50
+    for a, b in zip(runs['numpy'], runs['torch']):
+        np.testing.assert_allclose(a.pose.root_position, b.pose.root_position, atol=1e-5)
+        np.testing.assert_allclose(a.pose.rotations, b.pose.rotations, atol=1e-5)
+    assert OnlineGMR(with_tta(model, 'mirror'), lookahead=5).inference == 'torch'
+    with pytest.raises(ValueError, match='inference'):
+        OnlineGMR(model, lookahead=5, inference='onnx')
 
 
 def _poses(n=40, seed=0):
