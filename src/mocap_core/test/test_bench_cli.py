@@ -14,6 +14,18 @@ def test_a_malformed_keypoints_variant_is_one_error_line_before_any_run(tmp_path
     assert 'offline' not in out.stdout and not (tmp_path / 'report.md').exists()
 
 
+def test_a_variant_must_name_its_node(tmp_path):
+    for item, message in (('inference=torch', 'expected NODE.NAME=VALUE'),
+                          ('planner.x=1', 'NODE: keypoints, lifter, physics, gmr')):
+        out = subprocess.run([sys.executable, '-m', 'mocap_core.cli.mocap', 'bench',
+                              'pipeline', '--variant', item, '--output',
+                              str(tmp_path / 'report.md')],
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 2, out.stderr
+        assert f"--variant '{item}'" in out.stderr and message in out.stderr
+        assert 'offline' not in out.stdout and not (tmp_path / 'report.md').exists()
+
+
 def test_the_report_gives_the_video_runs_side_by_side_as_a_ratio(tmp_path):
     from mocap_core.cli.bench import write_report
 

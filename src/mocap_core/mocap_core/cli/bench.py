@@ -267,6 +267,9 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
                    '--param', f"gmr.lookahead={config['lookahead']}"]
             for k, v in kp.items():
                 cmd += ['--param', f'keypoints.{k}={v}']
+            for node in ('lifter', 'physics', 'gmr'):
+                for k, v in config.get(node, {}).items():
+                    cmd += ['--param', f'{node}.{k}={v}']
             logs['composed'] = work / f"{config['name']}_composed.log"
             with logs['composed'].open('wb') as f:
                 procs['composed'] = subprocess.Popen(cmd, env=env, stdout=f,
@@ -274,9 +277,9 @@ def bench_live(config: Dict, seconds: float, video: Path, work: Path, env: Dict)
                                                      stdin=subprocess.DEVNULL)
             wait_for('composed', 'detector')
         else:
-            start('lifter', {'mode': config['lifter_mode']})
-            start('physics', {})
-            start('gmr', {'lookahead': config['lookahead']})
+            start('lifter', {'mode': config['lifter_mode'], **config.get('lifter', {})})
+            start('physics', dict(config.get('physics', {})))
+            start('gmr', {'lookahead': config['lookahead'], **config.get('gmr', {})})
             for name, text in (('lifter', 'lifter ready'), ('physics', 'physics on'),
                                ('gmr', 'gmr ready')):
                 wait_for(name, text)
@@ -518,14 +521,28 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
     import shlex
     import tempfile
 
-    variants = []
-    for item in args.keypoints_variant:
+    variants = []        # {node: {name: value}} per variant
+    for option, item in ([('--keypoints-variant', i) for i in args.keypoints_variant]
+                         + [('--variant', i) for i in args.variant]):
         pairs = dict(kv.split('=', 1) for kv in item.split(',') if '=' in kv)
         if not pairs or len(pairs) != len(item.split(',')):
-            print(f'mocap bench pipeline: error: --keypoints-variant {item!r}: expected '
-                  'NAME=VALUE[,NAME=VALUE]', file=sys.stderr)
+            print(f'mocap bench pipeline: error: {option} {item!r}: expected '
+                  f"{'NODE.' if option == '--variant' else ''}NAME=VALUE[,...]",
+                  file=sys.stderr)
             return 2
-        variants.append(pairs)
+        if option == '--keypoints-variant':
+            variants.append({'keypoints': pairs})
+            continue
+        nodes: Dict[str, Dict[str, str]] = {}
+        for key, value in pairs.items():
+            node, _, name = key.partition('.')
+            if node not in ('keypoints', 'lifter', 'physics', 'gmr') or not name:
+                print(f'mocap bench pipeline: error: --variant {item!r}: expected '
+                      'NODE.NAME=VALUE (NODE: keypoints, lifter, physics, gmr)',
+                      file=sys.stderr)
+                return 2
+            nodes.setdefault(node, {})[name] = value
+        variants.append(nodes)
     _default_sigint()
     work = Path(tempfile.mkdtemp(prefix='mocap_bench_'))
     env = dict(os.environ)
@@ -558,12 +575,13 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
         configs.insert(0, {'name': 'defaults, max_persons 1 (single-person detector)',
                            'lifter_mode': 'windowed', 'lookahead': 15,
                            'keypoints': {'max_persons': 1}})
-    for pairs in variants:
-        # the live defaults with keypoint-node parameters changed (e.g. mirror_check=true),
-        # after the others, same run
-        configs.append({'name': 'defaults, keypoints ' + ', '.join(
-            f'{k}={v}' for k, v in pairs.items()), 'lifter_mode': 'windowed',
-            'lookahead': 15, 'keypoints': pairs})
+    for nodes in variants:
+        # the live defaults with node parameters changed (e.g. keypoints mirror_check=true,
+        # gmr inference=torch), after the others, same run
+        configs.append({'name': 'defaults, ' + ', '.join(
+            f'{node} ' + ', '.join(f'{k}={v}' for k, v in pairs.items())
+            for node, pairs in nodes.items()), 'lifter_mode': 'windowed',
+            'lookahead': 15, **nodes})
     if args.executor_baseline:
         # every node process with rclpy's SingleThreadedExecutor beside the default (the
         # events executor: mocap_core.executors), same run
@@ -609,6 +627,11 @@ def add_parser(sub) -> None:
                     metavar='NAME=VALUE[,NAME=VALUE]',
                     help='also run the live defaults with these keypoint-node parameters '
                     '(e.g. mirror_check=true), last, in the same run (repeatable)')
+    pp.add_argument('--variant', action='append', default=[],
+                    metavar='NODE.NAME=VALUE[,NODE.NAME=VALUE]',
+                    help='also run the live defaults with these node parameters (NODE: '
+                    'keypoints, lifter, physics, gmr; e.g. gmr.inference=torch), last, in '
+                    'the same run (repeatable)')
     pp.add_argument('--seconds', type=float, default=20.0, help='live run per configuration')
     pp.add_argument('--configs', type=int, default=2, choices=(0, 1, 2),
                     help='live configurations to run (defaults, then low latency)')
