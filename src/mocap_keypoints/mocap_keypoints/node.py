@@ -266,6 +266,11 @@ PARAMETERS = (
               'out in order and unchanged, the detector thread is free sooner (keypoint rate; '
               'docs/speed.md). false: both in the detector thread, one after the other',
               read_only=True),
+    ParamSpec('opencv_threads', 1, "OpenCV's worker threads in this process "
+              '(cv2.setNumThreads; 0 = OpenCV\'s default, one per core). 1: the camera-motion '
+              "estimate's optical flow on two threads took twice the CPU time for no wall "
+              'time (docs/speed.md), and the node already runs detection and that estimate in '
+              'threads of their own', read_only=True, min_value=0),
 )
 
 ANNOTATED_TOPIC = topics.ANNOTATED
@@ -386,6 +391,9 @@ class KeypointsNode(Node):
             raise ValueError(f"image_qos must be auto, reliable or best_effort, got "
                              f"{p['image_qos']!r}")
         log = self.get_logger()
+        if p['opencv_threads'] > 0:
+            import cv2
+            cv2.setNumThreads(int(p['opencv_threads']))
         calibration = None
         if p['calibration_file']:
             calibration = read_camera_info_yaml(p['calibration_file'])

@@ -83,3 +83,30 @@ def test_a_failing_callback_drops_only_its_frame(topic_node):
     assert _stamps(out) == [stamps[0]] + stamps[2:]
     assert node.diag.errors == 1
     assert node.diag.dropped == 1
+
+
+def test_opencv_threads_sets_the_process_pool_and_zero_leaves_it():
+    """``opencv_threads`` (default 1) is OpenCV's pool for the process; 0 leaves OpenCV's."""
+    import cv2
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from mocap_keypoints.node import KeypointsNode
+
+    before = cv2.getNumThreads()
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        for value, expected in ((None, 1), (3, 3), (0, 3)):
+            overrides = [Parameter('source', value='topic')]
+            if value is not None:
+                overrides.append(Parameter('opencv_threads', value=value))
+            node = KeypointsNode(context=context, parameter_overrides=overrides)
+            try:
+                assert cv2.getNumThreads() == expected
+            finally:
+                node.shutdown()
+                node.destroy_node()
+    finally:
+        context.try_shutdown()
+        cv2.setNumThreads(before)
