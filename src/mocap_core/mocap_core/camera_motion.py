@@ -87,9 +87,9 @@ import numpy as np
 from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
-#: side of the Lucas-Kanade window, working pixels
+#: side of the window over which a new corner's strength is measured (``corner_ratio``),
+#: working pixels
 TRACK_WINDOW = 21
-_LK = dict(winSize=(TRACK_WINDOW, TRACK_WINDOW), maxLevel=3)
 #: values of ``CameraMotionParams.moving_rotation`` (module docstring, ``moving``)
 MOVING_ROTATIONS: Tuple[str, ...] = ('plane', 'homography')
 
@@ -122,6 +122,11 @@ class CameraMotionParams:
     parallax_max_age: int = 30       # a new keyframe after this many frames
     ransac_px: float = 1.5           # homography inlier threshold
     fb_error_px: float = 1.0         # forward-backward tracking error bound
+    track_window: int = 15           # side of the Lucas-Kanade window, working pixels
+    track_levels: int = 2            # its pyramid levels above the image (OpenCV maxLevel);
+    #                                  21 and 3 before session 61: 0.73x the CPU, the same
+    #                                  rotation error and states on the rendered sets
+    #                                  (docs/speed.md)
     state_window: int = 9            # frames in the majority vote of ``state``
     reference_width: int = 640
     floor_min_points: int = 15       # floor inliers needed for a translation
@@ -143,6 +148,8 @@ class CameraMotionParams:
         bad = [n for n in ('max_features', 'min_features', 'state_window', 'max_width',
                            'reference_width', 'floor_min_points', 'floor_iterations')
                if getattr(self, n) < 1]
+        if self.track_window < 3 or self.track_levels < 0:
+            bad.append('track_window / track_levels')
         bad += [n for n in ('floor_max_distance', 'floor_max_speed', 'turn_tolerance_deg')
                 if not getattr(self, n) > 0]
         bad += [n for n in ('turn_tolerance_per_frame_deg',) if getattr(self, n) < 0]
@@ -762,10 +769,9 @@ class CameraMotionEstimator:
         ok = np.zeros(len(prev_pts), bool)
         nxt = prev_pts
         if len(prev_pts) >= p.min_features:
-            nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev, grey, prev_pts, None,
-                                                  **_LK)
-            back, st2, _ = cv2.calcOpticalFlowPyrLK(grey, self._prev, nxt, None,
-                                                    **_LK)
+            lk = dict(winSize=(p.track_window, p.track_window), maxLevel=p.track_levels)
+            nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev, grey, prev_pts, None, **lk)
+            back, st2, _ = cv2.calcOpticalFlowPyrLK(grey, self._prev, nxt, None, **lk)
             fb = np.linalg.norm((back - prev_pts).reshape(-1, 2), axis=1)
             ok = (st.ravel() == 1) & (st2.ravel() == 1) & (fb < p.fb_error_px * ref)
             # corners that moved onto a person (or out of the image) are not background
