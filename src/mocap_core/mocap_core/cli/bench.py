@@ -637,6 +637,8 @@ def add_parser(sub) -> None:
                     help='live configurations to run (defaults, then low latency)')
     pp.add_argument('--output', default=str(ROOT / 'docs' / 'benchmarks' / 'pipeline.md'))
     pp.set_defaults(func=cmd_pipeline)
+    from .bench_camera import add_parser as add_camera_motion
+    add_camera_motion(bench_sub, ROOT)
     ps = bench_sub.add_parser('soak', help='nodes fed a looped bag for a while: memory trend')
     ps.add_argument('--bag', default=str(ROOT / 'bags' / 'gt_cmu_walk_12_02'))
     ps.add_argument('--minutes', type=float, default=10.0)
