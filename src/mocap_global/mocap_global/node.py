@@ -297,7 +297,7 @@ PARAMETERS = (
     ParamSpec('threads', 1, 'Torch CPU threads', read_only=True, min_value=1),
     ParamSpec('device', 'cpu', "Torch device ('cpu' or 'cuda')", read_only=True),
     ParamSpec('inference', 'numpy', "The network's engine: 'numpy' (the same network in "
-              'NumPy, to float32 rounding; about 1.6x as fast for one window on a CPU: '
+              'NumPy, to float32 rounding; about 1.7x as fast for one window on a CPU: '
               "mocap_global.inference; used on the CPU without test-time augmentation, else "
               "PyTorch) or 'torch'", read_only=True,
               additional_constraints='one of: numpy, torch'),

@@ -405,7 +405,7 @@ class OnlineGMR:
             the foot planting when its probability is at least ``contact_threshold``. A frame
             without an entry falls back to the height rule (``lock_height``).
         inference: the network's engine: 'numpy' (:class:`~mocap_global.inference.NumpyGMR`:
-            the same function to float32 rounding, about 1.6 times as fast for one window
+            the same function to float32 rounding, about 1.7 times as fast for one window
             on a CPU; used for a plain GMR on the CPU, else PyTorch) or 'torch'.
     """
 
