@@ -88,8 +88,11 @@ from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
 #: side of the window over which a new corner's strength is measured (``corner_ratio``),
-#: working pixels
-TRACK_WINDOW = 21
+#: working pixels. It was the tracker's window too until session 61 and stays at 21, where
+#: ``min_corner_ratio`` was tuned; with the tracker's window at 15
+#: (``CameraMotionParams.track_window``) the measured states and rotation errors did not
+#: change (docs/speed.md)
+CORNER_WINDOW = 21
 #: values of ``CameraMotionParams.moving_rotation`` (module docstring, ``moving``)
 MOVING_ROTATIONS: Tuple[str, ...] = ('plane', 'homography')
 
@@ -224,7 +227,7 @@ def floor_points(bearings: np.ndarray, normal: np.ndarray, height: float,
     return s[:, None] * b, ok
 
 
-def corner_ratio(grey: np.ndarray, points: np.ndarray, window: int = TRACK_WINDOW
+def corner_ratio(grey: np.ndarray, points: np.ndarray, window: int = CORNER_WINDOW
                  ) -> np.ndarray:
     """How well each point's neighbourhood pins down its motion: the smaller over the larger
     eigenvalue of the image's structure tensor (summed Sobel gradient products) over a
@@ -621,7 +624,7 @@ class CameraMotionEstimator:
         self._origin = np.concatenate([self._origin, np.full((n, 2), np.nan)])
         strong = np.ones(n, bool)
         if self.params.min_corner_ratio > 0 and n:
-            strong = corner_ratio(grey, pts[len(keep):], TRACK_WINDOW) >= \
+            strong = corner_ratio(grey, pts[len(keep):], CORNER_WINDOW) >= \
                 self.params.min_corner_ratio
         self._strong = np.concatenate([self._strong, strong])
 

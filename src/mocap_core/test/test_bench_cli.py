@@ -1,4 +1,5 @@
-"""`mocap bench pipeline`'s arguments (the benchmark itself is run by hand, not in tests)."""
+"""`mocap bench pipeline`'s arguments and report, and `mocap bench camera-motion`'s scoring (the
+benchmarks themselves are run by hand, not in tests)."""
 
 import subprocess
 import sys
@@ -16,7 +17,11 @@ def test_a_malformed_keypoints_variant_is_one_error_line_before_any_run(tmp_path
 
 def test_a_variant_must_name_its_node(tmp_path):
     for item, message in (('inference=torch', 'expected NODE.NAME=VALUE'),
-                          ('planner.x=1', 'NODE: keypoints, lifter, physics, gmr')):
+                          ('gmr.inference', 'expected NODE.NAME=VALUE[,...]'),
+                          ('planner.x=1', 'NODE: keypoints, lifter, physics, gmr'),
+                          ('gmr.inferense=torch',
+                           "the gmr node has no parameter 'inferense' (did you mean "
+                           'inference')):
         out = subprocess.run([sys.executable, '-m', 'mocap_core.cli.mocap', 'bench',
                               'pipeline', '--variant', item, '--output',
                               str(tmp_path / 'report.md')],

@@ -16,10 +16,10 @@ the process's thread setting (``torch.set_num_threads``, the node's ``threads``)
 NumPy's BLAS starts threads of its own, whose spinning after each product would cost a
 second core's time for nothing (measured: CPU time twice the wall time).
 
-It reads the weights of a :class:`~mocap_global.model.GMR` once and is exact to float32
-rounding (outputs within about 1e-6 of the PyTorch pass: ``test_gmr.py``). Measured side by
-side in ``docs/speed.md``. It covers what the online stage needs: whole windows (no padding),
-no test-time augmentation, any batch size.
+It copies the weights of a :class:`~mocap_global.model.GMR` (again when they change) and is
+exact to float32 rounding (outputs within about 1e-6 of the PyTorch pass: ``test_gmr.py``).
+Measured side by side in ``docs/speed.md``. It covers what the online stage needs: whole
+windows (no padding), no test-time augmentation, any batch size.
 
 GRU equations (PyTorch's): ``r = s(W_ir x + b_ir + W_hr h + b_hr)``,
 ``z = s(W_iz x + b_iz + W_hz h + b_hz)``, ``n = tanh(W_in x + b_in + r * (W_hn h + b_hn))``,
@@ -28,6 +28,7 @@ GRU equations (PyTorch's): ``r = s(W_ir x + b_ir + W_hr h + b_hr)``,
 
 from __future__ import annotations
 
+import weakref
 from typing import Dict, List, Tuple
 
 import numpy as np
@@ -44,17 +45,31 @@ def _tensor(t: torch.Tensor) -> torch.Tensor:
     return t.detach().to('cpu', torch.float32).contiguous().clone()
 
 
+def _fingerprint(model: GMR) -> tuple:
+    """What changes when the model's tensors are replaced or modified in place (their storage
+    and PyTorch's version counters): a cheap test for stale copies."""
+    return tuple((t.data_ptr(), t._version) for t in
+                 list(model.parameters()) + list(model.buffers()))
+
+
 class NumpyGMR:
     """A :class:`~mocap_global.model.GMR`'s inference in NumPy (module docstring).
 
     Args:
-        model: the network (a plain :class:`GMR`, not an augmented one); its weights are
-            copied, so later changes to the model are not seen.
+        model: the network (a plain :class:`GMR`, not an augmented one). Its weights are
+            copied; each call first checks that the model's tensors were not replaced or
+            changed in place since (``load_state_dict``, ``set_normalisation``, training) and
+            copies them again if they were. Only a weak reference to the model is kept.
     """
 
     def __init__(self, model: GMR) -> None:
         if not isinstance(model, GMR):
             raise TypeError(f'NumpyGMR needs a plain GMR, got {type(model).__name__}')
+        self._model = weakref.ref(model)
+        self._load(model)
+
+    def _load(self, model: GMR) -> None:
+        """Copy the weights (float32, transposed for ``x @ W``)."""
         self.cfg = model.cfg
         self.hidden = model.gru.fwd[0].hidden_size
         #: per layer: the input-to-hidden weights (transposed) and biases of each direction,
@@ -75,6 +90,12 @@ class NumpyGMR:
         self.pose_dims = pose_dims(self.cfg.pose_input)
         self.velocity_scale = np.float32(10.0 if self.cfg.pose_input == 'quat'
                                          else self.cfg.fps)
+        self._loaded = _fingerprint(model)
+
+    def _refresh(self) -> None:
+        model = self._model()
+        if model is not None and _fingerprint(model) != self._loaded:
+            self._load(model)
 
     @staticmethod
     def _linear(x: np.ndarray, weight_bias: Tuple[torch.Tensor, torch.Tensor]) -> np.ndarray:
@@ -87,6 +108,7 @@ class NumpyGMR:
         """``x`` (B, T, C) features (float32; every frame valid) -> ``axis_angle`` (B, T, 3),
         ``translation`` (B, T, 3), ``rotation`` (B, T, 3, 3), ``up`` (B, T, 3), float64: what
         :meth:`GMR.forward` returns, as arrays."""
+        self._refresh()
         x = np.asarray(x, dtype=np.float32)
         if x.ndim != 3 or x.shape[-1] != len(self.feature_mean):
             raise ValueError(f'expected (B, T, {len(self.feature_mean)}) features, got '

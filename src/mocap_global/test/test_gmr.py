@@ -332,7 +332,16 @@ def test_numpy_inference_is_the_network(cfg):
         assert set(got) == set(ref)
         for k in ref:
             assert got[k].shape == ref[k].shape and got[k].dtype == np.float64
-            np.testing.assert_allclose(got[k], ref[k], atol=2e-5, err_msg=k)
+            np.testing.assert_allclose(got[k], ref[k], atol=2e-6, err_msg=k)
+    # weights changed in place after the copy are copied again before the next pass
+    x = rng.normal(size=(1, 24, model.cfg.num_features)).astype(np.float32)
+    before = engine(x)['translation']
+    with torch.no_grad():
+        model.regression.bias.add_(0.25)
+        ref = model(torch.as_tensor(x))['translation'].double().numpy()
+    after = engine(x)['translation']
+    assert np.abs(after - before).max() > 1e-3
+    np.testing.assert_allclose(after, ref, atol=2e-6)
     with pytest.raises(TypeError):
         NumpyGMR(with_tta(model, 'mirror'))
     with pytest.raises(ValueError, match='features'):

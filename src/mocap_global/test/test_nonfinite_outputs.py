@@ -55,8 +55,29 @@ def _poses(n: int, seed: int = 0) -> List[Pose]:
     return random_walk_poses(n, seed, start=(0.0, 0.0, 3.0), step=(0.05, 0.0, 0.0))
 
 
-def _run(model: nn.Module, poses: Sequence[Pose], **kwargs) -> tuple:
+class NaNEngineOnCalls:
+    """The NumPy engine (:class:`~mocap_global.inference.NumpyGMR`) with all outputs NaN on
+    the given (1-based) calls."""
+
+    def __init__(self, engine, bad_calls: Sequence[int]) -> None:
+        self.engine = engine
+        self.bad_calls = set(bad_calls)
+        self.calls = 0
+
+    def __call__(self, x: np.ndarray) -> Dict[str, np.ndarray]:
+        out = self.engine(x)
+        self.calls += 1
+        if self.calls in self.bad_calls:
+            out = {k: np.full_like(v, np.nan) for k, v in out.items()}
+        return out
+
+
+def _run(model: nn.Module, poses: Sequence[Pose], nan_engine_calls: Sequence[int] = (),
+         **kwargs) -> tuple:
     online = OnlineGMR(model, **kwargs)
+    if nan_engine_calls:
+        assert online.inference == 'numpy'
+        online._numpy = NaNEngineOnCalls(online._numpy, nan_engine_calls)
     frames: List[WorldFrame] = []
     for i, p in enumerate(poses):
         frames += online.push(i * DT_NS, p)[0]
@@ -79,12 +100,16 @@ def _all_finite(frames: Sequence[WorldFrame]) -> bool:
 
 
 @pytest.mark.parametrize('chunk', [1, 4])
-def test_one_nan_window_holds_the_last_motion_and_the_stream_carries_on(chunk):
+@pytest.mark.parametrize('engine', ['torch', 'numpy'])
+def test_one_nan_window_holds_the_last_motion_and_the_stream_carries_on(chunk, engine):
     poses = _poses(40)
-    kwargs = dict(lookahead=3, window=16, chunk=chunk)
+    kwargs = dict(lookahead=3, window=16, chunk=chunk, inference=engine)
     _, ref = _run(_model(), poses, **kwargs)
     bad_call = 6                      # the sixth network pass: frames 5 * chunk onwards
-    online, frames = _run(NaNOnCalls(_model(), [bad_call]), poses, **kwargs)
+    if engine == 'numpy':
+        online, frames = _run(_model(), poses, nan_engine_calls=[bad_call], **kwargs)
+    else:
+        online, frames = _run(NaNOnCalls(_model(), [bad_call]), poses, **kwargs)
     assert [f.stamp_ns for f in frames] == [f.stamp_ns for f in ref]
     assert _all_finite(frames)
     held = [i for i, f in enumerate(frames) if f.held]

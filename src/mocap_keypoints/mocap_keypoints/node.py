@@ -266,10 +266,11 @@ PARAMETERS = (
               'out in order and unchanged, the detector thread is free sooner (keypoint rate; '
               'docs/speed.md). false: both in the detector thread, one after the other',
               read_only=True),
-    ParamSpec('opencv_threads', 1, "OpenCV's worker threads in this process "
-              '(cv2.setNumThreads; 0 = OpenCV\'s default, one per core). 1: the camera-motion '
-              "estimate's optical flow on two threads took twice the CPU time for no wall "
-              'time (docs/speed.md), and the node already runs detection and that estimate in '
+    ParamSpec('opencv_threads', 1, "OpenCV's worker threads in this process while the node "
+              'runs (cv2.setNumThreads, restored at shutdown; 0 = leave the setting as it is, '
+              "OpenCV's own default being one per core). 1: the camera-motion estimate's "
+              'optical flow on two threads took twice the CPU time for no wall time '
+              '(docs/speed.md), and the node already runs detection and that estimate in '
               'threads of their own', read_only=True, min_value=0),
 )
 
@@ -391,8 +392,11 @@ class KeypointsNode(Node):
             raise ValueError(f"image_qos must be auto, reliable or best_effort, got "
                              f"{p['image_qos']!r}")
         log = self.get_logger()
+        #: OpenCV's thread setting before this node changed it (restored by ``shutdown``)
+        self._opencv_threads_before: Optional[int] = None
         if p['opencv_threads'] > 0:
             import cv2
+            self._opencv_threads_before = cv2.getNumThreads()
             cv2.setNumThreads(int(p['opencv_threads']))
         calibration = None
         if p['calibration_file']:
@@ -1084,6 +1088,10 @@ class KeypointsNode(Node):
             context = self._annotated_node.context
             self._annotated_node.destroy_node()
             context.try_shutdown()
+        if self._opencv_threads_before is not None:
+            import cv2
+            cv2.setNumThreads(self._opencv_threads_before)
+            self._opencv_threads_before = None
 
 
 if __name__ == '__main__':

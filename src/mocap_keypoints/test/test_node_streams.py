@@ -86,7 +86,8 @@ def test_a_failing_callback_drops_only_its_frame(topic_node):
 
 
 def test_opencv_threads_sets_the_process_pool_and_zero_leaves_it():
-    """``opencv_threads`` (default 1) is OpenCV's pool for the process; 0 leaves OpenCV's."""
+    """``opencv_threads`` (default 1) is OpenCV's pool while the node runs, restored at
+    shutdown; 0 leaves OpenCV's setting alone."""
     import cv2
     import rclpy
     from rclpy.parameter import Parameter
@@ -97,16 +98,18 @@ def test_opencv_threads_sets_the_process_pool_and_zero_leaves_it():
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
     try:
-        for value, expected in ((None, 1), (3, 3), (0, 3)):
+        cv2.setNumThreads(2)
+        for value, running in ((None, 1), (3, 3), (0, 2)):
             overrides = [Parameter('source', value='topic')]
             if value is not None:
                 overrides.append(Parameter('opencv_threads', value=value))
             node = KeypointsNode(context=context, parameter_overrides=overrides)
             try:
-                assert cv2.getNumThreads() == expected
+                assert cv2.getNumThreads() == running
             finally:
                 node.shutdown()
                 node.destroy_node()
+            assert cv2.getNumThreads() == 2
     finally:
         context.try_shutdown()
         cv2.setNumThreads(before)

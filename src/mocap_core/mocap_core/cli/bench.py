@@ -515,6 +515,12 @@ def write_report(res: Dict, out: Path) -> None:
     out.write_text('\n'.join(lines))
 
 
+#: the module of each node's PARAMETERS (``--variant`` names are checked against them: rclpy
+#: drops an override of an undeclared parameter without a word)
+_NODE_MODULES = {'keypoints': 'mocap_keypoints.node', 'lifter': 'mocap_lifter.node',
+                 'physics': 'mocap_physics.node', 'gmr': 'mocap_global.node'}
+
+
 def cmd_pipeline(args: argparse.Namespace) -> int:
     import platform
     import random
@@ -536,12 +542,26 @@ def cmd_pipeline(args: argparse.Namespace) -> int:
         nodes: Dict[str, Dict[str, str]] = {}
         for key, value in pairs.items():
             node, _, name = key.partition('.')
-            if node not in ('keypoints', 'lifter', 'physics', 'gmr') or not name:
+            if node not in _NODE_MODULES or not name:
                 print(f'mocap bench pipeline: error: --variant {item!r}: expected '
                       'NODE.NAME=VALUE (NODE: keypoints, lifter, physics, gmr)',
                       file=sys.stderr)
                 return 2
             nodes.setdefault(node, {})[name] = value
+        for node, pairs in nodes.items():
+            import difflib
+            import importlib
+
+            declared = [spec.name for spec in importlib.import_module(
+                _NODE_MODULES[node]).PARAMETERS]
+            for name in pairs:
+                if name not in declared:
+                    close = difflib.get_close_matches(name, declared, n=3)
+                    print(f'mocap bench pipeline: error: --variant {item!r}: the {node} node '
+                          f'has no parameter {name!r}'
+                          + (f' (did you mean {", ".join(close)}?)' if close else ''),
+                          file=sys.stderr)
+                    return 2
         variants.append(nodes)
     _default_sigint()
     work = Path(tempfile.mkdtemp(prefix='mocap_bench_'))

@@ -74,10 +74,11 @@ def score_clip(clip: Path, settings: Sequence[Tuple[int, int]]) -> Dict:
     finally:
         cap.release()
     n = min(len(frames), len(R))
+    if n < 2:
+        raise ValueError(f'{clip}: {n} frame(s) decoded, at least 2 needed')
     truth = true_states(R[:n], C[:n])
     row: Dict = {'clip': clip.name, 'frames': n,
-                 'true': {s: truth.count(s) / max(n, 1) for s in ('static', 'rotating',
-                                                                   'moving')}}
+                 'true': {s: truth.count(s) / n for s in ('static', 'rotating', 'moving')}}
     keypoints = z['keypoints']
     for window, levels in settings:
         est = CameraMotionEstimator(z['K'], CameraMotionParams(track_window=window,
@@ -85,7 +86,7 @@ def score_clip(clip: Path, settings: Sequence[Tuple[int, int]]) -> Dict:
         t0 = time.process_time()
         res = [est.update(frames[i], i / fps, keypoints[i] if i < len(keypoints) else None)
                for i in range(n)]
-        cpu = (time.process_time() - t0) / max(n, 1) * 1e3
+        cpu = (time.process_time() - t0) / n * 1e3
         errs = [np.linalg.norm(matrix_to_axis_angle(res[i].rotation.T @ (R[i - 1] @ R[i].T)))
                 for i in range(1, n) if res[i].frame_state != 'unknown']
         states = [e.state for e in res]
@@ -182,19 +183,32 @@ def cmd_camera_motion(args: argparse.Namespace) -> int:
 
     cv2.setNumThreads(1)
     settings = args.lk or [(15, 2), (21, 3)]
+    if len(set(settings)) != len(settings) or args.limit < 0 or args.every < 1:
+        print('mocap bench camera-motion: error: each --lk once, --limit >= 0, --every >= 1',
+              file=sys.stderr)
+        return 2
     keys = [f'{w}x{lv}' for w, lv in settings]
     sets: Dict[str, Dict] = {}
     for renders in args.renders or [str(DEFAULT_OUT)]:
         clips = [Path(c) for c in iter_done(Path(renders), args.split)]
         clips = clips[::max(1, args.every)][:args.limit or None]
         if not clips:
-            print(f'mocap bench camera-motion: no rendered {args.split} clips under {renders}')
+            print(f'mocap bench camera-motion: error: no rendered {args.split} clips under '
+                  f'{renders}', file=sys.stderr)
             return 2
         rows = []
         for i, clip in enumerate(clips):
-            rows.append(score_clip(clip, settings))
+            try:
+                rows.append(score_clip(clip, settings))
+            except (OSError, ValueError, KeyError) as exc:       # one bad clip: skipped
+                print(f'{renders} {i + 1}/{len(clips)}: skipped ({exc})', flush=True)
+                continue
             print(f'{renders} {i + 1}/{len(clips)} {clip.name[-50:]}: ' + ', '.join(
                 f"{k} {rows[-1][k]['cpu_ms']:.1f} ms" for k in keys), flush=True)
+        if not rows:
+            print(f'mocap bench camera-motion: error: no clip under {renders} could be read',
+                  file=sys.stderr)
+            return 1
         sets[renders] = {'clips': len(rows), 'rows': rows, 'summary': summarise(rows, keys),
                          'true_moving': float(np.mean([r['true']['moving'] for r in rows])),
                          'true_rotating': float(np.mean([r['true']['rotating']
