@@ -88,10 +88,8 @@ from .rotations import matrix_to_axis_angle, matrix_to_quat
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
 #: side of the window over which a new corner's strength is measured (``corner_ratio``),
-#: working pixels. It was the tracker's window too until session 61 and stays at 21, where
-#: ``min_corner_ratio`` was tuned; with the tracker's window at 15
-#: (``CameraMotionParams.track_window``) the measured states and rotation errors did not
-#: change (docs/speed.md)
+#: working pixels: the tracker's default window (``CameraMotionParams.track_window``), where
+#: ``min_corner_ratio`` was tuned; it stays at 21 when the tracker's window is changed
 CORNER_WINDOW = 21
 #: values of ``CameraMotionParams.moving_rotation`` (module docstring, ``moving``)
 MOVING_ROTATIONS: Tuple[str, ...] = ('plane', 'homography')
@@ -125,11 +123,11 @@ class CameraMotionParams:
     parallax_max_age: int = 30       # a new keyframe after this many frames
     ransac_px: float = 1.5           # homography inlier threshold
     fb_error_px: float = 1.0         # forward-backward tracking error bound
-    track_window: int = 15           # side of the Lucas-Kanade window, working pixels
-    track_levels: int = 2            # its pyramid levels above the image (OpenCV maxLevel);
-    #                                  21 and 3 before session 61: 0.73x the CPU, the same
-    #                                  rotation error and states on the rendered sets
-    #                                  (docs/speed.md)
+    track_window: int = 21           # side of the Lucas-Kanade window, working pixels
+    track_levels: int = 3            # its pyramid levels above the image (OpenCV maxLevel);
+    #                                  15 and 2 take 0.73x the CPU with the same states, but
+    #                                  made the travel set's world path worse through the
+    #                                  pipeline (docs/speed.md): an option, not the default
     state_window: int = 9            # frames in the majority vote of ``state``
     reference_width: int = 640
     floor_min_points: int = 15       # floor inliers needed for a translation

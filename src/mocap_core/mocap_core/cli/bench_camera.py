@@ -182,7 +182,7 @@ def cmd_camera_motion(args: argparse.Namespace) -> int:
     from ..render.clip import iter_done
 
     cv2.setNumThreads(1)
-    settings = args.lk or [(15, 2), (21, 3)]
+    settings = args.lk or [(21, 3), (15, 2)]
     if len(set(settings)) != len(settings) or args.limit < 0 or args.every < 1:
         print('mocap bench camera-motion: error: each --lk once, --limit >= 0, --every >= 1',
               file=sys.stderr)
@@ -238,6 +238,6 @@ def add_parser(bench_sub, root: Path) -> None:
     p.add_argument('--limit', type=int, default=0, help='at most this many clips per set')
     p.add_argument('--lk', action='append', type=parse_setting, metavar='WINDOWxLEVELS',
                    help='a Lucas-Kanade setting (repeatable; the first is the reference; '
-                   'default: 15x2, the default, and 21x3, the one before session 61)')
+                   'default: 21x3, the default, and 15x2)')
     p.add_argument('--output', default=str(root / 'docs' / 'benchmarks' / 'camera_motion.md'))
     p.set_defaults(func=cmd_camera_motion)
