@@ -256,6 +256,12 @@ PARAMETERS = (
               'person in the world; empty: rotation only', read_only=True),
     ParamSpec('camera_motion_max_width', 640, 'Frames wider than this are scaled down for the '
               'camera-motion estimate (speed)', min_value=64, read_only=True),
+    ParamSpec('camera_motion_track_window', 21, 'Side of the camera-motion estimate\'s '
+              'Lucas-Kanade window, pixels at 640 wide. 15 (with 2 pyramid levels) takes 0.73x '
+              'the CPU with the same states, but made the world path of walking cameras worse '
+              '(docs/benchmarks/video_eval/camera_lk_s61)', min_value=3, read_only=True),
+    ParamSpec('camera_motion_track_levels', 3, 'Pyramid levels of that window above the '
+              'image (OpenCV maxLevel)', min_value=0, read_only=True),
     ParamSpec('camera_motion_rotation', 'plane', "The rotation of a camera that translates, "
               "before the physics floor is known: 'plane' (the floor's homography decomposed, "
               "the solution nearest the pure turn) or 'homography' (the best pure turn, which "
@@ -434,7 +440,10 @@ class KeypointsNode(Node):
                 raise ValueError('camera_motion_rotation must be ' + ' or '.join(MOVING_ROTATIONS)
                                  + f", got {p['camera_motion_rotation']!r}")
             motion = CameraMotionParams(max_width=p['camera_motion_max_width'],
-                                        moving_rotation=p['camera_motion_rotation'])
+                                        moving_rotation=p['camera_motion_rotation'],
+                                        track_window=p['camera_motion_track_window'],
+                                        track_levels=p['camera_motion_track_levels'])
+            motion.validate()
         # unrelated images (tracking false): a person gets an id at first sight and nobody
         # is carried from one image to the next
         self.tracker = PersonTracker(TrackerParams(
