@@ -382,6 +382,12 @@ def test_process_video_file(tmp_path):
     assert seen[:2].max() == 0 and seen[2:].min() > 8
     for stage in ('lifter', 'physics', 'world'):
         np.testing.assert_array_equal(run.stages[stage].stamps, run.keypoint_stamps[2:])
+    # offline the mirror check reads every frame (process.OFFLINE_DEFAULTS); this person
+    # faces the camera and is left as the detector labelled her
+    diag = next(v for k, v in run.diagnostics.items() if k.startswith('keypoints'))
+    assert diag['mirror_check'] == 'on', diag
+    assert diag['mirror_frames_read'] == f'{frames} of {frames}', diag
+    assert diag['mirror_exchanged'].startswith('0 of '), diag
 
     # the demo's rendering of the run: report, plots, side-by-side video of every frame
     report = tmp_path / 'report'
@@ -425,6 +431,13 @@ def test_process_video_detects_beside_the_later_stages_with_the_same_output(tmp_
                  '--param', 'keypoints.finish_thread=false')
     assert res.returncode == 0, res.stdout + res.stderr
     a, b = load_run(split), load_run(one)
+    # the offline mirror check can be turned off like any default
+    off = tmp_path / 'no_mirror'
+    res = _mocap('process', VIDEO, '-o', off, '--no-progress', '--topics', '/diagnostics',
+                 '--param', 'keypoints.mirror_check=false')
+    assert res.returncode == 0, res.stdout + res.stderr
+    diag = next(v for k, v in load_run(off).diagnostics.items() if k.startswith('keypoints'))
+    assert diag['mirror_check'].startswith('off'), diag
     assert len(a.keypoint_stamps) == len(b.keypoint_stamps) > 90
     np.testing.assert_array_equal(np.diff(a.keypoint_stamps), np.diff(b.keypoint_stamps))
     np.testing.assert_array_equal(a.keypoints, b.keypoints)

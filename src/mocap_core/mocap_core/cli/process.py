@@ -62,7 +62,10 @@ PRODUCED = {
 }
 #: Parameters the offline run sets (overridable with --param).
 OFFLINE_DEFAULTS: Dict[str, Dict[str, Any]] = {
-    'keypoints': {'synchronous': True, 'realtime': False},
+    # the mirror check (a second detector pass per frame) where no frame budget forbids it:
+    # left and right put right in back views the detector reads as front views
+    # (docs/keypoints.md); live it is off, the pass does not fit in 30 fps on two cores
+    'keypoints': {'synchronous': True, 'realtime': False, 'mirror_check': True},
     # several frames per network pass: the lifter's output is the same as frame by frame,
     # GMR's earlier frames of a chunk see more future frames than the look-ahead
     'lifter': {'chunk': 16},
