@@ -425,10 +425,11 @@ class OnlineGMR:
         self.model = model.eval()
         if inference not in INFERENCE_ENGINES:
             raise ValueError(f'inference must be one of {INFERENCE_ENGINES}, got {inference!r}')
-        #: the network's engine in use: 'numpy' (:class:`~mocap_global.inference.NumpyGMR`,
-        #: where asked for and possible: a plain GMR on the CPU) or 'torch'
+        # the NumPy engine, where asked for and possible (a plain GMR on the CPU), else None
         self._numpy = _numpy_engine(model) if (
             inference == 'numpy' and device == 'cpu' and isinstance(model, GMR)) else None
+        #: the network's engine in use: 'numpy' (:class:`~mocap_global.inference.NumpyGMR`)
+        #: or 'torch'
         self.inference = 'numpy' if self._numpy is not None else 'torch'
         self.cfg = model.cfg
         self.window = int(window or self.cfg.window)
