@@ -84,7 +84,7 @@ from typing import Deque, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from .rotations import matrix_to_axis_angle, matrix_to_quat
+from .rotations import matrix_to_axis_angle, matrix_to_quat, quat_to_matrix
 
 STATES: Tuple[str, ...] = ('static', 'rotating', 'moving', 'unknown')
 #: side of the window over which a new corner's strength is measured (``corner_ratio``),
@@ -913,3 +913,30 @@ def estimate_video(video: str, K: np.ndarray, fps: float,
     finally:
         cap.release()
     return out
+
+
+def rotation_accuracy(estimates: Sequence[CameraMotionEstimate], R: np.ndarray,
+                      fps: float) -> Tuple[float, float]:
+    """How well the estimates of a clip follow its true camera: ``(rotation error, drift)``.
+
+    Args:
+        estimates: one per frame, from the first frame on.
+        R: (F, 3, 3) the true world -> camera rotation of each frame.
+        fps: the frame rate.
+
+    Returns:
+        the median error of the frame-to-frame rotation over the frames with an estimate
+        (``frame_state`` not ``unknown``), degrees per second (nan when no such frame), and
+        the drift: the accumulated orientation's error at the last frame scored, degrees.
+        The frames scored are the first ``min(len(estimates), len(R))``.
+    """
+    R = np.asarray(R, dtype=np.float64)
+    n = min(len(estimates), len(R))
+    if n < 1:
+        raise ValueError('no frame to score')
+    errs = [np.linalg.norm(matrix_to_axis_angle(estimates[i].rotation.T @ (R[i - 1] @ R[i].T)))
+            for i in range(1, n) if estimates[i].frame_state != 'unknown']
+    error = float(np.degrees(np.median(errs)) * fps) if errs else float('nan')
+    mine = quat_to_matrix(estimates[n - 1].orientation)
+    drift = float(np.degrees(np.linalg.norm(matrix_to_axis_angle(mine.T @ (R[0] @ R[n - 1].T)))))
+    return error, drift

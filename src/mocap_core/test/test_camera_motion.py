@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_axis_angle, quat_to_matrix
-from mocap_core.camera_motion import (CameraMotionEstimator, CameraMotionParams,
-                                           fit_rotation, person_boxes, person_mask)
+from mocap_core.camera_motion import (CameraMotionEstimate, CameraMotionEstimator,
+                                      CameraMotionParams, fit_rotation, person_boxes,
+                                      person_mask, rotation_accuracy)
 
 W, H = 640, 480
 K = np.array([[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]])
@@ -102,6 +103,34 @@ def test_a_turning_camera_gives_its_rotation(axis):
         quat_to_matrix(e.orientation).T @ R)))
     assert drift < 0.3, drift                                 # of 19.5 degrees turned
     np.testing.assert_allclose(e.angular_velocity, w, atol=np.radians(1.0))
+
+
+def test_rotation_accuracy_scores_the_turns_against_the_true_camera():
+    """The benchmark's score: a true pan of 15 deg/s, estimated exactly and 10 % too fast;
+    frames without an estimate are not scored."""
+    from mocap_core.rotations import matrix_to_quat
+    fps, n = 30.0, 31
+    w = np.radians(15.0) * np.array([0.0, 1.0, 0.0])
+    R = np.stack([axis_angle_to_matrix(-w * i / fps) for i in range(n)])   # world -> camera
+
+    def estimates(gain, unknown=()):
+        out, acc = [], np.eye(3)
+        for i in range(n):
+            rel = axis_angle_to_matrix(gain * w / fps) if i else np.eye(3)
+            acc = acc @ rel                       # current camera frame in the first one
+            out.append(CameraMotionEstimate('rotating', 'unknown' if i in unknown else
+                                            'rotating', matrix_to_quat(acc), gain * w, rel))
+        return out
+
+    error, drift = rotation_accuracy(estimates(1.0), R, fps)
+    assert error < 1e-6 and drift < 1e-6
+    error, drift = rotation_accuracy(estimates(1.1), R, fps)
+    np.testing.assert_allclose(error, 1.5, rtol=1e-6)           # deg/s
+    np.testing.assert_allclose(drift, 1.5 * (n - 1) / fps, rtol=1e-6)
+    error, _ = rotation_accuracy(estimates(1.0, unknown=range(1, n)), R, fps)
+    assert np.isnan(error)
+    with pytest.raises(ValueError):
+        rotation_accuracy([], R, fps)
 
 
 def test_a_translating_camera_is_moving():

@@ -132,6 +132,31 @@ def test_sampled_cameras_keep_subject_in_view():
         assert kp.shape == (120, NUM_KEYPOINTS, 3)
 
 
+def _elevation_deg(cam) -> float:
+    """How far the camera's optical axis points below the horizontal (degrees)."""
+    return float(np.degrees(np.arcsin(-cam.rotation[2, 2])))
+
+
+def test_steep_cameras_look_down_from_their_elevation_and_see_the_subject():
+    sk, rot, root = _walk(60)
+    pts = keypoints_3d(sk, rot, root)
+    # without steep cameras the generator's draws are those of before (no extra draw)
+    a = sample_camera(pts, np.random.default_rng(5), CameraSampling())
+    b = sample_camera(pts, np.random.default_rng(5), CameraSampling(steep_fraction=0.0))
+    np.testing.assert_array_equal(a.position, b.position)
+    cfg = CameraSampling(steep_fraction=1.0, steep_elevation=(40.0, 60.0))
+    rng = np.random.default_rng(6)
+    for _ in range(20):
+        cam = sample_camera(pts, rng, cfg)
+        assert in_view(cam, pts, margin=0.0)
+        # aimed within the aim jitter of the subject's centre: its axis looks down at about
+        # the drawn elevation (the jitter moves it a few degrees)
+        assert 30.0 < _elevation_deg(cam) < 70.0
+    # the usual ranges hardly ever look down that far
+    rng = np.random.default_rng(7)
+    usual = [_elevation_deg(sample_camera(pts, rng, CameraSampling())) for _ in range(50)]
+    assert max(usual) < 30.0
+
 def test_motion_to_camera_matches_projection_of_fk():
     sk, rot, root = _walk(10)
     cam = sample_camera(keypoints_3d(sk, rot, root), np.random.default_rng(1))

@@ -58,8 +58,7 @@ def score_clip(clip: Path, settings: Sequence[Tuple[int, int]]) -> Dict:
     'WxL': {rotation_error_deg_s, drift_deg, static_correct, states, cpu_ms}}``."""
     import cv2
 
-    from ..camera_motion import CameraMotionEstimator, CameraMotionParams
-    from ..rotations import matrix_to_axis_angle, quat_to_matrix
+    from ..camera_motion import CameraMotionEstimator, CameraMotionParams, rotation_accuracy
 
     z = np.load(clip / 'data.npz')
     fps, R, C = float(z['fps']), z['camera_R'], z['camera_position']
@@ -87,13 +86,11 @@ def score_clip(clip: Path, settings: Sequence[Tuple[int, int]]) -> Dict:
         res = [est.update(frames[i], i / fps, keypoints[i] if i < len(keypoints) else None)
                for i in range(n)]
         cpu = (time.process_time() - t0) / n * 1e3
-        errs = [np.linalg.norm(matrix_to_axis_angle(res[i].rotation.T @ (R[i - 1] @ R[i].T)))
-                for i in range(1, n) if res[i].frame_state != 'unknown']
+        error, drift = rotation_accuracy(res, R, fps)
         states = [e.state for e in res]
         row[f'{window}x{levels}'] = {
-            'rotation_error_deg_s': float(np.degrees(np.median(errs)) * fps) if errs else None,
-            'drift_deg': float(np.degrees(np.linalg.norm(matrix_to_axis_angle(
-                quat_to_matrix(res[n - 1].orientation).T @ (R[0] @ R[n - 1].T))))),
+            'rotation_error_deg_s': error if np.isfinite(error) else None,
+            'drift_deg': drift,
             'static_correct': float(np.mean([(s == 'static') == (t == 'static')
                                              for s, t in zip(states, truth)])),
             'states': {s: states.count(s) / n for s in ('static', 'rotating', 'moving',

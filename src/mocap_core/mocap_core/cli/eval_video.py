@@ -166,10 +166,10 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
     moving frames measured), ``position_error_pct`` (the camera's position at the end
     against the truth, % of the distance it travelled). ``true_floor``: the render's true
     floor instead (an oracle)."""
-    from mocap_core.camera_motion import estimate_video
+    from mocap_core.camera_motion import estimate_video, rotation_accuracy
 
     from ..render.bag import write_rendered_bag
-    from ..rotations import matrix_to_axis_angle, quat_to_matrix
+    from ..rotations import quat_to_matrix
 
     fps = float(gt['fps'])
     floors = _true_floors(gt) if true_floor else \
@@ -180,12 +180,8 @@ def _camera_motion_bag(clip_dir: Path, gt: Dict[str, np.ndarray], out: Path,
          e.position if e.translation_known else None, e.linear_velocity) for e in est])
     R = gt['camera_R']                   # world -> camera
     n = min(len(est), len(R))
-    errs = [np.linalg.norm(matrix_to_axis_angle(est[i].rotation.T @ (R[i - 1] @ R[i].T)))
-            for i in range(1, n) if est[i].frame_state != 'unknown']
-    acc = {'rotation_error_deg_s': float(np.degrees(np.median(errs)) * fps)
-           if errs else float('nan'),
-           'drift_deg': float(np.degrees(np.linalg.norm(matrix_to_axis_angle(
-               quat_to_matrix(est[n - 1].orientation).T @ (R[0] @ R[n - 1].T)))))}
+    error, drift = rotation_accuracy(est, R, fps)
+    acc = {'rotation_error_deg_s': error, 'drift_deg': drift}
     for state in ('static', 'rotating', 'moving', 'unknown'):
         acc[f'state_{state}'] = float(np.mean([e.state == state for e in est[:n]]))
     if floors is not None:

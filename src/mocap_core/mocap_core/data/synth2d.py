@@ -142,6 +142,12 @@ class CameraSampling:
                                                 (640, 480), (720, 1280))
     margin: float = 0.02                             # fraction of the image kept free
     max_tries: int = 30
+    #: share of cameras that look down steeply: their height is set by an elevation angle
+    #: drawn from ``steep_elevation`` (degrees above the horizontal, seen from the aim point)
+    #: instead of ``height``, as a camera on a wall or a ceiling sees a person. 0 (the
+    #: default) draws no such camera and leaves the generator's sequence as it was
+    steep_fraction: float = 0.0
+    steep_elevation: Tuple[float, float] = (25.0, 65.0)
 
 
 def sample_camera(points: np.ndarray, rng: np.random.Generator,
@@ -167,8 +173,13 @@ def sample_camera(points: np.ndarray, rng: np.random.Generator,
     height = rng.uniform(*cfg.height)
     aim = centre + rng.uniform(-cfg.aim_jitter, cfg.aim_jitter, 3) * np.array([1, 1, 0.5])
     roll = np.radians(rng.uniform(*cfg.roll))
+    slope = None
+    if cfg.steep_fraction > 0.0 and rng.random() < cfg.steep_fraction:
+        slope = np.tan(np.radians(rng.uniform(*cfg.steep_elevation)))
     cam = None
     for _ in range(cfg.max_tries):
+        if slope is not None:       # backs away along its line of sight to the aim point
+            height = aim[2] + dist * slope
         position = np.array([centre[0] + dist * np.cos(az), centre[1] + dist * np.sin(az),
                              height])
         cam = VirtualCamera(intr, look_at(position, aim, roll), position)

@@ -47,8 +47,9 @@ def add_train_parser(sub) -> None:
     p.add_argument('--rendered-fraction', type=float,
                    help='share of windows from rendered clips (mocap data render)')
     p.add_argument('--renders', help='rendered clips folder (default ~/.cache/mocap/render)')
-    p.add_argument('--cameras', choices=('default', 'wide'),
-                   help='projected-keypoint camera ranges (wide: those of the renders)')
+    p.add_argument('--cameras', choices=('default', 'wide', 'steep'),
+                   help='projected-keypoint camera ranges (wide: those of the renders; steep: '
+                   'wide, a quarter of the cameras looking down from 25-65 degrees)')
     p.add_argument('--install', action='store_true', help='copy the final weights to the '
                    'package (weights/motionet_<mode>.pt)')
     p.set_defaults(func=cmd_train)

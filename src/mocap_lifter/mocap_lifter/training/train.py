@@ -96,9 +96,10 @@ class TrainConfig:
     #: 'committed' trains on the committed training split; 'strict' on the strict one
     #: (whole motion families held out, mocap_core.data.strict_split)
     split: str = 'committed'
-    #: projected-keypoint cameras: 'default' (data.synth2d.CameraSampling) or 'wide' (the
+    #: projected-keypoint cameras: 'default' (data.synth2d.CameraSampling), 'wide' (the
     #: rendered benchmark's ranges: height 0.2-3.5 m, distance 2-12 m, field of view 35-100
-    #: degrees, portrait and landscape images)
+    #: degrees, portrait and landscape images) or 'steep' ('wide', a quarter of the cameras
+    #: looking down from 25-65 degrees above the person)
     cameras: str = 'default'
     validate_every: int = 500
     checkpoint_every: int = 250
@@ -358,16 +359,21 @@ def _network_shape(cfg: LifterConfig) -> Dict:
     return d
 
 
+#: the names of :func:`camera_sampling`
+CAMERA_RANGES = ('default', 'wide', 'steep')
+
+
 def camera_sampling(name: str) -> CameraSampling:
     """The projected-keypoint camera ranges of ``TrainConfig.cameras``."""
     if name == 'default':
         return CameraSampling()
-    if name == 'wide':
+    if name in ('wide', 'steep'):
         return CameraSampling(distance=(2.0, 12.0), height=(0.2, 3.5),
                               horizontal_fov=(35.0, 100.0), roll=(-5.0, 5.0),
                               image_sizes=((640, 480), (480, 640), (1280, 720), (720, 1280),
-                                           (1920, 1080), (960, 540)))
-    raise ValueError(f"unknown camera ranges {name!r} (use 'default' or 'wide')")
+                                           (1920, 1080), (960, 540)),
+                              steep_fraction=0.25 if name == 'steep' else 0.0)
+    raise ValueError(f"unknown camera ranges {name!r} (use one of {', '.join(CAMERA_RANGES)})")
 
 
 def _with_renders(sampler: WindowSampler, cfg: TrainConfig):
