@@ -185,6 +185,20 @@ def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
     assert list(floors['moving_by_floor']) == ['stripes']
     assert floors['moving_by_floor']['stripes']['clips'] == 1
     assert "## Moving cameras by the floor's texture" in report_markdown(floors, 't', [])
+    # by how far the camera looks down: the clip's median pitch, from its camera pose
+    from mocap_core.render.evaluate import camera_pitch_deg, pitch_class
+    down = look_at(np.array([0.0, -2.0, 3.0]), np.array([0.0, 0.0, 1.0]))   # 45 deg down
+    level = look_at(np.array([0.0, -4.0, 1.0]), np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(camera_pitch_deg(np.stack([down, level])), [45.0, 0.0],
+                               atol=1e-9)
+    steep = score_clip(meta['clip'], meta, dict(gt, camera_R=np.tile(down, (len(J), 1, 1))),
+                       J, idx)
+    assert steep.pitch == 'steep (>= 35 deg)' and pitch_class(-20.0) == 'raised (15-35 deg)'
+    pitches = aggregate([steep, dataclasses.replace(perfect, pitch='level (< 15 deg)')])
+    assert {g: r['clips'] for g, r in pitches['by_pitch'].items()} == {
+        'level (< 15 deg)': 1, 'steep (>= 35 deg)': 1}
+    text = report_markdown(pitches, 't', [])
+    assert '## By how far the camera looks down' in text and '| steep (>= 35 deg) | 1 |' in text
     # the detector's own swaps: none as placed; every scored frame with its legs exchanged
     det = detector_swaps(gt)
     assert (det >= 0).sum() > len(J) // 2 and det.max() == 0

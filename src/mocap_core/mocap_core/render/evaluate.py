@@ -112,6 +112,24 @@ def motion_group(clip_id: str) -> str:
     return re.sub(r'[_-]?\d+$', '', name.rsplit('.', 1)[0]) or name
 
 
+def camera_pitch_deg(R: np.ndarray) -> np.ndarray:
+    """(F,) how far each camera's optical axis points below the horizontal (degrees; negative:
+    looking up), from (F, 3, 3) world -> optical-frame rotations (world z up)."""
+    R = np.asarray(R, dtype=np.float64)
+    return np.degrees(np.arcsin(np.clip(-R[..., 2, 2], -1.0, 1.0)))
+
+
+#: the classes of :func:`pitch_class`, in report order
+PITCH_CLASSES = ('level (< 15 deg)', 'raised (15-35 deg)', 'steep (>= 35 deg)')
+
+
+def pitch_class(pitch_deg: float) -> str:
+    """A clip's camera by how far it looks down (its median :func:`camera_pitch_deg`): the
+    body's tilt toward the camera, which the keypoints hardly show, grows with it."""
+    a = abs(pitch_deg)
+    return PITCH_CLASSES[0] if a < 15 else PITCH_CLASSES[1] if a < 35 else PITCH_CLASSES[2]
+
+
 def height_class(height_m: float) -> str:
     return 'short (< 1.60 m)' if height_m < 1.6 else (
         'medium (1.60-1.75 m)' if height_m < 1.75 else 'tall (>= 1.75 m)')
@@ -384,6 +402,8 @@ class ClipScore:
     #: the rendered floor's texture kind (``render.scene``; what the camera-motion estimate
     #: tracks), '' when unknown
     floor: str = ''
+    #: the camera's pitch class (:func:`pitch_class`), '' when the clip has no camera pose
+    pitch: str = ''
 
     def summary(self) -> Dict[str, float]:
         s = self.swaps[self.swaps >= 0]
@@ -582,7 +602,9 @@ def score_clip(clip: str, meta: dict, gt: Dict[str, np.ndarray],
                      detector_swaps(gt), np.asarray(gt['view']), ra_mpjpe=ra,
                      orientation_deg=alignment_angle_deg(P, g), tilt_deg=tilt,
                      tilt_free_mpjpe=tilt_free,
-                     floor=str((meta.get('appearance') or {}).get('floor', [''])[0]))
+                     floor=str((meta.get('appearance') or {}).get('floor', [''])[0]),
+                     pitch=pitch_class(float(np.median(camera_pitch_deg(gt['camera_R'][idx]))))
+                     if 'camera_R' in gt else '')
 
 
 # ------------------------------------------------------------------------------------------
@@ -655,10 +677,11 @@ def aggregate(scores: List[ClipScore]) -> dict:
         g: {'steps': int(pooled[g][1]), 'mm': pooled[g][0] / pooled[g][1]}
         for g in CAMERA_STATE_GROUPS if g in pooled and pooled[g][1] > 0}
     for name, attr in (('by_group', 'group'), ('by_height', 'height'),
-                       ('by_camera', 'camera')):
+                       ('by_camera', 'camera'), ('by_pitch', 'pitch')):
         groups: Dict[str, List[dict]] = {}
         for s, p in zip(scores, per):
-            groups.setdefault(getattr(s, attr), []).append(p)
+            if getattr(s, attr):
+                groups.setdefault(getattr(s, attr), []).append(p)
         out[name] = {g: {'clips': len(ps), **{k: _median([p.get(k, float('nan')) for p in ps])
                                               for k in ('mpjpe', 'pa_mpjpe', 'swap_rate',
                                                         'jitter_ratio', 'detected',
@@ -675,7 +698,8 @@ def aggregate(scores: List[ClipScore]) -> dict:
                                                         'camera_state_static',
                                                         'camera_state_rotating',
                                                         'camera_state_moving',
-                                                        'camera_state_unknown')}}
+                                                        'camera_state_unknown',
+                                                        'tilt_bias_deg')}}
                      for g, ps in sorted(groups.items())}
     floors: Dict[str, List[dict]] = {}
     for s, p in zip(scores, per):
@@ -791,6 +815,20 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                 f" | {_f(r['world_root_error'], '{:.0f}')} | "
                 f"{_f(r.get('physics_penetration_after_1s_mm'))} / "
                 f"{_f(r.get('world_penetration_after_1s_mm'))} |")
+    if agg.get('by_pitch'):
+        lines += ['', '## By how far the camera looks down (median over clips)', '',
+                  "The body's tilt toward or away from the camera is what the keypoints "
+                  "hardly show of the camera's pitch (docs/lifter.md, \"What the keypoints "
+                  'cannot tell"); the tilt here is the median of the clips\' absolute median '
+                  'tilt.', '',
+                  '| camera pitch | clips | MPJPE | PA-MPJPE | tilt (deg) | leg swaps |',
+                  '|---|---|---|---|---|---|']
+        for g in PITCH_CLASSES:
+            r = agg['by_pitch'].get(g)
+            if r:
+                lines.append(f"| {g} | {r['clips']} | {_f(r['mpjpe'])} | {_f(r['pa_mpjpe'])}"
+                             f" | {_f(r.get('tilt_bias_deg', float('nan')))} | "
+                             f"{_f(100 * r['swap_rate'], '{:.2f}')} % |")
     cams = agg.get('by_camera', {})
     if any(np.isfinite(r.get(k, float('nan'))) for r in cams.values()
            for k in ('camera_state_static', 'world_root_error')):
