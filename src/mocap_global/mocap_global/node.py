@@ -218,6 +218,14 @@ PARAMETERS = (
               "lifter's and is moved to put the feet on its floor: docs/global.md); "
               "'input' = the input's root", read_only=True,
               additional_constraints='lifter or input'),
+    ParamSpec('fused_root', 'input', "Camera mode auto, a frame the camera-motion estimate "
+              "fixes in the world (a static or turning camera, or one whose translation was "
+              "measured over the floor): where the person's horizontal position comes from. "
+              "'lifter' = the lifter's camera-frame root of the same stamp "
+              "(network_pose_topic) moved by the camera's estimated motion, fused as "
+              "camera_pose_root lifter fuses it (the height and the body stay the input's); "
+              "'input' = the input's root (docs/global.md)", read_only=True,
+              additional_constraints='lifter or input'),
     ParamSpec('fusion_measured_root_half_window', 8, "A root measured apart from the input "
               "(camera_pose_root lifter) averaged over this many frames before and after its "
               "own, at most the look-ahead (no delay added)", read_only=True, min_value=0),
@@ -390,9 +398,11 @@ class GMRNode(Node):
         self.camera_pose_missing = 0
         #: frames with a known pose but no lifter root of their stamp (camera_pose_root)
         self.camera_pose_root_missing = 0
-        if p['camera_pose_root'] not in ('lifter', 'input'):
-            raise ValueError(f"camera_pose_root must be lifter or input, got "
-                             f"{p['camera_pose_root']!r}")
+        for name in ('camera_pose_root', 'fused_root'):
+            if p[name] not in ('lifter', 'input'):
+                raise ValueError(f'{name} must be lifter or input, got {p[name]!r}')
+        #: fixed frames without a lifter root of their stamp (fused_root lifter)
+        self.fused_root_missing = 0
         if p['camera_pose_topic'] and p['camera_pose_type'] not in ('odometry', 'pose'):
             raise ValueError(f"camera_pose_type must be odometry or pose, got "
                              f"{p['camera_pose_type']!r}")
@@ -722,8 +732,11 @@ class GMRNode(Node):
         R0 = cm[1]
         C = np.zeros(3) if position is None else position
         walking = state.startswith('moving')
+        # the lifter's root of this stamp in the first camera frame (fused_root lifter)
+        root = self._fused_root(network_pose, R0, C)
         if not on_floor:
-            return InputAnchor(True, R0, C, static=state == 'static', translating=walking)
+            return InputAnchor(True, R0, C, static=state == 'static', translating=walking,
+                               root=root)
         if self.floor is None:
             # no floor yet: the camera's motion cannot be put into the floor frame
             return InputAnchor(state == 'static', static=state == 'static')
@@ -731,7 +744,23 @@ class GMRNode(Node):
         # of the first image as for this one
         _, A, b = self.floor
         return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b),
-                           static=state == 'static', translating=walking)
+                           static=state == 'static', translating=walking,
+                           root=None if root is None else A.T @ (root - b))
+
+    def _fused_root(self, network_pose: Optional[Pose], R0: np.ndarray,
+                    C: np.ndarray) -> Optional[np.ndarray]:
+        """With ``fused_root`` lifter, the lifter's camera-frame root of the frame's stamp
+        (``network_pose``) in the first camera frame, ``R0 root + C`` (m; R0 (3, 3), C (3,):
+        the camera's estimated orientation and position there); None with ``input``, or when
+        the stamp has no finite lifter root (counted: the input's root is fused)."""
+        if self.p['fused_root'] != 'lifter':
+            return None
+        if network_pose is not None:
+            root = R0 @ np.asarray(network_pose.root_position, float) + C
+            if np.all(np.isfinite(root)):
+                return root
+        self.fused_root_missing += 1
+        return None
 
     def _derotated_anchor(self, cm, state: str, position: Optional[np.ndarray]
                           ) -> InputAnchor:
@@ -1024,6 +1053,11 @@ class GMRNode(Node):
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
                 self.diag.set_value('unfused_frames', online.unanchored_frames)
+                if self.p['fused_root'] == 'lifter':
+                    self.diag.set_value('fused_root', (
+                        f"the lifter's root in {online.measured_root_frames} frames, the "
+                        f"input's in {self.fused_root_missing} fixed frames (no lifter pose "
+                        'of the stamp, or not finite)'))
         self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
         return good
 

@@ -179,7 +179,8 @@ class InputAnchor:
     output, already filtered) fused with the static time constants and never locked to
     GMR's feet, so that the world output is the input moved by the known map.
     ``root``: (3,) m, the person's root in the fixed frame as measured apart from the input
-    (a known camera pose applied to the lifter's camera-frame root): its horizontal position
+    (a known camera pose, or the camera motion estimated from the image, applied to the
+    lifter's camera-frame root): its horizontal position
     (x, y) replaces the input root's in the measurement, the height stays the input's; such
     frames are fused with the fusion's ``measured_position_time_constant_s``."""
 

@@ -317,6 +317,56 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
         assert 'camera_pose_root' not in _values(node)
 
 
+@pytest.mark.parametrize('root', ['lifter', 'input'])
+def test_a_static_camera_fuses_the_lifters_root_with_fused_root_lifter(graph_node, root):
+    """fused_root lifter: the frames of a camera the estimate calls static take their
+    horizontal position from the lifter's camera-frame root of the same stamp, the height from
+    the physics input. The physics root here walks at 0.8 of the person's speed and 5 cm low:
+    with ``input`` the world path is 0.8 of the walk, with ``lifter`` the whole walk. A stamp
+    without a lifter pose is counted (and fused from the input)."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node(floor_topic='/floor', fused_root=root, lookahead=10,
+                                  fusion_static_position_time_constant_s=1e-6,
+                                  fusion_measured_position_time_constant_s=1e-6)
+    world = _poses(60)
+    t_wc, R_wc, t_wf, R_wf, A, b = _camera_and_its_floor()
+    start = world[0].root_position
+    for i, p in enumerate(world):
+        header = rc.make_header(i * DT_NS, 'camera_optical_frame')
+        graph.publish(topics.CAMERA_MOTION, rc.camera_motion_to_odometry(
+            'static', np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3),
+            rc.make_header(i * DT_NS, 'cam_start'), 'camera_optical_frame'))
+        graph.publish('/floor', rc.transform_stamped(header, 'floor', A, b))
+        if i != 30:     # the lifter's frame of stamp 30 is missing
+            graph.publish(topics.LIFTER_UNSMOOTHED_MOTION, rc.pose_to_motion(
+                _in_camera([p], R_wc, t_wc)[0], header))
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(R_wf.T @ quat_to_matrix(p.rotations[0]))
+        slow = start + 0.8 * (p.root_position - start) + [0.0, 0.0, -0.05]
+        in_floor = Pose(p.skeleton, rot, R_wf.T @ (slow - t_wf))
+        graph.publish('/in/motion', rc.pose_to_motion(in_floor, rc.make_header(i * DT_NS,
+                                                                               'floor')))
+    graph.flush()
+    v = _values(node)
+    assert v['unfused_frames'] == '0'
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == 60
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
+    T_true = np.stack([p.root_position for p in world])
+    # after the fusion's first frames (its alignment), the path along the walk
+    walked = np.linalg.norm(T[-10, :2] - T[20, :2])
+    true = np.linalg.norm(T_true[-10, :2] - T_true[20, :2])
+    if root == 'lifter':
+        assert walked == pytest.approx(true, rel=0.03)
+        assert v['fused_root'].startswith("the lifter's root in 59 frames, the input's in 1 ")
+    else:
+        assert walked == pytest.approx(0.8 * true, rel=0.03)
+        assert 'fused_root' not in v
+    np.testing.assert_allclose(T[20:, 2], T_true[20:, 2] - 0.05, atol=0.01)
+
+
 @pytest.mark.parametrize('frame', ['floor_start', 'floor'])
 def test_a_turning_camera_taken_out_by_physics_is_fused_as_a_static_one(graph_node, frame):
     """The physics stage took the camera's rotation out (``derotate_camera``: input frame
