@@ -218,7 +218,7 @@ PARAMETERS = (
               "lifter's and is moved to put the feet on its floor: docs/global.md); "
               "'input' = the input's root", read_only=True,
               additional_constraints='lifter or input'),
-    ParamSpec('fused_root', 'input', "Camera mode auto, a frame the camera-motion estimate "
+    ParamSpec('fused_root', 'lifter', "Camera mode auto, a frame the camera-motion estimate "
               "fixes in the world (a static or turning camera, or one whose translation was "
               "measured over the floor): where the person's horizontal position comes from. "
               "'lifter' = the lifter's camera-frame root of the same stamp "
