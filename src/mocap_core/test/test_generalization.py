@@ -193,12 +193,16 @@ def test_scores_of_a_perfect_and_of_a_leg_swapped_lifter(walk):
                                atol=1e-9)
     steep = score_clip(meta['clip'], meta, dict(gt, camera_R=np.tile(down, (len(J), 1, 1))),
                        J, idx)
-    assert steep.pitch == 'steep (>= 35 deg)' and pitch_class(-20.0) == 'raised (15-35 deg)'
-    pitches = aggregate([steep, dataclasses.replace(perfect, pitch='level (< 15 deg)')])
+    assert steep.pitch == 'looking down >= 35 deg'
+    assert pitch_class(-20.0) == 'looking up (> 15 deg)'
+    assert pitch_class(20.0) == 'looking down 15-35 deg'
+    assert pitch_class(-10.0) == pitch_class(10.0) == 'level (within 15 deg)'
+    pitches = aggregate([steep, dataclasses.replace(perfect, pitch='level (within 15 deg)')])
     assert {g: r['clips'] for g, r in pitches['by_pitch'].items()} == {
-        'level (< 15 deg)': 1, 'steep (>= 35 deg)': 1}
+        'level (within 15 deg)': 1, 'looking down >= 35 deg': 1}
     text = report_markdown(pitches, 't', [])
-    assert '## By how far the camera looks down' in text and '| steep (>= 35 deg) | 1 |' in text
+    assert '## By how far the camera looks up or down' in text
+    assert '| looking down >= 35 deg | 1 |' in text
     # the detector's own swaps: none as placed; every scored frame with its legs exchanged
     det = detector_swaps(gt)
     assert (det >= 0).sum() > len(J) // 2 and det.max() == 0

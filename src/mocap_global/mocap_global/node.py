@@ -43,7 +43,10 @@ out of the input root first (in the floor frame, with ``floor_topic``, when the 
 floor frame) and is fused too; so, with ``fuse_rotating``, is a camera that only turns; a
 translating camera without a measurement (or, by default, a turning one), an unknown motion or
 a missing estimate leaves GMR alone for that frame, and the fusion aligns itself again once
-the camera's pose is known again. ``static`` fuses every frame, ``moving``
+the camera's pose is known again. With a floor input, the horizontal position of a fixed frame
+is the lifter's root of the same stamp moved by the estimated camera motion
+(``fused_root`` 'lifter', the default; the physics root trails a walker), the height the
+input's. ``static`` fuses every frame, ``moving``
 never does. ``/diagnostics`` says which mode each frame took.
 
 Bad input never stops the node: a malformed or NaN message is dropped with a warning, a
@@ -218,25 +221,30 @@ PARAMETERS = (
               "lifter's and is moved to put the feet on its floor: docs/global.md); "
               "'input' = the input's root", read_only=True,
               additional_constraints='lifter or input'),
-    ParamSpec('fused_root', 'lifter', "Camera mode auto, a frame the camera-motion estimate "
-              "fixes in the world (a static or turning camera, or one whose translation was "
-              "measured over the floor): where the person's horizontal position comes from. "
-              "'lifter' = the lifter's camera-frame root of the same stamp "
+    ParamSpec('fused_root', 'lifter', "Camera mode auto with a floor input (the physics "
+              "output), a frame the camera-motion estimate fixes in the world (a static "
+              "camera, one whose translation was measured over the floor, or with "
+              "fuse_rotating one that turns): where the person's horizontal position comes "
+              "from. 'lifter' = the lifter's camera-frame root of the same stamp "
               "(network_pose_topic) moved by the camera's estimated motion, fused as "
               "camera_pose_root lifter fuses it (the height and the body stay the input's); "
-              "'input' = the input's root (docs/global.md)", read_only=True,
+              "'input' = the input's root (docs/global.md). Not used for an optical-frame "
+              "input or one the physics derotated (floor_start)", read_only=True,
               additional_constraints='lifter or input'),
     ParamSpec('fusion_measured_root_half_window', 8, "A root measured apart from the input "
-              "(camera_pose_root lifter) averaged over this many frames before and after its "
-              "own, at most the look-ahead (no delay added)", read_only=True, min_value=0),
+              "(camera_pose_root or fused_root lifter) averaged over this many frames before "
+              "and after its own, at most the look-ahead (no delay added)", read_only=True,
+              min_value=0),
     ParamSpec('fusion_measured_position_time_constant_s', 0.15, "Time constant of the "
               "position correction towards a root measured apart from the input "
-              "(camera_pose_root lifter): GMR's steps between, the lifter's noise filtered",
+              "(camera_pose_root or fused_root lifter): GMR's steps between, the lifter's "
+              "noise filtered",
               min_value=0.0),
     ParamSpec('fusion_measured_velocity_correction', False, "With a root measured apart "
-              "from the input (camera_pose_root lifter): fuse it with an alpha-beta filter "
-              "that also learns the velocity GMR's steps miss, so that a walker is not "
-              "trailed by the position time constant (docs/global.md)", read_only=True),
+              "from the input (camera_pose_root or fused_root lifter): fuse it with an "
+              "alpha-beta filter that also learns the velocity GMR's steps miss, so that a "
+              "walker is not trailed by the position time constant (docs/global.md)",
+              read_only=True),
     ParamSpec('vertical', 'auto', "Where the root's height and tilt come from: 'input' (an "
               "input in a floor frame, z up, floor z = 0, e.g. the physics output: one floor "
               "for all outputs; GMR gives heading and horizontal path), 'gmr' (accumulated "
@@ -401,7 +409,7 @@ class GMRNode(Node):
         for name in ('camera_pose_root', 'fused_root'):
             if p[name] not in ('lifter', 'input'):
                 raise ValueError(f'{name} must be lifter or input, got {p[name]!r}')
-        #: fixed frames without a lifter root of their stamp (fused_root lifter)
+        #: fixed frames without a lifter root of their stamp (fused_root lifter; all persons)
         self.fused_root_missing = 0
         if p['camera_pose_topic'] and p['camera_pose_type'] not in ('odometry', 'pose'):
             raise ValueError(f"camera_pose_type must be odometry or pose, got "
@@ -732,17 +740,16 @@ class GMRNode(Node):
         R0 = cm[1]
         C = np.zeros(3) if position is None else position
         walking = state.startswith('moving')
-        # the lifter's root of this stamp in the first camera frame (fused_root lifter)
-        root = self._fused_root(network_pose, R0, C)
         if not on_floor:
-            return InputAnchor(True, R0, C, static=state == 'static', translating=walking,
-                               root=root)
+            return InputAnchor(True, R0, C, static=state == 'static', translating=walking)
         if self.floor is None:
             # no floor yet: the camera's motion cannot be put into the floor frame
             return InputAnchor(state == 'static', static=state == 'static')
         # p_first_camera = R0 p_camera + C and p_camera = A p_floor + b, for the floor frame
-        # of the first image as for this one
+        # of the first image as for this one; the lifter's root of this stamp goes the same
+        # way (fused_root lifter)
         _, A, b = self.floor
+        root = self._fused_root(network_pose, R0, C)
         return InputAnchor(True, A.T @ R0 @ A, A.T @ (R0 @ b + C - b),
                            static=state == 'static', translating=walking,
                            root=None if root is None else A.T @ (root - b))
@@ -1046,18 +1053,19 @@ class GMRNode(Node):
                 self.diag.set_value('camera_pose_missing_frames', self.camera_pose_missing)
                 if self.p['camera_pose_root'] == 'lifter':
                     self.diag.set_value('camera_pose_root', (
-                        f"the lifter's root in {online.measured_root_frames} frames, the "
-                        f'input\'s in {self.camera_pose_root_missing} (no lifter pose of '
-                        'the stamp, or not finite)'))
+                        f"the lifter's root in {online.measured_root_frames} frames; "
+                        f'{self.camera_pose_root_missing} frames of all persons had none of '
+                        "their stamp (filled from their neighbours', else the input's)"))
             if self.camera_mode == 'auto':
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
                 self.diag.set_value('unfused_frames', online.unanchored_frames)
-                if self.p['fused_root'] == 'lifter':
+                if self.p['fused_root'] == 'lifter' and 'optical' not in self.input_frame \
+                        and not self.input_frame.endswith(topics.START_FRAME_SUFFIX):
                     self.diag.set_value('fused_root', (
-                        f"the lifter's root in {online.measured_root_frames} frames, the "
-                        f"input's in {self.fused_root_missing} fixed frames (no lifter pose "
-                        'of the stamp, or not finite)'))
+                        f"the lifter's root in {online.measured_root_frames} frames; "
+                        f'{self.fused_root_missing} fixed frames of all persons had none of '
+                        "their stamp (filled from their neighbours', else the input's)"))
         self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
         return good
 

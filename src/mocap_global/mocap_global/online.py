@@ -774,21 +774,30 @@ class OnlineGMR:
     def _smoothed_anchor(self, pos: int) -> Optional[InputAnchor]:
         """The anchor of buffer position ``pos`` with its measured root averaged over the
         ``measured_root_half_window`` frames on each side that the buffer holds, in pairs
-        (the frames j before and j after, both with a root of the same kind, or neither):
-        the mean of a steady walk is its middle, no lag."""
+        (the frames j before and j after, both fixed with a root of the same kind): the mean
+        of a steady walk is its middle, no lag. A fixed frame without a root of its own (no
+        lifter pose of its stamp) takes the mean of those pairs alone. Roots from a
+        known camera pose are absolute and may be paired across frames without one; roots
+        moved by the camera-motion estimate are not paired beyond the first frame without
+        one (the fixed frame may have moved by an unmeasured amount across it)."""
         anchor = self._anchors_in[pos]
         h = min(self.measured_root_half_window, pos, len(self._anchors_in) - 1 - pos)
-        if anchor is None or anchor.root is None or h <= 0:
+        if anchor is None or not anchor.fixed or h <= 0:
             return anchor
 
         def root(i: int) -> Optional[np.ndarray]:
             a = self._anchors_in[i]
-            return a.root if a is not None and a.known == anchor.known else None
-        roots = [anchor.root]
+            return a.root if a is not None and a.fixed and a.known == anchor.known else None
+        roots = [] if anchor.root is None else [anchor.root]
         for j in range(1, h + 1):
             before, after = root(pos - j), root(pos + j)
-            if before is not None and after is not None:
-                roots += [before, after]
+            if before is None or after is None:
+                if anchor.known:
+                    continue
+                break
+            roots += [before, after]
+        if not roots:
+            return anchor
         return dataclasses.replace(anchor, root=np.mean(roots, axis=0))
 
     def _fuse(self, R: np.ndarray, T: np.ndarray, pose: Pose, anchor: Optional[InputAnchor],

@@ -266,7 +266,8 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
     """camera_pose_root lifter: with a known pose the horizontal position is the lifter's
     camera-frame root of each stamp moved by the pose, the height the physics input's; the
     physics root here lags 30 cm behind along the walk and stands 5 cm lower. With
-    ``input`` the physics root is taken. A stamp without a lifter pose is counted. A lifter
+    ``input`` the physics root is taken. A stamp without a lifter pose is counted and takes
+    its neighbours' mean. A lifter
     root that jumps 5 cm back and forth along the walk every frame is averaged over 8 frames
     on each side (without a delay: the walk is followed) and moves the output by less than
     1.5 cm; with no averaging it would move it by the noise."""
@@ -303,41 +304,64 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
     T = np.stack([rc.odometry_to_root(m)[0] for m in odom])[1:]
     T_true = np.stack([p.root_position for p in world])[1:]
     np.testing.assert_allclose(T[:, 2], T_true[:, 2] + lag[2], atol=0.01)
-    keep = np.arange(1, 40) != 25
     if root == 'lifter' and noise:
-        # the middle of the walk (8 frames on each side in the buffer)
-        mid = keep & (np.arange(1, 40) >= 11) & (np.arange(1, 40) <= 28)
+        # the middle of the walk (8 frames on each side in the buffer; 25 filled)
+        mid = (np.arange(1, 40) >= 11) & (np.arange(1, 40) <= 28)
         assert np.abs(T[mid, :2] - T_true[mid, :2]).max() < 0.015
     elif root == 'lifter':
-        np.testing.assert_allclose(T[keep, :2], T_true[keep, :2], atol=0.02)
-        assert _values(node)['camera_pose_root'].startswith("the lifter's root in 39 frames, "
-                                                            "the input's in 1 ")
+        np.testing.assert_allclose(T[:, :2], T_true[:, :2], atol=0.02)
+        assert _values(node)['camera_pose_root'].startswith(
+            "the lifter's root in 40 frames; 1 frames of all persons had none ")
     else:
         np.testing.assert_allclose(T[:, :2], T_true[:, :2] + lag[:2], atol=0.02)
         assert 'camera_pose_root' not in _values(node)
 
 
+def _floor_of(R_wc, t_wc):
+    """The floor frame of a camera (optical -> world ``R_wc``, ``t_wc``) as the physics
+    stage's: z up, origin on the floor below the camera, x along the optical axis projected
+    on the floor (floor -> world ``R_wf``, ``t_wf``; ``p_camera = A p_floor + b``)."""
+    f = R_wc[:, 2] * np.array([1.0, 1.0, 0.0])
+    x = f / np.linalg.norm(f)
+    R_wf = np.stack([x, np.cross([0.0, 0.0, 1.0], x), [0.0, 0.0, 1.0]], axis=1)
+    t_wf = np.array([t_wc[0], t_wc[1], 0.0])
+    return R_wf, t_wf, R_wc.T @ R_wf, R_wc.T @ (t_wf - t_wc)
+
+
+@pytest.mark.parametrize('camera', ['static', 'turning', 'walking'])
 @pytest.mark.parametrize('root', ['lifter', 'input'])
-def test_a_static_camera_fuses_the_lifters_root_with_fused_root_lifter(graph_node, root):
-    """fused_root lifter: the frames of a camera the estimate calls static take their
-    horizontal position from the lifter's camera-frame root of the same stamp, the height from
-    the physics input. The physics root here walks at 0.8 of the person's speed and 5 cm low:
-    with ``input`` the world path is 0.8 of the walk, with ``lifter`` the whole walk. A stamp
-    without a lifter pose is counted (and fused from the input)."""
+def test_the_frames_the_estimate_fixes_fuse_the_lifters_root(graph_node, root, camera):
+    """fused_root lifter: the frames the camera-motion estimate fixes (a static camera, a
+    turning one with fuse_rotating, one whose translation was measured) take their horizontal
+    position from the lifter's camera-frame root of the same stamp moved by the estimated
+    camera motion, the height from the physics input. The physics root here walks at 0.8 of
+    the person's speed and 5 cm low: with ``input`` the world path is 0.8 of the walk, with
+    ``lifter`` the whole walk. A stamp without a lifter pose is counted and takes its
+    neighbours' root (no step there)."""
     from mocap_core import ros_conversions as rc
     from mocap_core import topics
+    from mocap_core.rotations import axis_angle_to_matrix as aa
 
     graph, node, out = graph_node(floor_topic='/floor', fused_root=root, lookahead=10,
+                                  fuse_rotating=True,
                                   fusion_static_position_time_constant_s=1e-6,
+                                  fusion_position_time_constant_s=1e-6,
                                   fusion_measured_position_time_constant_s=1e-6)
     world = _poses(60)
-    t_wc, R_wc, t_wf, R_wf, A, b = _camera_and_its_floor()
+    t0, R_wc0, *_ = _camera_and_its_floor()
     start = world[0].root_position
     for i, p in enumerate(world):
+        # the camera turns about the vertical by 0.4 deg per frame, and walks 1 cm per frame
+        turn = 0.0 if camera == 'static' else np.radians(0.4) * i
+        R_wc = aa(np.array([0.0, 0.0, turn])) @ R_wc0
+        t_wc = t0 + (np.array([0.0, 0.01 * i, 0.0]) if camera == 'walking' else 0.0)
+        R_wf, t_wf, A, b = _floor_of(R_wc, t_wc)
         header = rc.make_header(i * DT_NS, 'camera_optical_frame')
+        state = {'static': 'static', 'turning': 'rotating', 'walking': 'moving'}[camera]
         graph.publish(topics.CAMERA_MOTION, rc.camera_motion_to_odometry(
-            'static', np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3),
-            rc.make_header(i * DT_NS, 'cam_start'), 'camera_optical_frame'))
+            state, matrix_to_quat(R_wc0.T @ R_wc), np.zeros(3),
+            rc.make_header(i * DT_NS, 'cam_start'), 'camera_optical_frame',
+            position=R_wc0.T @ (t_wc - t0) if camera == 'walking' else None))
         graph.publish('/floor', rc.transform_stamped(header, 'floor', A, b))
         if i != 30:     # the lifter's frame of stamp 30 is missing
             graph.publish(topics.LIFTER_UNSMOOTHED_MOTION, rc.pose_to_motion(
@@ -350,7 +374,7 @@ def test_a_static_camera_fuses_the_lifters_root_with_fused_root_lifter(graph_nod
                                                                                'floor')))
     graph.flush()
     v = _values(node)
-    assert v['unfused_frames'] == '0'
+    assert v['unfused_frames'] == '0', v
     odom = [m for t, m in out if t == topics.WORLD_ODOM]
     assert len(odom) == 60
     T = np.stack([rc.odometry_to_root(m)[0] for m in odom])
@@ -358,9 +382,13 @@ def test_a_static_camera_fuses_the_lifters_root_with_fused_root_lifter(graph_nod
     # after the fusion's first frames (its alignment), the path along the walk
     walked = np.linalg.norm(T[-10, :2] - T[20, :2])
     true = np.linalg.norm(T_true[-10, :2] - T_true[20, :2])
+    steps = np.linalg.norm(np.diff(T[:, :2], axis=0), axis=1)
     if root == 'lifter':
         assert walked == pytest.approx(true, rel=0.03)
-        assert v['fused_root'].startswith("the lifter's root in 59 frames, the input's in 1 ")
+        assert v['fused_root'].startswith(
+            "the lifter's root in 60 frames; 1 fixed frames of all persons had none ")
+        # every step is the person's (4 cm), stamp 30 without a lifter pose included
+        np.testing.assert_allclose(steps[20:50], 0.04, atol=0.005)
     else:
         assert walked == pytest.approx(0.8 * true, rel=0.03)
         assert 'fused_root' not in v

@@ -120,14 +120,19 @@ def camera_pitch_deg(R: np.ndarray) -> np.ndarray:
 
 
 #: the classes of :func:`pitch_class`, in report order
-PITCH_CLASSES = ('level (< 15 deg)', 'raised (15-35 deg)', 'steep (>= 35 deg)')
+PITCH_CLASSES = ('looking up (> 15 deg)', 'level (within 15 deg)', 'looking down 15-35 deg',
+                 'looking down >= 35 deg')
 
 
 def pitch_class(pitch_deg: float) -> str:
-    """A clip's camera by how far it looks down (its median :func:`camera_pitch_deg`): the
-    body's tilt toward the camera, which the keypoints hardly show, grows with it."""
-    a = abs(pitch_deg)
-    return PITCH_CLASSES[0] if a < 15 else PITCH_CLASSES[1] if a < 35 else PITCH_CLASSES[2]
+    """A clip's camera by how far it looks down (its median :func:`camera_pitch_deg`, degrees;
+    negative: up). The body's tilt toward the camera, which the keypoints hardly show, grows
+    with the pitch."""
+    if pitch_deg <= -15.0:
+        return PITCH_CLASSES[0]
+    if pitch_deg < 15.0:
+        return PITCH_CLASSES[1]
+    return PITCH_CLASSES[2] if pitch_deg < 35.0 else PITCH_CLASSES[3]
 
 
 def height_class(height_m: float) -> str:
@@ -816,7 +821,7 @@ def report_markdown(agg: dict, title: str, setup: Sequence[str]) -> str:
                 f"{_f(r.get('physics_penetration_after_1s_mm'))} / "
                 f"{_f(r.get('world_penetration_after_1s_mm'))} |")
     if agg.get('by_pitch'):
-        lines += ['', '## By how far the camera looks down (median over clips)', '',
+        lines += ['', '## By how far the camera looks up or down (median over clips)', '',
                   "The body's tilt toward or away from the camera is what the keypoints "
                   "hardly show of the camera's pitch (docs/lifter.md, \"What the keypoints "
                   'cannot tell"); the tilt here is the median of the clips\' absolute median '
