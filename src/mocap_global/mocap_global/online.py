@@ -776,10 +776,10 @@ class OnlineGMR:
         ``measured_root_half_window`` frames on each side that the buffer holds, in pairs
         (the frames j before and j after, both fixed with a root of the same kind): the mean
         of a steady walk is its middle, no lag. A fixed frame without a root of its own (no
-        lifter pose of its stamp) takes the mean of those pairs alone. Roots from a
-        known camera pose are absolute and may be paired across frames without one; roots
-        moved by the camera-motion estimate are not paired beyond the first frame without
-        one (the fixed frame may have moved by an unmeasured amount across it)."""
+        lifter pose of its stamp) takes the mean of those pairs alone. Pairs are taken
+        across frames without a root: for roots moved by the camera-motion estimate that
+        is an approximation (across an unmeasured camera step the fixed frame moved by
+        that step), measured better than stopping at such a frame (docs/global.md)."""
         anchor = self._anchors_in[pos]
         h = min(self.measured_root_half_window, pos, len(self._anchors_in) - 1 - pos)
         if anchor is None or not anchor.fixed or h <= 0:
@@ -791,11 +791,8 @@ class OnlineGMR:
         roots = [] if anchor.root is None else [anchor.root]
         for j in range(1, h + 1):
             before, after = root(pos - j), root(pos + j)
-            if before is None or after is None:
-                if anchor.known:
-                    continue
-                break
-            roots += [before, after]
+            if before is not None and after is not None:
+                roots += [before, after]
         if not roots:
             return anchor
         return dataclasses.replace(anchor, root=np.mean(roots, axis=0))
