@@ -10,6 +10,7 @@ from mocap_core.data.synth2d import (CameraSampling, ConfidenceModel, Corruption
                                      look_at, mirror_keypoints, mirror_motion, motion_to_camera,
                                      project, sample_camera)
 from mocap_core.kinematics import forward_kinematics
+from mocap_core.render.evaluate import camera_pitch_deg
 from mocap_core.rotations import axis_angle_to_quat, quat_angle, quat_normalize
 from mocap_core.skeleton import (JOINT_INDEX, KEYPOINT_INDEX, NUM_JOINTS, NUM_KEYPOINTS,
                                  Skeleton)
@@ -132,11 +133,6 @@ def test_sampled_cameras_keep_subject_in_view():
         assert kp.shape == (120, NUM_KEYPOINTS, 3)
 
 
-def _elevation_deg(cam) -> float:
-    """How far the camera's optical axis points below the horizontal (degrees)."""
-    return float(np.degrees(np.arcsin(-cam.rotation[2, 2])))
-
-
 def test_steep_cameras_look_down_from_their_elevation_and_see_the_subject():
     sk, rot, root = _walk(60)
     pts = keypoints_3d(sk, rot, root)
@@ -155,10 +151,11 @@ def test_steep_cameras_look_down_from_their_elevation_and_see_the_subject():
         assert in_view(cam, pts, margin=0.0)
         # aimed within the aim jitter of the subject's centre: its axis looks down at about
         # the drawn elevation (the jitter moves it a few degrees)
-        assert 30.0 < _elevation_deg(cam) < 70.0
+        assert 30.0 < float(camera_pitch_deg(cam.rotation)) < 70.0
     # the usual ranges hardly ever look down that far
     rng = np.random.default_rng(7)
-    usual = [_elevation_deg(sample_camera(pts, rng, CameraSampling())) for _ in range(50)]
+    usual = [float(camera_pitch_deg(sample_camera(pts, rng, CameraSampling()).rotation))
+             for _ in range(50)]
     assert max(usual) < 30.0
 
 

@@ -337,6 +337,14 @@ def parse_up(text: str) -> Optional[np.ndarray]:
 
 
 
+def _measured_root_text(frames: int, missing: int, kind: str) -> str:
+    """The diagnostics value of a root measured apart from the input (``camera_pose_root``,
+    ``fused_root``): how many frames the main person's took the lifter's root, and how many
+    ``kind`` frames of all persons had no lifter pose of their stamp."""
+    return (f"the lifter's root in {frames} frames; {missing} {kind}frames of all persons had "
+            "none of their stamp (filled from their neighbours', else the input's)")
+
+
 class GMRNode(Node):
     """The ``gmr`` node (module docstring). Keyword arguments go to ``rclpy.node.Node``
     (``context``, ``parameter_overrides``, ...).
@@ -1052,20 +1060,16 @@ class GMRNode(Node):
             if self.camera_mode == 'known':
                 self.diag.set_value('camera_pose_missing_frames', self.camera_pose_missing)
                 if self.p['camera_pose_root'] == 'lifter':
-                    self.diag.set_value('camera_pose_root', (
-                        f"the lifter's root in {online.measured_root_frames} frames; "
-                        f'{self.camera_pose_root_missing} frames of all persons had none of '
-                        "their stamp (filled from their neighbours', else the input's)"))
+                    self.diag.set_value('camera_pose_root', _measured_root_text(
+                        online.measured_root_frames, self.camera_pose_root_missing, ''))
             if self.camera_mode == 'auto':
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))
                 self.diag.set_value('unfused_frames', online.unanchored_frames)
                 if self.p['fused_root'] == 'lifter' and 'optical' not in self.input_frame \
                         and not self.input_frame.endswith(topics.START_FRAME_SUFFIX):
-                    self.diag.set_value('fused_root', (
-                        f"the lifter's root in {online.measured_root_frames} frames; "
-                        f'{self.fused_root_missing} fixed frames of all persons had none of '
-                        "their stamp (filled from their neighbours', else the input's)"))
+                    self.diag.set_value('fused_root', _measured_root_text(
+                        online.measured_root_frames, self.fused_root_missing, 'fixed '))
         self.diag.set_value('persons', len(self.persons) if self.bodies_mode else 1)
         return good
 
