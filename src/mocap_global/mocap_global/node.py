@@ -96,8 +96,8 @@ from mocap_core.rotations import closest_yaw, quat_to_matrix
 from .model import TTA_MODES, with_tta
 from mocap_core.foot_plant import FootPlantConfig
 
-from .online import (INFERENCE_ENGINES, InputAnchor, OnlineGMR, StaticCameraFusion,
-                     WorldFrame, prepare_outputs)
+from .online import (INFERENCE_ENGINES, MEASURED_ROOT_AVERAGES, InputAnchor, OnlineGMR,
+                     StaticCameraFusion, WorldFrame, prepare_outputs)
 from .se3 import heading_rotation
 from .weights import default_weights, load_weights
 
@@ -235,6 +235,12 @@ PARAMETERS = (
               "(camera_pose_root or fused_root lifter) averaged over this many frames before "
               "and after its own, at most the look-ahead (no delay added)", read_only=True,
               min_value=0),
+    ParamSpec('fusion_measured_root_average', 'root', "What that average is taken of: "
+              "'root' = the measured roots; 'offset' = their horizontal offsets from the "
+              "input roots moved into the world the same way, added to the frame's own input "
+              "root (the measured root's slow part, the input's motion from frame to frame: "
+              "docs/global.md)", read_only=True,
+              additional_constraints=' or '.join(MEASURED_ROOT_AVERAGES)),
     ParamSpec('fusion_measured_position_time_constant_s', 0.15, "Time constant of the "
               "position correction towards a root measured apart from the input "
               "(camera_pose_root or fused_root lifter): GMR's steps between, the lifter's "
@@ -417,6 +423,9 @@ class GMRNode(Node):
         for name in ('camera_pose_root', 'fused_root'):
             if p[name] not in ('lifter', 'input'):
                 raise ValueError(f'{name} must be lifter or input, got {p[name]!r}')
+        if p['fusion_measured_root_average'] not in MEASURED_ROOT_AVERAGES:
+            raise ValueError('fusion_measured_root_average must be root or offset, got '
+                             f"{p['fusion_measured_root_average']!r}")
         #: fixed frames without a lifter root of their stamp (fused_root lifter; all persons)
         self.fused_root_missing = 0
         if p['camera_pose_topic'] and p['camera_pose_type'] not in ('odometry', 'pose'):
@@ -563,7 +572,8 @@ class GMRNode(Node):
                           contact_threshold=p['contact_threshold'],
                           transition_time_constant_s=p['transition_time_constant_s'],
                           measured_root_half_window=min(
-                              p['fusion_measured_root_half_window'], p['lookahead']))
+                              p['fusion_measured_root_half_window'], p['lookahead']),
+                          measured_root_average=p['fusion_measured_root_average'])
         self.diag.set_value('inference', state.inference)
         return state
 

@@ -200,6 +200,10 @@ class InputAnchor:
         return self.rotation @ R_in, T
 
 
+#: what :class:`OnlineGMR` averages of the measured roots (``measured_root_average``)
+MEASURED_ROOT_AVERAGES = ('root', 'offset')
+
+
 def _anchor_between(a: Optional[InputAnchor], b: Optional[InputAnchor], t: float
                     ) -> Optional[InputAnchor]:
     """The anchor of a frame filled in at fraction ``t`` between frames anchored ``a`` and
@@ -422,7 +426,8 @@ class OnlineGMR:
                  contacts: Optional[Mapping[int, np.ndarray]] = None,
                  contact_threshold: float = 0.5,
                  transition_time_constant_s: float = 0.0,
-                 measured_root_half_window: int = 0, inference: str = 'numpy') -> None:
+                 measured_root_half_window: int = 0, inference: str = 'numpy',
+                 measured_root_average: str = 'root') -> None:
         self.model = model.eval()
         if inference not in INFERENCE_ENGINES:
             raise ValueError(f'inference must be one of {INFERENCE_ENGINES}, got {inference!r}')
@@ -460,6 +465,13 @@ class OnlineGMR:
         if self.measured_root_half_window < 0:
             raise ValueError('measured_root_half_window must be >= 0, got '
                              f'{measured_root_half_window}')
+        #: what that average is taken of: 'root' (the measured roots themselves) or
+        #: 'offset' (their horizontal offsets from the input roots moved by the same maps,
+        #: added to this frame's input root: the input's own motion between frames kept)
+        if measured_root_average not in MEASURED_ROOT_AVERAGES:
+            raise ValueError(f'measured_root_average must be one of {MEASURED_ROOT_AVERAGES}, '
+                             f'got {measured_root_average!r}')
+        self.measured_root_average = measured_root_average
         if not self.transition_time_constant_s >= 0:
             raise ValueError('transition_time_constant_s must be >= 0, got '
                              f'{transition_time_constant_s}')
@@ -779,23 +791,41 @@ class OnlineGMR:
         lifter pose of its stamp) takes the mean of those pairs alone. Pairs are taken
         across frames without a root: for roots moved by the camera-motion estimate that
         is an approximation (across an unmeasured camera step the fixed frame moved by
-        that step), measured better than stopping at such a frame (docs/global.md)."""
+        that step), measured better than stopping at such a frame (docs/global.md).
+
+        With ``measured_root_average`` 'offset' the average is of each root's horizontal
+        offset from its frame's input root moved by the same anchor, and the result is this
+        frame's input root (so moved) plus that mean offset: the measured root's slow part
+        (where the person is) with the input's motion from frame to frame (the physics
+        body's, whose feet stand where that root puts them)."""
         anchor = self._anchors_in[pos]
         h = min(self.measured_root_half_window, pos, len(self._anchors_in) - 1 - pos)
         if anchor is None or not anchor.fixed or h <= 0:
             return anchor
 
+        offset = self.measured_root_average == 'offset'
+
+        def moved_input(i: int) -> np.ndarray:
+            a = self._anchors_in[i]
+            return a.rotation @ np.asarray(self._poses[i].root_position, float) + a.translation
+
         def root(i: int) -> Optional[np.ndarray]:
             a = self._anchors_in[i]
-            return a.root if a is not None and a.fixed and a.known == anchor.known else None
-        roots = [] if anchor.root is None else [anchor.root]
+            if a is None or not a.fixed or a.known != anchor.known or a.root is None:
+                return None
+            if offset:
+                d = np.asarray(a.root, float) - moved_input(i)
+                return np.array([d[0], d[1], 0.0])
+            return a.root
+        roots = [] if root(pos) is None else [root(pos)]
         for j in range(1, h + 1):
             before, after = root(pos - j), root(pos + j)
             if before is not None and after is not None:
                 roots += [before, after]
         if not roots:
             return anchor
-        return dataclasses.replace(anchor, root=np.mean(roots, axis=0))
+        mean = np.mean(roots, axis=0)
+        return dataclasses.replace(anchor, root=moved_input(pos) + mean if offset else mean)
 
     def _fuse(self, R: np.ndarray, T: np.ndarray, pose: Pose, anchor: Optional[InputAnchor],
               up: np.ndarray, first: bool) -> Tuple[np.ndarray, np.ndarray, bool]:

@@ -395,6 +395,64 @@ def test_the_frames_the_estimate_fixes_fuse_the_lifters_root(graph_node, root, c
     np.testing.assert_allclose(T[20:, 2], T_true[20:, 2] - 0.05, atol=0.01)
 
 
+@pytest.mark.parametrize('average', ['root', 'offset'])
+def test_the_measured_roots_offset_keeps_the_inputs_steps(graph_node, average):
+    """fusion_measured_root_average: a static camera, the physics root walks at 0.8 of the
+    person's speed and sways 2 cm sideways at 2 Hz (its body's own motion, which its feet
+    follow); the lifter's root is the true one with 1 cm of noise. Both averages give the
+    whole walk; 'root' averages the sway away with the noise, 'offset' keeps the physics
+    root's sway (its steps from frame to frame) and takes only the slow part from the
+    lifter."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node(floor_topic='/floor', fused_root='lifter', lookahead=10,
+                                  foot_plant=False,
+                                  fusion_measured_root_average=average,
+                                  fusion_static_position_time_constant_s=1e-6,
+                                  fusion_position_time_constant_s=1e-6,
+                                  fusion_measured_position_time_constant_s=1e-6)
+    n = 80
+    world = _poses(n)
+    t_wc, R_wc, *_ = _camera_and_its_floor()
+    R_wf, t_wf, A, b = _floor_of(R_wc, t_wc)
+    start = world[0].root_position
+    sway = 0.02 * np.sin(2 * np.pi * np.arange(n) / 15.0)
+    noise = np.random.default_rng(4).normal(0.0, 0.01, (n, 2))
+    for i, p in enumerate(world):
+        header = rc.make_header(i * DT_NS, 'camera_optical_frame')
+        graph.publish(topics.CAMERA_MOTION, rc.camera_motion_to_odometry(
+            'static', np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3),
+            rc.make_header(i * DT_NS, 'cam_start'), 'camera_optical_frame'))
+        graph.publish('/floor', rc.transform_stamped(header, 'floor', A, b))
+        seen = Pose(p.skeleton, p.rotations,
+                    p.root_position + np.array([noise[i, 0], noise[i, 1], 0.0]))
+        graph.publish(topics.LIFTER_UNSMOOTHED_MOTION, rc.pose_to_motion(
+            _in_camera([seen], R_wc, t_wc)[0], header))
+        rot = np.array(p.rotations)
+        rot[0] = matrix_to_quat(R_wf.T @ quat_to_matrix(p.rotations[0]))
+        slow = start + 0.8 * (p.root_position - start) + [0.0, sway[i], -0.05]
+        graph.publish('/in/motion', rc.pose_to_motion(
+            Pose(p.skeleton, rot, R_wf.T @ (slow - t_wf)), rc.make_header(i * DT_NS, 'floor')))
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    assert len(odom) == n
+    T = np.stack([rc.odometry_to_root(m)[0] for m in odom])[20:70, :2]
+    T_true = np.stack([p.root_position for p in world])[20:70, :2]
+    walked = np.linalg.norm(T[-1] - T[0])
+    assert walked == pytest.approx(np.linalg.norm(T_true[-1] - T_true[0]), rel=0.05)
+    # sideways: the output's distance from its own straight line, against the sway
+    c = T - T.mean(axis=0)
+    direction = np.linalg.svd(c, full_matrices=False)[2][0]
+    side = c @ np.array([-direction[1], direction[0]])
+    corr = abs(np.corrcoef(side, sway[20:70])[0, 1])
+    if average == 'offset':
+        assert corr > 0.9
+        assert np.std(side) == pytest.approx(np.std(sway[20:70]), rel=0.25)
+    else:
+        assert np.std(side) < 0.4 * np.std(sway[20:70])
+
+
 @pytest.mark.parametrize('frame', ['floor_start', 'floor'])
 def test_a_turning_camera_taken_out_by_physics_is_fused_as_a_static_one(graph_node, frame):
     """The physics stage took the camera's rotation out (``derotate_camera``: input frame
