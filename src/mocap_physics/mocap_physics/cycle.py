@@ -343,7 +343,11 @@ class PhysicsCycle:
                  np.concatenate([np.arange(3) + model.idx_v[names.index(f'{side}_{j}')]
                                  for j in ('hip', 'knee', 'ankle', 'toe')]))
                 for side in ('left', 'right')]
-        self._kp, self._kd = self.params.gains(model.nv)
+        #: (kp, kd) per DoF of a frame whose camera stands still or moves (step's
+        #: moving_gains)
+        self._gains = {False: self.params.gains(model.nv),
+                       True: self.params.gains(model.nv, moving=True)}
+        self._kp, self._kd = self._gains[False]
         self.dynet = None
         if self._dynet_net is not None:
             from .dynet import LearnedGains
@@ -438,7 +442,8 @@ class PhysicsCycle:
     # -- the cycle ---------------------------------------------------------------------------
     def step(self, target, stamp: Optional[float] = None,
              contact_probabilities: Optional[Sequence[float]] = None,
-             alpha: Optional[np.ndarray] = None, camera_moving: bool = False) -> FrameResult:
+             alpha: Optional[np.ndarray] = None, camera_moving: bool = False,
+             moving_gains: bool = False) -> FrameResult:
         """Advance the simulation by one frame towards ``target``.
 
         Args:
@@ -451,6 +456,9 @@ class PhysicsCycle:
             camera_moving: the camera may move in this frame (a camera-motion estimate
                 that is not ``static``): only then is the stance drift followed
                 (``stance_drift_s``).
+            moving_gains: the joints' PD of this frame is ``kp_joint_moving`` /
+                ``kd_joint_moving`` where set (a camera that may move and whose motion is not
+                carried: the floor frame rides with it).
 
         Raises:
             InvalidInput: no skeleton/model yet and the target cannot provide one, or the
@@ -551,6 +559,7 @@ class PhysicsCycle:
                     n = np.linalg.norm(step, axis=1, keepdims=True)
                     step *= np.minimum(1.0, p.stick_speed * frame_dt / np.maximum(n, 1e-12))
                 self._anchor[far] += step
+        self._kp, self._kd = self._gains[bool(moving_gains)]
         try:
             simulate = self._simulate_whole_body if self._whole_body else self._simulate
             acc = simulate(q_hat, v_ff, mask, alpha, dt, n_sub)

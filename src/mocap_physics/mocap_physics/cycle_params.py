@@ -90,6 +90,11 @@ class PhysicsParams:
     kd_root: float = 40.0                 # s^-1
     kp_joint: float = 3600.0              # ball joints, s^-2
     kd_joint: float = 120.0               # s^-1
+    #: the ball joints' PD in frames whose camera may move and is not carried (the floor
+    #: frame then rides with the camera: the target's apparent motion includes the camera's,
+    #: which the PD would trail); 0 = kp_joint / kd_joint
+    kp_joint_moving: float = 0.0          # s^-2
+    kd_joint_moving: float = 0.0          # s^-1
     velocity_feedforward: bool = False    # kd o (qdot_hat - qdot) instead of -kd o qdot
     friction: float = 0.8                 # mu (eq. 9)
     contact_probability_threshold: float = 0.5
@@ -128,7 +133,8 @@ class PhysicsParams:
             val = getattr(self, name)
             if not (np.isfinite(val) and val > 0):
                 bad.append(f'{name}={val} (must be > 0)')
-        for name in ('kp_root', 'kd_root', 'kp_joint', 'kd_joint', 'grf_smoothness'):
+        for name in ('kp_root', 'kd_root', 'kp_joint', 'kd_joint', 'kp_joint_moving',
+                     'kd_joint_moving', 'grf_smoothness'):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0):
                 bad.append(f'{name}={val} (must be >= 0)')
@@ -163,10 +169,14 @@ class PhysicsParams:
         if bad:
             raise ValueError('bad physics parameters: ' + '; '.join(bad))
 
-    def gains(self, nv: int) -> Tuple[np.ndarray, np.ndarray]:
-        """Per-DoF (kp, kd) vectors of length nv (root first: 3 translation, 3 rotation)."""
-        kp = np.full(nv, float(self.kp_joint))
-        kd = np.full(nv, float(self.kd_joint))
+    def gains(self, nv: int, moving: bool = False) -> Tuple[np.ndarray, np.ndarray]:
+        """Per-DoF (kp, kd) vectors of length nv (root first: 3 translation, 3 rotation);
+        ``moving``: those of a frame whose camera moves (``kp_joint_moving``,
+        ``kd_joint_moving`` where set)."""
+        kp_j = self.kp_joint_moving if moving and self.kp_joint_moving > 0 else self.kp_joint
+        kd_j = self.kd_joint_moving if moving and self.kd_joint_moving > 0 else self.kd_joint
+        kp = np.full(nv, float(kp_j))
+        kd = np.full(nv, float(kd_j))
         kp[:6] = self.kp_root
         kd[:6] = self.kd_root
         return kp, kd

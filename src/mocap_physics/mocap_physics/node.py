@@ -208,6 +208,13 @@ PARAMETERS = (
               read_only=True),
     ParamSpec('kd_joint', _D.kd_joint, 'PD damping of the ball joints, s^-1', min_value=0.0,
               read_only=True),
+    ParamSpec('kp_joint_moving', _D.kp_joint_moving, 'PD stiffness of the ball joints in '
+              'frames whose camera the camera-motion estimate does not call static and whose '
+              'motion is not carried (the floor frame rides with the camera, so the target '
+              'moves by the camera\'s motion too and the PD would trail it), s^-2; 0 = '
+              'kp_joint (docs/physics.md)', min_value=0.0, read_only=True),
+    ParamSpec('kd_joint_moving', _D.kd_joint_moving, 'PD damping of the ball joints in those '
+              'frames, s^-1; 0 = kd_joint', min_value=0.0, read_only=True),
     ParamSpec('velocity_feedforward', _D.velocity_feedforward, 'PD damping against the '
               "target's velocity (kd o (qdot_hat - qdot), qdot_hat differenced from the last "
               'two targets) instead of against zero velocity (-kd o qdot)', read_only=True),
@@ -391,6 +398,7 @@ class PhysicsNode(Node):
         self.params = PhysicsParams(
             body_mass=p['body_mass'], substeps=p['substeps'], kp_root=p['kp_root'],
             kd_root=p['kd_root'], kp_joint=p['kp_joint'], kd_joint=p['kd_joint'],
+            kp_joint_moving=p['kp_joint_moving'], kd_joint_moving=p['kd_joint_moving'],
             friction=p['friction'], contact_probability_threshold=p['contact_threshold'],
             contact_height=p['contact_height'], grf_smoothness=p['grf_smoothness'],
             root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],

@@ -382,7 +382,9 @@ class OnlinePhysics:
         t = stamp_ns * 1e-9 if time_s is None else float(time_s)
         t0 = time.perf_counter()
         try:
-            res = self.cycle.step(pose, t, probabilities, camera_moving=camera_moving)
+            # a camera whose motion is carried leaves no apparent motion to trail
+            res = self.cycle.step(pose, t, probabilities, camera_moving=camera_moving,
+                                  moving_gains=camera_moving and camera is None)
         except (InvalidInput, SkeletonError) as exc:
             self._notify('skeleton', f'skipping a frame: {exc}', 'problem', dropped=True)
             return None

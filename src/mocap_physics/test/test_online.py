@@ -125,6 +125,26 @@ def test_a_static_camera_keeps_the_floor_window_from_restarting():
     assert seen == [False, True, True]
 
 
+def test_the_moving_gains_go_to_frames_of_a_moving_camera_not_carried(clip):
+    """``camera_moving`` reaches the cycle as ``moving_gains`` through the queue, except in a
+    frame whose camera pose carries the body (its motion is then taken out)."""
+    online = OnlinePhysics(PhysicsParams(), clip.to_world, skeleton=clip.skeleton)
+    seen = []
+    step = online.cycle.step
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get('moving_gains'))
+        return step(*args, **kwargs)
+    online.cycle.step = spy
+    camera = (np.eye(3), np.zeros(3))
+    online.add_motion(T0, clip.pose(0), 'camera_optical_frame', camera_moving=True)
+    online.add_motion(T0 + DT, clip.pose(1), 'camera_optical_frame', camera_static=True)
+    online.add_motion(T0 + 2 * DT, clip.pose(2), 'camera_optical_frame', camera=camera,
+                      camera_moving=True)
+    online.flush()
+    assert seen == [True, False, False]
+
+
 def test_contacts_matched_by_stamp_wait_and_age():
     rest = Pose.rest(Skeleton.default())
     online, clock, notices, calls = _streaming(contacts_expected=lambda: True,
