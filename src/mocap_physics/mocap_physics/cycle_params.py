@@ -92,9 +92,10 @@ class PhysicsParams:
     kd_joint: float = 120.0               # s^-1
     #: the ball joints' PD in frames whose camera may move and is not carried (the floor
     #: frame then rides with the camera: the target's apparent motion includes the camera's,
-    #: which the PD would trail); 0 = kp_joint / kd_joint
-    kp_joint_moving: float = 0.0          # s^-2
-    kd_joint_moving: float = 0.0          # s^-1
+    #: which the PD would trail): 90 rad/s, critically damped (docs/physics.md, session 63);
+    #: 0 = kp_joint / kd_joint
+    kp_joint_moving: float = 8100.0       # s^-2
+    kd_joint_moving: float = 180.0        # s^-1
     velocity_feedforward: bool = False    # kd o (qdot_hat - qdot) instead of -kd o qdot
     friction: float = 0.8                 # mu (eq. 9)
     contact_probability_threshold: float = 0.5
