@@ -400,9 +400,9 @@ def test_the_measured_roots_offset_keeps_the_inputs_steps(graph_node, average):
     """fusion_measured_root_average: a static camera, the physics root walks at 0.8 of the
     person's speed and sways 2 cm sideways at 2 Hz (its body's own motion, which its feet
     follow); the lifter's root is the true one with 1 cm of noise. Both averages give the
-    whole walk; 'root' averages the sway away with the noise, 'offset' keeps the physics
-    root's sway (its steps from frame to frame) and takes only the slow part from the
-    lifter."""
+    whole walk; 'root' takes the position from the lifter's roots alone (the physics root's
+    sway is not used; the noise averaged over 17 frames), 'offset' keeps the physics root's
+    sway (its steps from frame to frame) and takes only the slow part from the lifter."""
     from mocap_core import ros_conversions as rc
     from mocap_core import topics
 

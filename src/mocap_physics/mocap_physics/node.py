@@ -204,16 +204,19 @@ PARAMETERS = (
     ParamSpec('kd_root', _D.kd_root, 'PD damping of the root, s^-1 (default: 20 rad/s, '
               'critically damped with kp 400)', min_value=0.0, read_only=True),
     ParamSpec('kp_joint', _D.kp_joint, 'PD stiffness of the ball joints, s^-2 (default: '
-              '60 rad/s natural frequency, critically damped with kd 120)', min_value=0.0,
+              '60 rad/s natural frequency, critically damped with kd 120); frames of a moving '
+              'camera take kp_joint_moving', min_value=0.0,
               read_only=True),
-    ParamSpec('kd_joint', _D.kd_joint, 'PD damping of the ball joints, s^-1', min_value=0.0,
+    ParamSpec('kd_joint', _D.kd_joint, 'PD damping of the ball joints, s^-1 (frames of a '
+              'moving camera: kd_joint_moving)', min_value=0.0,
               read_only=True),
     ParamSpec('kp_joint_moving', _D.kp_joint_moving, 'PD stiffness of the ball joints in '
               'frames whose camera the camera-motion estimate does not call static and whose '
               'motion is not carried (the floor frame rides with the camera, so the target '
               'moves by the camera\'s motion too and the PD would trail it), s^-2 (default: 90 '
               'rad/s, critically damped with kd 180; travel set PA-MPJPE cost +4.5 -> +3.0 '
-              'mm); 0 = kp_joint (docs/physics.md)', min_value=0.0, read_only=True),
+              'mm); 0 = kp_joint. Unused with derotate_camera, a carried body, floor_source '
+              'input or learned gains (docs/physics.md)', min_value=0.0, read_only=True),
     ParamSpec('kd_joint_moving', _D.kd_joint_moving, 'PD damping of the ball joints in those '
               'frames, s^-1; 0 = kd_joint', min_value=0.0, read_only=True),
     ParamSpec('velocity_feedforward', _D.velocity_feedforward, 'PD damping against the '
@@ -399,11 +402,10 @@ class PhysicsNode(Node):
         self.params = PhysicsParams(
             body_mass=p['body_mass'], substeps=p['substeps'], kp_root=p['kp_root'],
             kd_root=p['kd_root'], kp_joint=p['kp_joint'], kd_joint=p['kd_joint'],
-            # a derotated input, or one in its own floor frame, has no camera motion to trail
-            kp_joint_moving=0.0 if self._derotating(p) or p['floor_source'] == 'input'
-            else p['kp_joint_moving'],
-            kd_joint_moving=0.0 if self._derotating(p) or p['floor_source'] == 'input'
-            else p['kd_joint_moving'],
+            # a derotated or carried input, or one in its own floor frame, has no camera
+            # motion to trail; learned gains replace the PD's gains
+            kp_joint_moving=0.0 if self._no_moving_gains(p) else p['kp_joint_moving'],
+            kd_joint_moving=0.0 if self._no_moving_gains(p) else p['kd_joint_moving'],
             friction=p['friction'], contact_probability_threshold=p['contact_threshold'],
             contact_height=p['contact_height'], grf_smoothness=p['grf_smoothness'],
             root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
@@ -560,7 +562,9 @@ class PhysicsNode(Node):
         self.diag.on_publish(guarded(self, self.refresh_diagnostics, 'diagnostics'))
         self.get_logger().info(
             f"physics on {p['motion_topic']} (contacts: {contacts_topic or 'none'}); "
-            f"k={p['substeps']}, kp={p['kp_joint']:g}, kd={p['kd_joint']:g}, "
+            f"k={p['substeps']}, kp={p['kp_joint']:g}, kd={p['kd_joint']:g} "
+            f"(moving camera: {self.params.kp_joint_moving or p['kp_joint']:g}, "
+            f"{self.params.kd_joint_moving or p['kd_joint']:g}), "
             f"mu={p['friction']:g}, floor: {p['floor_source']}")
 
     def _make_online(self, contacts_topic: str) -> OnlinePhysics:
@@ -738,6 +742,14 @@ class PhysicsNode(Node):
             and bool(p['camera_motion_topic'])
 
     @staticmethod
+    def _no_moving_gains(p) -> bool:
+        """Whether kp_joint_moving / kd_joint_moving are unused: the camera's motion is taken
+        out (derotate_camera) or carried, the input is in its own floor frame, or the gains
+        are learned."""
+        return PhysicsNode._derotating(p) or PhysicsNode._carried(p) or \
+            p['floor_source'] == 'input' or p['gains_mode'] == 'learned'
+
+    @staticmethod
     def _carried(p) -> bool:
         """Whether the simulated body is carried with the camera's motion (a known camera
         pose, or carry_with_camera with the estimate; not while derotating)."""
@@ -755,7 +767,7 @@ class PhysicsNode(Node):
         except MessageError as exc:
             self._problem('camera_motion', f'ignoring camera motion: {exc}')
             return
-        if self.drift:
+        if self.drift or self.moving_gains:
             self.camera_states[stamp_to_ns(msg.header.stamp)] = state
             while len(self.camera_states) > 600:
                 self.camera_states.popitem(last=False)

@@ -422,8 +422,10 @@ def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
     moved = [Pose(p.skeleton, p.rotations, p.root_position - side * (i / 30.0))
              for i, p in enumerate(static[:n])]
     ident = [np.eye(3)] * n
-    drift = {'stance_drift_s': 0.3}
-    off, _, _ = _run({'stance_drift_s': 0.0}, moved, contacts[:n], ident)
+    # (the joints' moving gains off: this is the drift alone)
+    fixed = {'kp_joint_moving': 0.0, 'kd_joint_moving': 0.0}
+    drift = dict(fixed, stance_drift_s=0.3)
+    off, _, _ = _run(dict(fixed, stance_drift_s=0.0), moved, contacts[:n], ident)
     follows, _, node = _run(drift, moved, contacts[:n], ident, state='moving')
     assert node.drift and node.online.cycle.drift_frames > 0
     node.refresh_diagnostics()
@@ -441,6 +443,25 @@ def test_the_node_follows_the_stance_drift_unless_the_camera_is_static(panning):
                       moved, contacts[:n], None,
                       known=[(np.eye(3), side * (i / 30.0)) for i in range(n)])
     assert node.carry and not node.drift and node.online.cycle.drift_frames == 0
+
+
+@pytest.mark.parametrize('dynamics', ['whole_body', 'paper'])
+def test_the_node_gives_a_moving_cameras_frames_the_moving_gains(panning, dynamics):
+    """``kp_joint_moving`` / ``kd_joint_moving`` reach the frames the estimate says move, in
+    either dynamics and without the stance drift: the same input simulated differently with
+    the estimate ``moving`` than ``static``, and alike with the moving gains at 0 (then
+    reported off in the diagnostics)."""
+    _, panned, turns, contacts, _ = panning
+    n = 30
+    base = {'stance_drift_s': 0.0, 'dynamics': dynamics}
+    plain = dict(base, kp_joint_moving=0.0, kd_joint_moving=0.0)
+    still, _, _ = _run(base, panned[:n], contacts[:n], turns[:n], state='static')
+    moving, _, node = _run(base, panned[:n], contacts[:n], turns[:n], state='moving')
+    assert node.diag._values['moving_gains'].startswith('joints kp 8100, kd 180')
+    assert np.abs(_feet(moving) - _feet(still)).max() > 1e-4
+    alike, _, node = _run(plain, panned[:n], contacts[:n], turns[:n], state='moving')
+    assert node.diag._values['moving_gains'] == 'off'
+    assert np.abs(_feet(alike) - _feet(still)).max() < 1e-9
 
 
 @pytest.mark.parametrize('gravity', [True, False])

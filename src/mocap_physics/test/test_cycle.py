@@ -200,7 +200,7 @@ def test_a_moving_cameras_frames_take_the_moving_gains(skeleton):
             arm = 0.8 * np.sin(2 * np.pi * f * t)
             rot[JOINT_INDEX['right_shoulder']] = axis_angle_to_quat(np.array([0.0, 0.0, arm]))
             r = cyc.step(Pose(skeleton, rot, [0, 0, skeleton.rest_root_height()]), t,
-                         [1, 1, 1, 1], camera_moving=moving, moving_gains=moving)
+                         [1, 1, 1, 1], moving_gains=moving)
             assert _finite(r)
             if t >= 1.0:
                 err.append(abs(quat_to_axis_angle(
@@ -209,7 +209,7 @@ def test_a_moving_cameras_frames_take_the_moving_gains(skeleton):
 
     stiff = PhysicsParams(kp_joint_moving=8100.0, kd_joint_moving=180.0)
     still, moving = run(stiff, False), run(stiff, True)
-    assert moving.mean() < 0.7 * still.mean(), (moving.mean(), still.mean())
+    assert moving.mean() < 0.8 * still.mean(), (moving.mean(), still.mean())
     plain = PhysicsParams(kp_joint_moving=0.0, kd_joint_moving=0.0)
     np.testing.assert_array_equal(run(plain, True), run(plain, False))
     with pytest.raises(ValueError, match='kp_joint_moving'):
