@@ -817,7 +817,8 @@ class OnlineGMR:
                 d = np.asarray(a.root, float) - moved_input(i)
                 return np.array([d[0], d[1], 0.0])
             return a.root
-        roots = [] if root(pos) is None else [root(pos)]
+        own = root(pos)
+        roots = [] if own is None else [own]
         for j in range(1, h + 1):
             before, after = root(pos - j), root(pos + j)
             if before is not None and after is not None:

@@ -399,13 +399,14 @@ class PhysicsNode(Node):
         if learned and not os.path.isfile(weights):
             raise ValueError(f'gains_mode learned: no DyNet weights at {weights} (train '
                              'them with `mocap train physics --install`)')
+        # a derotated or carried input, or one in its own floor frame, has no camera motion
+        # to trail; learned gains replace the PD's gains
+        no_moving = self._no_moving_gains(p)
         self.params = PhysicsParams(
             body_mass=p['body_mass'], substeps=p['substeps'], kp_root=p['kp_root'],
             kd_root=p['kd_root'], kp_joint=p['kp_joint'], kd_joint=p['kd_joint'],
-            # a derotated or carried input, or one in its own floor frame, has no camera
-            # motion to trail; learned gains replace the PD's gains
-            kp_joint_moving=0.0 if self._no_moving_gains(p) else p['kp_joint_moving'],
-            kd_joint_moving=0.0 if self._no_moving_gains(p) else p['kd_joint_moving'],
+            kp_joint_moving=0.0 if no_moving else p['kp_joint_moving'],
+            kd_joint_moving=0.0 if no_moving else p['kd_joint_moving'],
             friction=p['friction'], contact_probability_threshold=p['contact_threshold'],
             contact_height=p['contact_height'], grf_smoothness=p['grf_smoothness'],
             root_residual=p['root_residual'], penetration_metric=p['penetration_metric'],
