@@ -18,8 +18,13 @@ the BlazePose way, per person:
   side, and in larger images the whole image again and squares of two thirds of the short
   side on a grid (overlapping by at least a third). The detector sees its input at
   224 x 224, so in a wide image a person a third of the image high is ~50 px to it and often
-  missed; in the smaller squares the same person is three times that. A person that a
-  square cuts is not taken from it (a larger region finds them whole). Each region is scanned every
+  missed; in the smaller squares the same person is three times that. After a first round
+  of these regions, they take turns with finer squares (:meth:`~BlazePoseMultiDetector.
+  fine_regions`) sized for people down to ``min_person_px`` high, or
+  ``search_min_person_fraction`` of the image's short side if more: a person far from the
+  camera, 50 px high in a 360 x 640 video, is never found in the regions above and is
+  followed in most frames once a 128-px square finds them. A person that a square cuts is
+  not taken from it (a larger region finds them whole). Each region is scanned every
   ``detection_interval`` x (number of regions) frames; while whole rounds find nobody new
   the interval doubles, up to ``max_detection_interval``, and it drops back as soon as someone
   new is found or a window ends. Once a whole round of regions at the longest interval has
@@ -194,10 +199,23 @@ def _fill(crop: np.ndarray, box: tuple, x0: int, y0: int) -> None:
 #: it gave partial bodies. A person such a square cuts is left to the larger regions
 #: (:func:`cut_by`).
 TILE_FRACTION = 2.0 / 3.0
-#: The smaller squares are scanned only in images whose short side is at least this (px):
-#: in smaller images a person the detector misses whole is too small to follow anyway, and
-#: the extra regions would only slow the discovery of everybody else.
+#: The squares of :data:`TILE_FRACTION` are scanned only in images whose short side is at
+#: least this (px); in smaller images the finer squares of
+#: :meth:`BlazePoseMultiDetector.fine_regions` look for the small people.
 SMALL_TILE_MIN_SIDE = 480
+
+#: The finest search squares (:meth:`BlazePoseMultiDetector.fine_regions`) are sized so that the
+#: smallest person searched is this fraction of a square's side high (the detector sees the
+#: square at 224 x 224). Measured on rendered walkers far from a static camera (a 360 x 640
+#: video, squares placed at random around the person, 20 frames each): a person 51 px high was
+#: found in 18 of 20 squares of 128 px (0.40 of the side), 12-14 of 20 of 180-240 px (0.21-0.28),
+#: 2 of 20 of 360 px and never in the whole image; people 33 px high in 5-9 of 20 squares of
+#: 128 px. Found, their landmarks were off by 3 % of their height (docs/multi_person.md).
+SMALL_PERSON_SIDE_FRACTION = 0.375
+#: Each level of finer squares is this much larger than the one below it, up to the smallest
+#: of the regions of :meth:`BlazePoseMultiDetector.regions`; the squares of a level overlap by
+#: half their side, so that a person up to half a square high lies wholly in one of them.
+FINE_LEVEL_STEP = 1.5
 
 #: :func:`jumped`'s largest torso-length ratio between a window's first landmarks and the
 #: search's keypoints that opened it. The search sees the whole region at 224 x 224, so a
@@ -284,6 +302,11 @@ class BlazePoseMultiDetector:
             them at least this x 224 px high); 0 disables it.
         whole_frame_leave_height: ... and goes back to a window below this fraction
             (hysteresis; at most ``whole_frame_min_height``).
+        search_min_person_fraction: the search also scans finer squares
+            (:meth:`fine_regions`), taking turns with the regions of :meth:`regions` after
+            their first round, for people down to ``max(min_person_px, this x the image's
+            short side)`` high (a smaller fraction: more squares, so each is scanned less
+            often); 1 scans only :meth:`regions`.
     """
 
     name = 'mediapipe_blazepose_full_multi'
@@ -295,7 +318,8 @@ class BlazePoseMultiDetector:
                  min_detection_confidence: float = 0.5,
                  min_tracking_confidence: float = 0.5, threads: int = 2,
                  whole_frame_min_height: float = 0.4,
-                 whole_frame_leave_height: float = 0.3) -> None:
+                 whole_frame_leave_height: float = 0.3,
+                 search_min_person_fraction: float = 0.1) -> None:
         if max_persons < 1:
             raise ValueError(f'max_persons must be >= 1, got {max_persons}')
         if detection_interval < 1:
@@ -309,6 +333,13 @@ class BlazePoseMultiDetector:
                 <= whole_frame_min_height:
             raise ValueError(f'whole_frame_leave_height must be in [0, whole_frame_min_height '
                              f'= {whole_frame_min_height}], got {whole_frame_leave_height}')
+        if not 0.0 <= search_min_person_fraction <= 1.0:
+            raise ValueError(f'search_min_person_fraction must be in [0, 1], got '
+                             f'{search_min_person_fraction}')
+        self.search_min_person_fraction = float(search_min_person_fraction)
+        #: the search's regions in turn per image size (see :meth:`search_regions`), and
+        #: the number of searches in a round of them
+        self._scan: dict = {}
         self.whole_frame_min_height = float(whole_frame_min_height)
         self.whole_frame_leave_height = float(whole_frame_leave_height)
         self.threads = int(threads)
@@ -429,7 +460,7 @@ class BlazePoseMultiDetector:
             for kp in new:
                 self._open(kp, w, h, whole=alone and self._large(kp, w, h))
             people += new
-            self._back_off(len(new), len(self.regions(w, h)))
+            self._back_off(len(new), self.search_regions(w, h)[1])
             self._searched(rgb)
         self._settle_whole(w, h)
         self._frame += 1
@@ -563,6 +594,47 @@ class BlazePoseMultiDetector:
             out += [(0, 0, width, height)] + grid(int(round(TILE_FRACTION * short)), both=True)
         return out
 
+    @staticmethod
+    def fine_regions(width: int, height: int, smallest_px: float) -> List[tuple]:
+        """``(x0, y0, x1, y1)`` squares for people down to ``smallest_px`` high, which the
+        regions of :meth:`regions` show the detector too small: levels of squares from
+        ``smallest_px`` / :data:`SMALL_PERSON_SIDE_FRACTION` up by :data:`FINE_LEVEL_STEP`
+        while below the smallest of those regions, each level a grid over the image whose
+        neighbouring squares overlap by half a square (finest level first, row by row). Empty
+        when the coarse regions are fine enough."""
+        coarse = min(min(x1 - x0, y1 - y0) for x0, y0, x1, y1 in
+                     BlazePoseMultiDetector.regions(width, height))
+        out: List[tuple] = []
+        side = smallest_px / SMALL_PERSON_SIDE_FRACTION
+        while side < coarse / np.sqrt(FINE_LEVEL_STEP):
+            s = int(round(side))
+
+            def starts(length: int) -> List[int]:
+                if length <= s:
+                    return [0]
+                n = int(np.ceil((length - s) / (s / 2.0))) + 1
+                return [int(round(k * (length - s) / (n - 1))) for k in range(n)]
+            out += [(x, y, x + s, y + s) for y in starts(height) for x in starts(width)]
+            side *= FINE_LEVEL_STEP
+        return out
+
+    def search_regions(self, width: int, height: int) -> Tuple[List[tuple], int]:
+        """The regions searched in turn in a ``width`` x ``height`` image, and how many
+        searches make a round of :meth:`regions` (for the interval's back-off): a first
+        round of :meth:`regions`, then those taking turns with the :meth:`fine_regions` for
+        people down to ``max(min_person_px, search_min_person_fraction`` x the short side)
+        high (each coarse region then comes every other search)."""
+        key = (width, height)
+        if key not in self._scan:
+            coarse = self.regions(width, height)
+            smallest = max(self.min_person_px,
+                           self.search_min_person_fraction * min(width, height))
+            fine = self.fine_regions(width, height, smallest) if smallest > 0 else []
+            seq = coarse + [r for k, f in enumerate(fine)
+                            for r in (coarse[k % len(coarse)], f)]
+            self._scan[key] = (seq, 2 * len(coarse) if fine else len(coarse))
+        return self._scan[key]
+
     def _find(self, rgb: np.ndarray, followed: Sequence[np.ndarray] = ()
               ) -> List[np.ndarray]:
         """Detection on this turn's region: (23, 3) image keypoints of every person found.
@@ -570,7 +642,7 @@ class BlazePoseMultiDetector:
         (:func:`mask_box`): the detector's strongest detections are often the people it
         already follows, and it then reports nobody else."""
         h, w = rgb.shape[:2]
-        regions = self.regions(w, h)
+        regions = self.search_regions(w, h)[0]
         x0, y0, x1, y1 = regions[self.detections % len(regions)]
         self.detections += 1
         boxes = [b for b in map(mask_box, followed) if b is not None]

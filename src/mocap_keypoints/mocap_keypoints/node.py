@@ -156,6 +156,11 @@ PARAMETERS = (
               min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('min_person_height_px', 48.0, 'Persons whose seen keypoints span fewer pixels '
               'in height are ignored', min_value=0.0, read_only=True),
+    ParamSpec('search_min_person_fraction', 0.1, 'blazepose_multi: after a first round of '
+              'its regions the search also scans finer squares, for people down to '
+              'max(min_person_height_px, this x the image\'s short side) high (far from the '
+              'camera); smaller: more squares, each scanned less often; 1 = no finer squares',
+              min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('id_after_frames', 0, 'A new person gets an id (and is published) after being '
               'seen in this many consecutive frames, so that a one-frame false detection never '
               'gets one; 0 = 3 when max_persons > 1, else 1 (the single-person detector '
@@ -961,7 +966,8 @@ class KeypointsNode(Node):
                 min_tracking_confidence=p['min_tracking_confidence'],
                 threads=p['landmark_threads'],
                 whole_frame_min_height=p['whole_frame_min_height'],
-                whole_frame_leave_height=0.75 * p['whole_frame_min_height'])
+                whole_frame_leave_height=0.75 * p['whole_frame_min_height'],
+                search_min_person_fraction=p['search_min_person_fraction'])
         return create_detector(name, tracking=p['tracking'],
                                min_detection_confidence=p['min_detection_confidence'],
                                min_tracking_confidence=p['min_tracking_confidence'])

@@ -144,14 +144,17 @@ def test_searches_skipped_while_the_picture_is_still(clip_frames):
     """The committed clip, one person alone beside a grey side: once a whole round of
     regions at the longest interval found nobody, most searches are skipped (nothing else
     changes), one still made every ``still_detection_interval`` frames. Then a copy of the
-    person steps into the grey side: searches are made again, and both are followed."""
+    person steps into the grey side: searches are made again, and both are followed. (The
+    finer squares for small people are left out: the counts below are those of the coarse
+    regions' rounds.)"""
     frames = [f.image for f in clip_frames[:90]]
     frames = (frames + frames[-2::-1] + frames[1:]) * 2      # forwards, backwards, ...
     h, w = frames[0].shape[:2]
     grey = np.full((h, w // 2, 3), 127, np.uint8)
     counts = {}
     for still in (60, 0):
-        with BlazePoseMultiDetector(max_persons=4, still_detection_interval=still) as det:
+        with BlazePoseMultiDetector(max_persons=4, still_detection_interval=still,
+                                    search_min_person_fraction=1.0) as det:
             for img in frames[:420]:
                 det.detect(_wide(img, grey))
             counts[still] = (det.detections, det.searches_skipped)
@@ -176,3 +179,67 @@ def test_searches_skipped_while_the_picture_is_still(clip_frames):
     (gated, skipped), (plain, never) = counts[60], counts[0]
     assert never == 0 and skipped >= 10, counts
     assert gated <= plain - 8, counts
+
+
+def test_fine_regions_cover_the_image_for_the_smallest_person():
+    """Every person up to half the finest square high lies wholly in one finest square, the
+    squares are sized for the smallest person asked for, and there are none where the coarse
+    regions already show such a person large enough."""
+    from mocap_keypoints.multipose import SMALL_PERSON_SIDE_FRACTION
+    for w, h in ((360, 640), (640, 480), (1280, 720)):
+        smallest = max(48.0, 0.1 * min(w, h))
+        fine = BlazePoseMultiDetector.fine_regions(w, h, smallest)
+        sides = sorted({x1 - x0 for x0, y0, x1, y1 in fine})
+        assert sides[0] == round(smallest / SMALL_PERSON_SIDE_FRACTION), (w, h, sides)
+        coarse = min(min(x1 - x0, y1 - y0) for x0, y0, x1, y1 in
+                      BlazePoseMultiDetector.regions(w, h))
+        assert max(sides) < coarse
+        finest = [r for r in fine if r[2] - r[0] == sides[0]]
+        assert all(0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h for x0, y0, x1, y1 in finest)
+        rng = np.random.default_rng(0)
+        size = sides[0] // 2
+        for x, y in zip(rng.integers(0, w - size, 300), rng.integers(0, h - size, 300)):
+            assert any(x0 <= x and y0 <= y and x + size <= x1 and y + size <= y1
+                       for x0, y0, x1, y1 in finest), (w, h, x, y)
+    # a person a whole short side high needs no finer squares
+    assert BlazePoseMultiDetector.fine_regions(640, 360, 360.0) == []
+
+
+def test_a_person_far_from_the_camera_is_found_by_the_finer_squares(clip_frames,
+                                                                      clip_detections):
+    """The committed clip shrunk to a person ~55 px high in a corner of a grey 640 x 360
+    image: the regions of before never find them; the finer squares do, and the windows
+    then follow them in most frames where the single-person detector sees the full-size
+    person (keypoints within 10 % of their height)."""
+    import cv2
+    scale, x0, y0 = 0.19, 430, 210
+    frames = [f.image for f in clip_frames]
+    single = np.concatenate(clip_detections[0])
+    order = list(range(len(frames))) + list(range(len(frames) - 1, -1, -1))
+    order = (order * 2)[:180]
+
+    def shrunk(img):
+        canvas = np.full((360, 640, 3), 110, np.uint8)
+        small = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        canvas[y0:y0 + small.shape[0], x0:x0 + small.shape[1]] = small
+        return canvas
+
+    results = {}
+    for fraction in (0.1, 1.0):
+        found, errors = [], []
+        with BlazePoseMultiDetector(max_persons=4, search_min_person_fraction=fraction) as det:
+            for k in order:
+                got = det.detect(shrunk(frames[k]))
+                found.append(len(got))
+                ref = single[k]
+                if len(got) == 1 and ref[BODY, 2].min() >= 0.5:
+                    expect = ref[BODY, :2] * scale + [x0, y0]
+                    errors.append(np.median(np.linalg.norm(got[0, BODY, :2] - expect, axis=1)))
+        results[fraction] = (found, errors)
+    coarse = results[1.0][0]
+    assert max(coarse) == 0, coarse
+    found, errors = results[0.1]
+    first = next(i for i, n in enumerate(found) if n)
+    assert first < 150 and max(found) == 1, found
+    assert np.mean(np.array(found[first:]) == 1) >= 0.8, found
+    assert np.median(errors) < 0.1 * 294 * scale, errors
