@@ -29,7 +29,8 @@ setup(
         'mocap.nodes': ['keypoints = mocap_keypoints.node:KeypointsNode'],
         'mocap.commands': ['keypoints = mocap_keypoints.training.cli'],
         'mocap.benches': ['keypoints = mocap_keypoints.bench:main',
-                          'multipose = mocap_keypoints.people_bench:main'],
+                          'multipose = mocap_keypoints.people_bench:main',
+                          'recall = mocap_keypoints.recall_bench:main'],
         # the node's detectors, for data generation (mocap data render)
         'mocap.detectors': ['blazepose = mocap_keypoints.detector:BlazePoseDetector'],
     },

@@ -251,6 +251,15 @@ def jumped(last: np.ndarray, kp: np.ndarray, max_shift: float = 1.0,
                 or max(a[1], b[1]) / min(a[1], b[1]) > max_ratio)
 
 
+def _starts(length: int, side: int, step: float) -> List[int]:
+    """Starts of squares of ``side`` px spread evenly over ``length`` px, from one end to the
+    other, at most ``step`` px apart (one square when it covers the length)."""
+    if length <= side:
+        return [0]
+    n = int(np.ceil((length - side) / step)) + 1
+    return [int(round(k * (length - side) / (n - 1))) for k in range(n)]
+
+
 def _where(win: '_Window') -> List[np.ndarray]:
     """Where the person of ``win`` may be in this frame, before its landmarker has run: the
     last frame's keypoints and, after two frames in a row, those moved on as much again."""
@@ -578,13 +587,9 @@ class BlazePoseMultiDetector:
         short = min(width, height)
 
         def grid(side: int, both: bool) -> List[tuple]:
-            def starts(length: int) -> List[int]:
-                if length <= side:
-                    return [0]
-                n = int(np.ceil((length - side) / (side * 2.0 / 3.0))) + 1
-                return [int(round(k * (length - side) / (n - 1))) for k in range(n)]
-            ys = starts(height) if both or height > width else [0]
-            xs = starts(width) if both or width >= height else [0]
+            step = side * 2.0 / 3.0
+            ys = _starts(height, side, step) if both or height > width else [0]
+            xs = _starts(width, side, step) if both or width >= height else [0]
             return [(x, y, x + side, y + side) for y in ys for x in xs]
 
         out = [(0, 0, width, height)]
@@ -608,13 +613,8 @@ class BlazePoseMultiDetector:
         side = smallest_px / SMALL_PERSON_SIDE_FRACTION
         while side < coarse / np.sqrt(FINE_LEVEL_STEP):
             s = int(round(side))
-
-            def starts(length: int) -> List[int]:
-                if length <= s:
-                    return [0]
-                n = int(np.ceil((length - s) / (s / 2.0))) + 1
-                return [int(round(k * (length - s) / (n - 1))) for k in range(n)]
-            out += [(x, y, x + s, y + s) for y in starts(height) for x in starts(width)]
+            out += [(x, y, x + s, y + s) for y in _starts(height, s, s / 2.0)
+                    for x in _starts(width, s, s / 2.0)]
             side *= FINE_LEVEL_STEP
         return out
 
