@@ -7,7 +7,9 @@ per frame, the ids the tracker gave and for how many frames each. The mean inclu
 multi-person detector's periodic search for new people, so it is the one that says what a
 live keypoint node spends. A third column runs the multi-person detector with its windows
 only (``whole_frame_min_height`` 0: no whole-image tracking of a lone person), the design
-before it. A clip shorter than ``--frames`` is played forwards and backwards (no cut).
+before it; a fourth without the finer search squares for people far from the camera
+(``search_min_person_fraction`` 1). A clip shorter than ``--frames`` is played forwards and
+backwards (no cut).
 
 Clips: the committed test clip, and where ``../shared/data/videos`` exists the real videos
 (two basketball players, a walk filmed by a moving camera, a two-person demo, a street).
@@ -74,7 +76,8 @@ def ping_pong(frames: List, limit: int) -> List:
 
 #: the detectors compared: label -> (factory keyword arguments of the multi-person detector,
 #: or None for the single-person one)
-DETECTORS = {'single': None, 'multi': {}, 'windows': {'whole_frame_min_height': 0.0}}
+DETECTORS = {'single': None, 'multi': {}, 'windows': {'whole_frame_min_height': 0.0},
+             'coarse': {'search_min_person_fraction': 1.0}}
 
 
 def measure(path: Path, limit: int) -> Dict[str, object]:
@@ -136,39 +139,41 @@ def render(results: Dict[str, dict], limit: int) -> str:
         'taking turns frame by frame (the order rotating), one thread each. "single": '
         'BlazePose, one person (`max_persons 1`); "multi": the multi-person detector '
         '(`max_persons 4`, defaults); "windows": the same with windows only '
-        '(`whole_frame_min_height 0`, no whole-image tracking of a lone person). Short clips '
-        'are played forwards and backwards up to the frame count.',
+        '(`whole_frame_min_height 0`, no whole-image tracking of a lone person); "coarse": '
+        'the defaults without the finer search squares for people far from the camera '
+        '(`search_min_person_fraction 1`). Short clips are played forwards and backwards up '
+        'to the frame count.',
         '',
         '## Time per frame',
         '',
         'Median and mean (ms); the mean includes the periodic search for new people and is what '
         'a live node spends. Ratios: multi / single.',
         '',
-        '| clip | frames | size | single median | multi median | windows median | '
-        'single mean | multi mean | windows mean | ratio of medians | ratio of means |',
-        '|---|---|---|---|---|---|---|---|---|---|---|',
+        '| clip | frames | size | ' + ' | '.join(f'{d} median' for d in DETECTORS) + ' | '
+        + ' | '.join(f'{d} mean' for d in DETECTORS) + ' | ratio of medians | ratio of means |',
+        '|---|---|---|' + '---|' * (2 * len(DETECTORS) + 2),
     ]
 
     def ratio(a, b):
         return a / b if b > 0 else float('nan')
     for name, r in results.items():
         lines.append(
-            f"| {name} | {r['frames']} | {r['size']} | {r['single_ms']:.1f} | "
-            f"{r['multi_ms']:.1f} | {r['windows_ms']:.1f} | {r['single_mean_ms']:.1f} | "
-            f"{r['multi_mean_ms']:.1f} | {r['windows_mean_ms']:.1f} | "
+            f"| {name} | {r['frames']} | {r['size']} | "
+            + ' | '.join(f"{r[f'{d}_ms']:.1f}" for d in DETECTORS) + ' | '
+            + ' | '.join(f"{r[f'{d}_mean_ms']:.1f}" for d in DETECTORS) + ' | '
             f"{ratio(r['multi_ms'], r['single_ms']):.2f} | "
             f"{ratio(r['multi_mean_ms'], r['single_mean_ms']):.2f} |")
     lines += ['', '## People found', '',
-              '| clip | single | multi | windows | ids of multi (frames each) | whole-image '
-              'switches |', '|---|---|---|---|---|---|']
+              '| clip | ' + ' | '.join(DETECTORS) + ' | ids of multi (frames each) | '
+              'whole-image switches |', '|---|' + '---|' * (len(DETECTORS) + 2)]
     for name, r in results.items():
         cells = [', '.join(f'{k}: {v}' for k, v in r[f'{d}_found'].items())
                  for d in DETECTORS]
         ids = ', '.join(f'{k}: {v}' for k, v in r['ids'].items()) or 'none'
         lines.append(f"| {name} | {' | '.join(cells)} | {ids} | "
                      f"{r['whole_frame_switches']} |")
-    lines += ['', '"single", "multi", "windows": frames by number of people the detector '
-              'returned. "ids": the tracker\'s ids over the multi-person detections (keypoint '
+    lines += ['', ', '.join(f'"{d}"' for d in DETECTORS) + ': frames by number of people the '
+              'detector returned. "ids": the tracker\'s ids over the multi-person detections (keypoint '
               'node defaults) and the frames each was published. "whole-image switches": '
               'times the multi-person detector took a lone person onto the whole image or '
               'back to a window.', '']
@@ -190,7 +195,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"{name}: per frame median / mean: single {r['single_ms']:.1f} / "
               f"{r['single_mean_ms']:.1f} ms, multi {r['multi_ms']:.1f} / "
               f"{r['multi_mean_ms']:.1f} ms, windows only {r['windows_ms']:.1f} / "
-              f"{r['windows_mean_ms']:.1f} ms; people (multi) {r['multi_found']}; "
+              f"{r['windows_mean_ms']:.1f} ms, coarse {r['coarse_ms']:.1f} / "
+              f"{r['coarse_mean_ms']:.1f} ms; people (multi) {r['multi_found']}; "
               f"ids {r['ids']}")
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(render(results, args.frames))
