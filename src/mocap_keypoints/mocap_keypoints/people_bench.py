@@ -175,8 +175,8 @@ def render(results: Dict[str, dict], limit: int) -> str:
     lines += ['', ', '.join(f'"{d}"' for d in DETECTORS) + ': frames by number of people the '
               'detector returned. "ids": the tracker\'s ids over the multi-person detections '
               '(keypoint node defaults) and the frames each was published. "whole-image '
-              'switches": times the multi-person detector took a lone person onto the whole image or '
-              'back to a window.', '']
+              'switches": times the multi-person detector took a lone person onto the whole '
+              'image or back to a window.', '']
     return '\n'.join(lines)
 
 
