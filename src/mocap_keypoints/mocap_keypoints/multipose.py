@@ -349,6 +349,7 @@ class BlazePoseMultiDetector:
         #: the search's regions in turn per image size (see :meth:`search_regions`), and
         #: the number of searches in a round of them
         self._scan: dict = {}
+        self._fine_turn = False
         self.whole_frame_min_height = float(whole_frame_min_height)
         self.whole_frame_leave_height = float(whole_frame_leave_height)
         self.threads = int(threads)
@@ -393,6 +394,10 @@ class BlazePoseMultiDetector:
         self._whole_blocked = False
         #: searches skipped because nothing changed outside the people followed
         self.searches_skipped = 0
+        #: searches of the finer squares (:meth:`fine_regions`), and the people they found
+        #: that nobody followed yet
+        self.fine_searches = 0
+        self.found_in_fine = 0
         self._frame = 0
         self._since_find = 0
         self._interval = self.detection_interval
@@ -465,6 +470,9 @@ class BlazePoseMultiDetector:
                 if len(self._windows) + len(new) >= self.max_persons:
                     break
                 new.append(kp)
+            if self._fine_turn:
+                self.fine_searches += 1
+                self.found_in_fine += len(new)
             alone = not self._windows and len(new) == 1
             for kp in new:
                 self._open(kp, w, h, whole=alone and self._large(kp, w, h))
@@ -642,8 +650,12 @@ class BlazePoseMultiDetector:
         (:func:`mask_box`): the detector's strongest detections are often the people it
         already follows, and it then reports nobody else."""
         h, w = rgb.shape[:2]
-        regions = self.search_regions(w, h)[0]
-        x0, y0, x1, y1 = regions[self.detections % len(regions)]
+        regions, _ = self.search_regions(w, h)
+        turn = self.detections % len(regions)
+        x0, y0, x1, y1 = regions[turn]
+        # after the first round of coarse regions, every other turn is a finer square
+        coarse = len(self.regions(w, h))
+        self._fine_turn = turn >= coarse and (turn - coarse) % 2 == 1
         self.detections += 1
         boxes = [b for b in map(mask_box, followed) if b is not None]
         crop = (np.array if boxes else np.ascontiguousarray)(rgb[y0:y1, x0:x1])

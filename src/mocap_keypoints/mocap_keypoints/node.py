@@ -1028,6 +1028,11 @@ class KeypointsNode(Node):
         self.diag.set_value('renamed_by_bone_lengths', ts.renamed)
         self.diag.set_value('false_detections_ignored', ts.blips)
         self.diag.set_value('persons_ignored', ts.ignored)
+        det = self.detector
+        if det is not None and hasattr(det, 'fine_searches'):
+            self.diag.set_value('searches', f'{det.detections} ({det.fine_searches} in the finer '
+                                f'squares, {det.found_in_fine} people found there), '
+                                f'{det.searches_skipped} skipped in a still picture')
         self.diag.set_value('facing_check', self.facing_status)
         self.diag.set_value('mirror_check', self.mirror_status)
         mc = self.processor.mirror

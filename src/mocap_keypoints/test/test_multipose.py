@@ -235,10 +235,11 @@ def test_a_person_far_from_the_camera_is_found_by_the_finer_squares(clip_frames,
                 if len(got) == 1 and ref[BODY, 2].min() >= 0.5:
                     expect = ref[BODY, :2] * scale + [x0, y0]
                     errors.append(np.median(np.linalg.norm(got[0, BODY, :2] - expect, axis=1)))
-        results[fraction] = (found, errors)
-    coarse = results[1.0][0]
-    assert max(coarse) == 0, coarse
-    found, errors = results[0.1]
+            results[fraction] = (found, errors, det.fine_searches, det.found_in_fine)
+    coarse, _, fine_searches, _ = results[1.0]
+    assert max(coarse) == 0 and fine_searches == 0, coarse
+    found, errors, fine_searches, found_in_fine = results[0.1]
+    assert found_in_fine >= 1 and fine_searches >= found_in_fine
     first = next(i for i, n in enumerate(found) if n)
     assert first < 150 and max(found) == 1, found
     assert np.mean(np.array(found[first:]) == 1) >= 0.8, found
