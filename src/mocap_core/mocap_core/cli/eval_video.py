@@ -6,8 +6,10 @@ truth (``mocap_core.render.evaluate``).
                      [--start video|keypoints] [--tag NAME]
 
 Per rendered clip (``mocap data render``), ``mocap process`` runs on ``video.mp4`` (start
-``video``: the keypoint node with BlazePose, then lifter, physics, GMR; the camera's true
-intrinsics are given to the keypoint node as a calibration file unless ``--intrinsics
+``video``: the keypoint node with BlazePose, then lifter, physics, GMR; one person per
+render, so the single-person detector (``max_persons`` 1, as the recorded detections) unless
+``--param keypoints.max_persons=4`` asks for the node's default multi-person one; the
+camera's true intrinsics are given to the keypoint node as a calibration file unless ``--intrinsics
 approx``) or on the clip's bag from the keypoints it recorded (start ``keypoints``: the same
 detector output, faster). The output bags are kept under
 ``~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>/`` (``--work``) and reused by a rerun
