@@ -18,14 +18,20 @@ the BlazePose way, per person:
   side, and in larger images the whole image again and squares of two thirds of the short
   side on a grid (overlapping by at least a third). The detector sees its input at
   224 x 224, so in a wide image a person a third of the image high is ~50 px to it and often
-  missed; in the smaller squares the same person is three times that. After a first round
-  of these regions, they take turns with finer squares (:meth:`~BlazePoseMultiDetector.
-  fine_regions`) sized for people down to ``min_person_px`` high, or
-  ``search_min_person_fraction`` of the image's short side if more: a person far from the
-  camera, 50 px high in a 360 x 640 video, is never found in the regions above and is
-  followed in most frames once a 128-px square finds them. A person that a square cuts is
-  not taken from it (a larger region finds them whole). Each region is scanned every
-  ``detection_interval`` x (number of regions) frames; while whole rounds find nobody new
+  missed; in the smaller squares the same person is three times that. Then these regions
+  take turns with finer squares (:meth:`~BlazePoseMultiDetector.fine_regions`) sized for
+  people down to ``min_person_px`` high, or ``search_min_person_fraction`` of the image's
+  short side if more (:meth:`~BlazePoseMultiDetector.search_regions`: a round of the coarse
+  regions alone, then a coarse region and a finer square in turn, until every finer square
+  had its turn; then again). A person far from the camera, 50 px high in a 360 x 640 video,
+  is hardly ever found in the coarse regions and is followed in most frames once a 128-px
+  square finds them. A person that a square cuts is not taken from it (a larger region finds
+  them whole). A search is made every ``detection_interval`` frames (every frame while
+  nobody is followed), so a coarse region comes every ``detection_interval`` x (twice their
+  number) frames and the finer squares, many more, are all scanned only every
+  ``detection_interval`` x (their number + twice that of the coarse regions) frames: about
+  5 s on a 640 x 360 video while nobody is followed, over a minute at the longest interval
+  while somebody is. While whole rounds of the coarse regions find nobody new
   the interval doubles, up to ``max_detection_interval``, and it drops back as soon as someone
   new is found or a window ends. Once a whole round of regions at the longest interval has
   found nobody new, a due search is skipped while nothing has changed outside the people
@@ -212,10 +218,16 @@ SMALL_TILE_MIN_SIDE = 480
 #: 2 of 20 of 360 px and never in the whole image; people 33 px high in 5-9 of 20 squares of
 #: 128 px. Found, their landmarks were off by 3 % of their height (docs/multi_person.md).
 SMALL_PERSON_SIDE_FRACTION = 0.375
-#: Each level of finer squares is this much larger than the one below it, up to the smallest
-#: of the regions of :meth:`BlazePoseMultiDetector.regions`; the squares of a level overlap by
-#: half their side, so that a person up to half a square high lies wholly in one of them.
+#: Each level of finer squares is this much larger than the one below it, as long as a level's
+#: squares stay smaller than the smallest of the regions of
+#: :meth:`BlazePoseMultiDetector.regions` by more than the square root of this; the squares of
+#: a level overlap by half their side, so that a person up to half a square high lies wholly
+#: in one of them.
 FINE_LEVEL_STEP = 1.5
+#: The smallest person the finer squares are made for (px), whatever the settings: people
+#: 33 px high were found in at most 9 of 20 squares sized for them, and the number of squares
+#: grows with the inverse square of the size (``min_person_height_px`` may be 0).
+SMALLEST_SEARCHED_PX = 32.0
 
 #: :func:`jumped`'s largest torso-length ratio between a window's first landmarks and the
 #: search's keypoints that opened it. The search sees the whole region at 224 x 224, so a
@@ -249,6 +261,14 @@ def jumped(last: np.ndarray, kp: np.ndarray, max_shift: float = 1.0,
     size = max(a[1], b[1])
     return bool(np.linalg.norm(a[0] - b[0]) > max_shift * size
                 or max(a[1], b[1]) / min(a[1], b[1]) > max_ratio)
+
+
+def interleave(coarse: Sequence[tuple], fine: Sequence[tuple]) -> List[tuple]:
+    """One cycle of the search's regions: every ``coarse`` region once, then a coarse region
+    (in order, again and again) and a ``fine`` square in turn until each fine square had its
+    turn. Without fine squares: the coarse regions."""
+    return list(coarse) + [r for k, f in enumerate(fine)
+                           for r in (coarse[k % len(coarse)], f)]
 
 
 def _starts(length: int, side: int, step: float) -> List[int]:
@@ -312,10 +332,11 @@ class BlazePoseMultiDetector:
         whole_frame_leave_height: ... and goes back to a window below this fraction
             (hysteresis; at most ``whole_frame_min_height``).
         search_min_person_fraction: the search also scans finer squares
-            (:meth:`fine_regions`), taking turns with the regions of :meth:`regions` after
-            their first round, for people down to ``max(min_person_px, this x the image's
-            short side)`` high (a smaller fraction: more squares, so each is scanned less
-            often); 1 scans only :meth:`regions`.
+            (:meth:`fine_regions`), taking turns with the regions of :meth:`regions` after a
+            round of those alone (:meth:`search_regions`), for people down to
+            ``max(min_person_px, this x the image's short side)`` high, at least
+            :data:`SMALLEST_SEARCHED_PX` (a smaller fraction: more squares, so each is
+            scanned less often); 1 scans only :meth:`regions`.
     """
 
     name = 'mediapipe_blazepose_full_multi'
@@ -350,6 +371,9 @@ class BlazePoseMultiDetector:
         #: the number of searches in a round of them
         self._scan: dict = {}
         self._fine_turn = False
+        #: the next turn in the cycle of :meth:`search_regions`, and the image size it is of
+        self._turn = 0
+        self._turn_size: Optional[Tuple[int, int]] = None
         self.whole_frame_min_height = float(whole_frame_min_height)
         self.whole_frame_leave_height = float(whole_frame_leave_height)
         self.threads = int(threads)
@@ -495,6 +519,7 @@ class BlazePoseMultiDetector:
         self._interval = self.detection_interval
         self._quiet = 0
         self._ref, self._ref_boxes = None, []
+        self._turn = 0
         self._settled = self._whole_blocked = False
         self._since_search = 0
 
@@ -612,9 +637,12 @@ class BlazePoseMultiDetector:
         """``(x0, y0, x1, y1)`` squares for people down to ``smallest_px`` high, which the
         regions of :meth:`regions` show the detector too small: levels of squares from
         ``smallest_px`` / :data:`SMALL_PERSON_SIDE_FRACTION` up by :data:`FINE_LEVEL_STEP`
-        while below the smallest of those regions, each level a grid over the image whose
-        neighbouring squares overlap by half a square (finest level first, row by row). Empty
-        when the coarse regions are fine enough."""
+        while smaller than the smallest of those regions by more than the square root of
+        that step, each level a grid over the image whose neighbouring squares overlap by half
+        a square (finest level first, row by row). Empty when the coarse regions are fine
+        enough. ``smallest_px`` must be at least 1."""
+        if not smallest_px >= 1.0:
+            raise ValueError(f'smallest_px must be >= 1, got {smallest_px}')
         coarse = min(min(x1 - x0, y1 - y0) for x0, y0, x1, y1 in
                      BlazePoseMultiDetector.regions(width, height))
         out: List[tuple] = []
@@ -627,20 +655,20 @@ class BlazePoseMultiDetector:
         return out
 
     def search_regions(self, width: int, height: int) -> Tuple[List[tuple], int]:
-        """The regions searched in turn in a ``width`` x ``height`` image, and how many
-        searches make a round of :meth:`regions` (for the interval's back-off): a first
-        round of :meth:`regions`, then those taking turns with the :meth:`fine_regions` for
-        people down to ``max(min_person_px, search_min_person_fraction`` x the short side)
-        high (each coarse region then comes every other search)."""
+        """The regions searched in turn in a ``width`` x ``height`` image (one cycle,
+        :func:`interleave` of :meth:`regions` and the :meth:`fine_regions` for people down to
+        ``max(min_person_px, search_min_person_fraction`` x the short side,
+        :data:`SMALLEST_SEARCHED_PX`) high), and the searches that the interval's back-off
+        counts as a round of the coarse regions (twice their number where they take turns
+        with finer squares). The settings are read once per image size."""
         key = (width, height)
         if key not in self._scan:
             coarse = self.regions(width, height)
-            smallest = max(self.min_person_px,
+            smallest = max(self.min_person_px, SMALLEST_SEARCHED_PX,
                            self.search_min_person_fraction * min(width, height))
-            fine = self.fine_regions(width, height, smallest) if smallest > 0 else []
-            seq = coarse + [r for k, f in enumerate(fine)
-                            for r in (coarse[k % len(coarse)], f)]
-            self._scan[key] = (seq, 2 * len(coarse) if fine else len(coarse))
+            fine = self.fine_regions(width, height, smallest)
+            self._scan[key] = (interleave(coarse, fine),
+                               2 * len(coarse) if fine else len(coarse))
         return self._scan[key]
 
     def _find(self, rgb: np.ndarray, followed: Sequence[np.ndarray] = ()
@@ -651,9 +679,12 @@ class BlazePoseMultiDetector:
         already follows, and it then reports nobody else."""
         h, w = rgb.shape[:2]
         regions, _ = self.search_regions(w, h)
-        turn = self.detections % len(regions)
+        if (w, h) != self._turn_size:      # a new image size starts a cycle
+            self._turn, self._turn_size = 0, (w, h)
+        turn = self._turn % len(regions)
+        self._turn = turn + 1
         x0, y0, x1, y1 = regions[turn]
-        # after the first round of coarse regions, every other turn is a finer square
+        # after the round of coarse regions alone, every other turn is a finer square
         coarse = len(self.regions(w, h))
         self._fine_turn = turn >= coarse and (turn - coarse) % 2 == 1
         self.detections += 1

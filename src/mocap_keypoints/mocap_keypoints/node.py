@@ -156,10 +156,12 @@ PARAMETERS = (
               min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('min_person_height_px', 48.0, 'Persons whose seen keypoints span fewer pixels '
               'in height are ignored', min_value=0.0, read_only=True),
-    ParamSpec('search_min_person_fraction', 0.1, 'blazepose_multi: after a first round of '
-              'its regions the search also scans finer squares, for people down to '
-              'max(min_person_height_px, this x the image\'s short side) high (far from the '
-              'camera); smaller: more squares, each scanned less often; 1 = no finer squares',
+    ParamSpec('search_min_person_fraction', 0.1, 'blazepose_multi: the search takes turns '
+              'between its regions and finer squares, for people down to '
+              'max(min_person_height_px, this x the image\'s short side, 32 px) high (far from '
+              'the camera); smaller: more squares, each scanned less often (all of them every '
+              'few seconds while nobody is followed, over a minute while somebody is); 1 = no '
+              'finer squares',
               min_value=0.0, max_value=1.0, read_only=True),
     ParamSpec('id_after_frames', 0, 'A new person gets an id (and is published) after being '
               'seen in this many consecutive frames, so that a one-frame false detection never '

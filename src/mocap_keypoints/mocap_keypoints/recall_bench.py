@@ -22,6 +22,7 @@ import argparse
 import json
 import os
 import platform
+import sys
 import time
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -38,6 +39,10 @@ MATCH_FRACTION = 0.2
 MIN_HEIGHT_PX = 48.0
 #: ... or where fewer than this share of the true joints lie in the image
 IN_IMAGE_SHARE = 0.8
+#: only detected keypoints at least this confident are compared, and a detection needs
+#: :data:`MIN_SEEN` of its body keypoints that confident to be the person
+MIN_CONFIDENCE = 0.3
+MIN_SEEN = 4
 #: the person's image height bins of the breakdown (px)
 HEIGHT_BINS = (48, 64, 96, 160, 100000)
 _BODY = ('left_shoulder', 'right_shoulder', 'left_hip', 'right_hip', 'left_knee',
@@ -81,12 +86,18 @@ def clip_dirs(roots: Sequence[Path], limit: Optional[int] = None) -> List[Path]:
 def match(found: np.ndarray, truth_uv: np.ndarray, height: float) -> Tuple[Optional[float], int]:
     """(P, 23, 3) detections and the (18, 2) projected true joints of a person ``height`` px
     high -> (the best detection's mean body-keypoint error / height if it is the person,
-    else None; the number of other detections)."""
+    else None; the number of other detections). Only keypoints at least
+    :data:`MIN_CONFIDENCE` confident count; a detection with fewer than :data:`MIN_SEEN`
+    of them is another detection."""
     from mocap_core.skeleton import JOINT_INDEX, KEYPOINT_INDEX
     kp_idx = [KEYPOINT_INDEX[n] for n in _BODY]
     j_idx = [JOINT_INDEX[n] for n in _BODY]
-    errs = [float(np.mean(np.linalg.norm(k[kp_idx, :2] - truth_uv[j_idx], axis=1)))
-            / max(height, 1.0) for k in found]
+    errs = []
+    for k in found:
+        seen = k[kp_idx, 2] >= MIN_CONFIDENCE
+        d = np.linalg.norm(k[kp_idx, :2] - truth_uv[j_idx], axis=1)[seen]
+        errs.append(float(d.mean()) / max(height, 1.0) if seen.sum() >= MIN_SEEN
+                    else float('inf'))
     hits = [e for e in errs if e < MATCH_FRACTION]
     best = min(hits) if hits else None
     return best, len(errs) - (1 if best is not None else 0)
@@ -105,7 +116,7 @@ def measure(clip: Path, variants: Dict[str, Dict[str, float]]) -> Dict[str, obje
     uv = project_pinhole(gt['K'], gt['joints_camera'])[..., :2]
     names = list(variants)
     dets = {n: BlazePoseMultiDetector(**{**NODE_DEFAULTS, **variants[n]}) for n in names}
-    res = {n: {'found': [], 'error': [], 'false': 0, 'ms': []} for n in names}
+    res = {n: {'found': [], 'error': [], 'false': [], 'ms': []} for n in names}
     heights, counted = [], []
     cap = cv2.VideoCapture(str(clip / 'video.mp4'))
     k = 0
@@ -128,7 +139,7 @@ def measure(clip: Path, variants: Dict[str, Dict[str, float]]) -> Dict[str, obje
                 err, others = match(got, p, height)
                 res[n]['found'].append(err is not None)
                 res[n]['error'].append(np.nan if err is None else err)
-                res[n]['false'] += others
+                res[n]['false'].append(others)
             k += 1
     finally:
         cap.release()
@@ -150,9 +161,11 @@ def clip_recall(clip: dict, name: str) -> float:
 
 
 def summarise(clips: List[dict], names: Sequence[str]) -> Dict[str, dict]:
-    """Pooled figures per variant: recall over the counted frames (all, and by the person's
-    height), median error of the hits, false detections per 1000 frames, clips where the
-    person was never found, time per frame (median, mean)."""
+    """Pooled figures per variant over the counted frames: recall (all, and by the person's
+    height), median error of the hits, other detections per 1000 frames, clips where the
+    person was never found; time per frame (median, mean) over every frame."""
+    if not clips:
+        raise ValueError('no clip was measured')
     out = {}
     height = np.concatenate([np.asarray(c['height']) for c in clips])
     counted = np.concatenate([np.asarray(c['counted'], bool) for c in clips])
@@ -160,6 +173,7 @@ def summarise(clips: List[dict], names: Sequence[str]) -> Dict[str, dict]:
         found = np.concatenate([np.asarray(c[n]['found'], bool) for c in clips])
         err = np.concatenate([np.asarray(c[n]['error'], float) for c in clips])
         ms = np.concatenate([np.asarray(c[n]['ms'], float) for c in clips])
+        other = np.concatenate([np.asarray(c[n]['false'], float) for c in clips])
         bins = {}
         for lo, hi in zip(HEIGHT_BINS[:-1], HEIGHT_BINS[1:]):
             sel = counted & (height >= lo) & (height < hi)
@@ -173,8 +187,10 @@ def summarise(clips: List[dict], names: Sequence[str]) -> Dict[str, dict]:
             'frames': int(counted.sum()),
             'recall': float(found[counted].mean()) if counted.any() else float('nan'),
             'by_height': bins,
-            'error_median': float(np.nanmedian(err[found])) if found.any() else float('nan'),
-            'false_per_1000': 1000.0 * sum(c[n]['false'] for c in clips) / max(len(ms), 1),
+            'error_median': float(np.median(err[found & counted]))
+            if (found & counted).any() else float('nan'),
+            'false_per_1000': 1000.0 * float(other[counted].mean()) if counted.any()
+            else float('nan'),
             'never_found': never,
             'ms_median': float(np.median(ms)) if len(ms) else float('nan'),
             'ms_mean': float(np.mean(ms)) if len(ms) else float('nan'),
@@ -239,6 +255,18 @@ def render(summary: Dict[str, dict], clips: List[dict], variants: Dict[str, dict
     return '\n'.join(lines)
 
 
+def _finite(x):
+    """``x`` with every non-finite float (nested in dicts and lists) replaced by None, for
+    strict JSON."""
+    if isinstance(x, float):
+        return x if np.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    return x
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(prog='mocap bench recall', description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -263,6 +291,9 @@ def main(argv: Optional[List[str]] = None) -> int:
             clips.append(measure(d, variants))
         except Exception as e:   # one unreadable clip is reported, the rest measured
             tqdm.write(f'{d.name}: skipped ({type(e).__name__}: {e})')
+    if not clips:
+        print('no clip could be measured', file=sys.stderr)
+        return 1
     summary = summarise(clips, list(variants))
     for n, s in summary.items():
         bins = ', '.join(f"{b}: {100 * v['recall']:.0f} %" for b, v in s['by_height'].items())
@@ -274,12 +305,14 @@ def main(argv: Optional[List[str]] = None) -> int:
     args.output.write_text(render(summary, clips, variants, args.renders))
     per_clip = [{'clip': c['clip'], 'frames': c['frames'], 'size': c['size'],
                  'height_median': float(np.median(c['height'])) if c['height'] else None,
-                 **{n: {'recall': clip_recall(c, n), 'false': c[n]['false'],
+                 **{n: {'recall': clip_recall(c, n),
+                        'false': int(np.sum(np.asarray(c[n]['false'])[
+                            np.asarray(c['counted'], bool)])),
                         'error_median': float(np.nanmedian(c[n]['error']))
                         if np.any(c[n]['found']) else None} for n in variants}}
                 for c in clips]
-    args.output.with_suffix('.json').write_text(json.dumps(
-        {'summary': summary, 'variants': variants, 'clips': per_clip}, indent=1))
+    args.output.with_suffix('.json').write_text(json.dumps(_finite(
+        {'summary': summary, 'variants': variants, 'clips': per_clip}), indent=1))
     print(f'report: {args.output}')
     return 0
 

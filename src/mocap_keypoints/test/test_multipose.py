@@ -205,6 +205,23 @@ def test_fine_regions_cover_the_image_for_the_smallest_person():
     assert BlazePoseMultiDetector.fine_regions(640, 360, 360.0) == []
 
 
+def test_the_search_cycle_takes_turns_between_coarse_regions_and_finer_squares():
+    from mocap_keypoints.multipose import SMALLEST_SEARCHED_PX, interleave
+    assert interleave(['a', 'b'], [1, 2, 3]) == ['a', 'b', 'a', 1, 'b', 2, 'a', 3]
+    assert interleave(['a', 'b'], []) == ['a', 'b']
+    coarse = BlazePoseMultiDetector.regions(640, 360)
+    with BlazePoseMultiDetector(search_min_person_fraction=1.0) as det:
+        assert det.search_regions(640, 360) == (coarse, len(coarse))
+    # no lower bound in the settings: the squares stay sized for 32-px people
+    with BlazePoseMultiDetector(min_person_px=0.0, search_min_person_fraction=0.0) as det:
+        seq, per_round = det.search_regions(640, 360)
+        assert per_round == 2 * len(coarse) and seq[:len(coarse)] == coarse
+        sides = {x1 - x0 for x0, y0, x1, y1 in seq[len(coarse) + 1::2]}
+        assert min(sides) == round(SMALLEST_SEARCHED_PX / 0.375)
+    with pytest.raises(ValueError):
+        BlazePoseMultiDetector.fine_regions(640, 360, 0.0)
+
+
 def test_a_person_far_from_the_camera_is_found_by_the_finer_squares(clip_frames,
                                                                       clip_detections):
     """The committed clip shrunk to a person ~55 px high in a corner of a grey 640 x 360
