@@ -6,14 +6,15 @@ truth (``mocap_core.render.evaluate``).
                      [--start video|keypoints] [--tag NAME]
 
 Per rendered clip (``mocap data render``), ``mocap process`` runs on ``video.mp4`` (start
-``video``: the keypoint node with BlazePose, then lifter, physics, GMR; one person per
-render, so the single-person detector (``max_persons`` 1, as the recorded detections) unless
-``--param keypoints.max_persons=4`` asks for the node's default multi-person one; the
-camera's true intrinsics are given to the keypoint node as a calibration file unless ``--intrinsics
-approx``) or on the clip's bag from the keypoints it recorded (start ``keypoints``: the same
-detector output, faster). The output bags are kept under
-``~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>/`` (``--work``) and reused by a rerun
-with the same tag. Writes ``OUT_DIR/report.md``, ``report.json`` and plots.
+``video``: the keypoint node with BlazePose at its defaults, the multi-person detector (until
+session 64 ``max_persons`` 1 was set here, the single-person detector of the recorded
+detections; ``--param keypoints.max_persons=1`` asks for it), then lifter, physics, GMR;
+the camera's true intrinsics are given to the keypoint node as a calibration file unless
+``--intrinsics approx``) or on the clip's bag from the keypoints it recorded (start
+``keypoints``: the single-person detector's output at render time, faster). The output
+bags are kept under ``~/.cache/mocap/eval_video/<tag>_<start>_<intrinsics>/``
+(``--work``) and reused by a rerun with the same tag. Writes ``OUT_DIR/report.md``,
+``report.json`` and plots.
 
 ``--live`` (with start ``video``): each clip is played at its frame rate through the composed
 live pipeline (``mocap run``: the four nodes in one process, every stage at live settings),
@@ -251,8 +252,6 @@ def run_clip(clip_dir: Path, work: Path, start: str, intrinsics: str,
             p.setdefault('lifter', {})['subject_height'] = float(meta['body_height_m'])
         if start == 'video':
             src = clip_dir / 'video.mp4'
-            # one person per render: the single-person detector, as the recorded detections
-            p.setdefault('keypoints', {}).setdefault('max_persons', 1)
             if intrinsics == 'true':
                 K = gt['K']
                 w, h = (int(x) for x in gt['image_size'])
@@ -533,8 +532,9 @@ def add_eval_parser(sub) -> None:
                    help="true: the render camera's calibration; approx: the keypoint node's "
                    'field-of-view approximation')
     p.add_argument('--start', choices=('video', 'keypoints'), default='video',
-                   help='video: run the detector on the video; keypoints: reuse the '
-                   "render's detections (same detector, faster)")
+                   help="video: run the keypoint node on the video (its default, "
+                   "multi-person detector); keypoints: reuse the render's detections (the "
+                   "single-person detector, faster)")
     p.add_argument('--known-camera-pose', action='store_true',
                    help="give the physics and world stages the render camera's true pose "
                    '(/mocap/groundtruth/camera_pose; --start keypoints), as a robot that knows '
