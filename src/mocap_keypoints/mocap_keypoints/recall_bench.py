@@ -109,7 +109,7 @@ def measure(clip: Path, variants: Dict[str, Dict[str, float]]) -> Dict[str, obje
     time per frame."""
     import cv2
 
-    from mocap_core.render.evaluate import project_pinhole
+    from mocap_core.camera import project_pinhole
 
     from .multipose import BlazePoseMultiDetector
     gt = np.load(clip / 'data.npz')
