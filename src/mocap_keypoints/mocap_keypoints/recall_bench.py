@@ -48,11 +48,8 @@ HEIGHT_BINS = (48, 64, 96, 160, 100000)
 _BODY = ('left_shoulder', 'right_shoulder', 'left_hip', 'right_hip', 'left_knee',
          'right_knee', 'left_ankle', 'right_ankle')
 
-#: the node's settings of the multi-person detector (``KeypointsNode._new_detector``)
-NODE_DEFAULTS = dict(max_persons=4, detection_interval=5, max_detection_interval=15,
-                     still_detection_interval=60, min_person_px=48.0, threads=2,
-                     whole_frame_min_height=0.4, whole_frame_leave_height=0.3)
-#: settings compared by default: name -> changes to :data:`NODE_DEFAULTS`
+#: settings compared by default: name -> changes to the detector's defaults (which are the
+#: keypoint node's: ``KeypointsNode._new_detector`` with its default parameters)
 VARIANTS = {'default': {}, 'coarse': {'search_min_person_fraction': 1.0}}
 
 
@@ -115,7 +112,7 @@ def measure(clip: Path, variants: Dict[str, Dict[str, float]]) -> Dict[str, obje
     gt = np.load(clip / 'data.npz')
     uv = project_pinhole(gt['K'], gt['joints_camera'])[..., :2]
     names = list(variants)
-    dets = {n: BlazePoseMultiDetector(**{**NODE_DEFAULTS, **variants[n]}) for n in names}
+    dets = {n: BlazePoseMultiDetector(**variants[n]) for n in names}
     res = {n: {'found': [], 'error': [], 'false': [], 'ms': []} for n in names}
     heights, counted = [], []
     cap = cv2.VideoCapture(str(clip / 'video.mp4'))
