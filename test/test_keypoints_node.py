@@ -207,8 +207,9 @@ def test_video_source_one_message_per_frame_with_image_stamps(processes, ros2_cm
     assert values['finish_thread'] == 'on'      # the camera motion beside the detector
     assert values['person_ids'] == '1' and values['ids_given'] == '1'
     # the person is found in the first searches and followed; the finer squares are
-    # searched in turn
-    assert re.fullmatch(r'[1-9]\d* \(\d+ in the finer squares, \d+ people found there\), '
+    # searched in turn, and where the picture changed
+    assert re.fullmatch(r'[1-9]\d* \(\d+ in the finer squares, \d+ people found there; '
+                        r'\d+ where the picture changed, \d+ found there\), '
                         r'\d+ skipped in a still picture', values['searches']), values
     assert 'calibration file' in values['intrinsics']
     # the facing check ran on the frames with a person (what it decides there is

@@ -156,6 +156,9 @@ def cut_by(kp: np.ndarray, region: tuple, width: int, height: int,
 #: Width (px) of the grey copy of the image compared between searches (:func:`changed_outside`),
 #: at least: the image is reduced by the integer factor that comes nearest (160-319 px).
 CHANGE_WIDTH = 160
+#: A change over more than this share of that grey copy (outside the people followed) has no
+#: one place to look at (:func:`changed_patch`): the camera moved or the light changed.
+MAX_CHANGED_SHARE = 0.2
 #: The people followed are left out of that comparison in their box grown by this x their
 #: height on every side (:func:`mask_box`): their shadows and reflections on the floor move
 #: with them (measured on the committed clip: a reflection beyond 0.1 triggered searches).
@@ -170,6 +173,22 @@ def picture_range(ref: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     return cv2.erode(ref, kernel).astype(np.int16), cv2.dilate(ref, kernel).astype(np.int16)
 
 
+def changed_mask(ref_range: Tuple[np.ndarray, np.ndarray], now: np.ndarray,
+                 boxes: Sequence[tuple], level: float = 20.0) -> Optional[np.ndarray]:
+    """(H, W) bool: the pixels of the small grey image ``now`` (uint8) more than ``level``
+    grey levels outside the range of the reference in their 3 x 3 neighbourhood
+    (``ref_range``, from :func:`picture_range`), none inside ``boxes`` (``(x0, y0, x1, y1)``
+    pixels of these images); None when the sizes differ (see :func:`changed_outside`)."""
+    lo, hi = ref_range
+    if lo.shape != now.shape:
+        return None
+    cur = now.astype(np.int16)
+    diff = (cur < lo - level) | (cur > hi + level)
+    for x0, y0, x1, y1 in boxes:
+        diff[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)] = False
+    return diff
+
+
 def changed_outside(ref_range: Tuple[np.ndarray, np.ndarray], now: np.ndarray,
                     boxes: Sequence[tuple], level: float = 20.0, min_pixels: int = 6) -> bool:
     """Whether a small grey image ``now`` (uint8) differs from a reference outside ``boxes``
@@ -181,14 +200,30 @@ def changed_outside(ref_range: Tuple[np.ndarray, np.ndarray], now: np.ndarray,
     person coming into the picture changes a whole patch. At :data:`CHANGE_WIDTH` px wide a
     person 48 px high in a 1280 x 720 image covers about 15 pixels. Another image size is a
     change."""
-    lo, hi = ref_range
-    if lo.shape != now.shape:
-        return True
-    cur = now.astype(np.int16)
-    diff = (cur < lo - level) | (cur > hi + level)
-    for x0, y0, x1, y1 in boxes:
-        diff[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)] = False
-    return int(np.count_nonzero(diff)) >= min_pixels
+    diff = changed_mask(ref_range, now, boxes, level)
+    return diff is None or int(np.count_nonzero(diff)) >= min_pixels
+
+
+def changed_patch(diff: np.ndarray, min_pixels: int = 6,
+                  max_share: float = MAX_CHANGED_SHARE) -> Optional[tuple]:
+    """Where something moved in a :func:`changed_mask`: ``(x0, y0, x1, y1)`` (pixels of that
+    mask, end exclusive) of its largest patch of changed pixels (8-connected after a 3 x 3
+    dilation, so that the scattered pixels of one moving person join), or None when fewer
+    than ``min_pixels`` changed (nothing came) or more than ``max_share`` of the image (the
+    camera moved or the light changed: no one place to look)."""
+    import cv2
+    n = int(np.count_nonzero(diff))
+    if n < min_pixels or n > max_share * diff.size:
+        return None
+    grown = cv2.dilate(diff.astype(np.uint8), np.ones((3, 3), np.uint8))
+    count, labels = cv2.connectedComponents(grown, connectivity=8)
+    if count < 2:
+        return None
+    # the patch with the most changed pixels, boxed by those pixels (not by the dilation's)
+    sizes = np.bincount(labels[diff], minlength=count)
+    sizes[0] = 0
+    ys, xs = np.nonzero(diff & (labels == int(np.argmax(sizes))))
+    return int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1
 
 
 def _fill(crop: np.ndarray, box: tuple, x0: int, y0: int) -> None:
@@ -337,6 +372,14 @@ class BlazePoseMultiDetector:
             ``max(min_person_px, this x the image's short side)`` high, at least
             :data:`SMALLEST_SEARCHED_PX` (a smaller fraction: more squares, so each is
             scanned less often); 1 scans only :meth:`regions`.
+        search_where_changed: a due search looks where the picture changed since the last
+            search, outside the people followed (:meth:`_changed_region`: the region of the
+            cycle sized for the largest patch of change that holds it), every other search
+            at most; the others keep to the cycle of :meth:`search_regions`. Somebody who
+            walks into a static camera's picture is then looked for where they are within a
+            search or two, instead of when the cycle comes to their region (up to a minute for
+            a small person while somebody else is followed). A camera that moves changes too
+            much of the picture (:data:`MAX_CHANGED_SHARE`) to say where: the cycle goes on.
     """
 
     name = 'mediapipe_blazepose_full_multi'
@@ -349,7 +392,8 @@ class BlazePoseMultiDetector:
                  min_tracking_confidence: float = 0.5, threads: int = 2,
                  whole_frame_min_height: float = 0.4,
                  whole_frame_leave_height: float = 0.3,
-                 search_min_person_fraction: float = 0.1) -> None:
+                 search_min_person_fraction: float = 0.1,
+                 search_where_changed: bool = True) -> None:
         if max_persons < 1:
             raise ValueError(f'max_persons must be >= 1, got {max_persons}')
         if detection_interval < 1:
@@ -367,6 +411,11 @@ class BlazePoseMultiDetector:
             raise ValueError(f'search_min_person_fraction must be in [0, 1], got '
                              f'{search_min_person_fraction}')
         self.search_min_person_fraction = float(search_min_person_fraction)
+        self.search_where_changed = bool(search_where_changed)
+        #: the last search looked where the picture changed (the next keeps to the cycle)
+        self._guided_last = False
+        #: this frame's small grey image and its scale (:meth:`_small`), for the frame number
+        self._small_of: Optional[Tuple[int, np.ndarray, float]] = None
         #: the search's regions in turn per image size (see :meth:`search_regions`), and
         #: the number of searches in a round of them
         self._scan: dict = {}
@@ -422,6 +471,10 @@ class BlazePoseMultiDetector:
         #: that nobody followed yet
         self.fine_searches = 0
         self.found_in_fine = 0
+        #: searches where the picture changed (:meth:`_changed_region`), and the people they
+        #: found that nobody followed yet
+        self.guided_searches = 0
+        self.found_guided = 0
         self._frame = 0
         self._since_find = 0
         self._interval = self.detection_interval
@@ -484,8 +537,12 @@ class BlazePoseMultiDetector:
             due = False
         if due:
             self._since_find = self._since_search = 0
+            region = self._changed_region(rgb) if self.search_where_changed and \
+                not self._guided_last else None
+            self._guided_last = region is not None
             new: List[np.ndarray] = []
-            for kp in self._find(rgb, [wn.last for wn in self._windows if wn.last is not None]):
+            for kp in self._find(rgb, [wn.last for wn in self._windows if wn.last is not None],
+                                 region):
                 box = keypoint_box(kp, 0.3)
                 if box is None or box[2] < self.min_person_px:
                     continue
@@ -494,7 +551,10 @@ class BlazePoseMultiDetector:
                 if len(self._windows) + len(new) >= self.max_persons:
                     break
                 new.append(kp)
-            if self._fine_turn:
+            if region is not None:
+                self.guided_searches += 1
+                self.found_guided += len(new)
+            elif self._fine_turn:
                 self.fine_searches += 1
                 self.found_in_fine += len(new)
             alone = not self._windows and len(new) == 1
@@ -519,13 +579,22 @@ class BlazePoseMultiDetector:
         self._interval = self.detection_interval
         self._quiet = 0
         self._ref, self._ref_boxes = None, []
+        self._small_of = None
         self._turn = 0
-        self._settled = self._whole_blocked = False
+        self._settled = self._whole_blocked = self._guided_last = False
         self._since_search = 0
 
     def _small(self, rgb: np.ndarray) -> Tuple[np.ndarray, float]:
         """The image grey, reduced by an integer factor to :data:`CHANGE_WIDTH` - 319 px wide
-        (the last rows and columns that do not fill a block are left out), and its scale."""
+        (the last rows and columns that do not fill a block are left out), and its scale
+        (made once per frame: ``rgb`` is this frame's image)."""
+        if self._small_of is not None and self._small_of[0] == self._frame:
+            return self._small_of[1], self._small_of[2]
+        small, scale = self._make_small(rgb)
+        self._small_of = (self._frame, small, scale)
+        return small, scale
+
+    def _make_small(self, rgb: np.ndarray) -> Tuple[np.ndarray, float]:
         h, w = rgb.shape[:2]
         f = max(1, w // CHANGE_WIDTH)
         cut = rgb[:max(f, h - h % f), :w - w % f]
@@ -563,10 +632,49 @@ class BlazePoseMultiDetector:
     def _searched(self, rgb: np.ndarray) -> None:
         """After a search: its picture is the reference of the next :meth:`_still`."""
         self._whole_blocked = False
-        if self.still_detection_interval > 0:
+        if self.still_detection_interval > 0 or self.search_where_changed:
             small, scale = self._small(rgb)
             self._ref = picture_range(small)
             self._ref_boxes = self._followed_boxes(scale)
+
+    def _changed_region(self, rgb: np.ndarray) -> Optional[tuple]:
+        """Where this due search looks (``search_where_changed``): the region of the cycle
+        (:meth:`region_for`) for the largest patch of the picture that changed since the last
+        search outside the people followed then and now (:func:`changed_mask`,
+        :func:`changed_patch`), or None (no last search, nothing changed, or too much)."""
+        if self._ref is None:
+            return None
+        small, scale = self._small(rgb)
+        diff = changed_mask(self._ref, small, self._ref_boxes + self._followed_boxes(scale))
+        patch = changed_patch(diff) if diff is not None else None
+        if patch is None:
+            return None
+        h, w = rgb.shape[:2]
+        return self.region_for(w, h, tuple(v / scale for v in patch))
+
+    def region_for(self, width: int, height: int, box: tuple) -> Optional[tuple]:
+        """The region of the search's cycle (:meth:`search_regions`) to look for a person in
+        whose moving part is the image box ``(x0, y0, x1, y1)`` (px): the smallest that holds
+        the box and shows it at most :data:`SMALL_PERSON_SIDE_FRACTION` of its side (as the
+        finer squares show the smallest person), the one whose centre is nearest the box's
+        among equals; None when none does (a box larger than the image's short side)."""
+        regions, _ = self.search_regions(width, height)
+        x0, y0, x1, y1 = box
+        need = max(x1 - x0, y1 - y0) / SMALL_PERSON_SIDE_FRACTION
+        cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+        best, key = None, None
+        for r in set(regions):
+            rx0, ry0, rx1, ry1 = r
+            whole = r == (0, 0, width, height)
+            if not whole and min(rx1 - rx0, ry1 - ry0) < need:
+                continue
+            if not (rx0 <= x0 and ry0 <= y0 and x1 <= rx1 and y1 <= ry1):
+                continue
+            k = ((rx1 - rx0) * (ry1 - ry0),
+                 np.hypot((rx0 + rx1) / 2.0 - cx, (ry0 + ry1) / 2.0 - cy), r)
+            if key is None or k < key:
+                best, key = r, k
+        return best
 
     def _back_off(self, opened: int, regions: int) -> None:
         """After a detection: someone new resets the interval to ``detection_interval``; a
@@ -671,22 +779,27 @@ class BlazePoseMultiDetector:
                                2 * len(coarse) if fine else len(coarse))
         return self._scan[key]
 
-    def _find(self, rgb: np.ndarray, followed: Sequence[np.ndarray] = ()
-              ) -> List[np.ndarray]:
-        """Detection on this turn's region: (23, 3) image keypoints of every person found.
-        The people already ``followed`` (their last (23, 3) keypoints) are masked grey
-        (:func:`mask_box`): the detector's strongest detections are often the people it
-        already follows, and it then reports nobody else."""
+    def _find(self, rgb: np.ndarray, followed: Sequence[np.ndarray] = (),
+              region: Optional[tuple] = None) -> List[np.ndarray]:
+        """Detection on ``region`` ``(x0, y0, x1, y1)``, by default this turn's region of the
+        cycle (which a given region leaves where it is): (23, 3) image keypoints of every
+        person found. The people already ``followed`` (their last (23, 3) keypoints) are
+        masked grey (:func:`mask_box`): the detector's strongest detections are often the
+        people it already follows, and it then reports nobody else."""
         h, w = rgb.shape[:2]
         regions, _ = self.search_regions(w, h)
         if (w, h) != self._turn_size:      # a new image size starts a cycle
             self._turn, self._turn_size = 0, (w, h)
-        turn = self._turn % len(regions)
-        self._turn = turn + 1
-        x0, y0, x1, y1 = regions[turn]
-        # after the round of coarse regions alone, every other turn is a finer square
-        coarse = len(self.regions(w, h))
-        self._fine_turn = turn >= coarse and (turn - coarse) % 2 == 1
+        if region is None:
+            turn = self._turn % len(regions)
+            self._turn = turn + 1
+            x0, y0, x1, y1 = regions[turn]
+            # after the round of coarse regions alone, every other turn is a finer square
+            coarse = len(self.regions(w, h))
+            self._fine_turn = turn >= coarse and (turn - coarse) % 2 == 1
+        else:
+            x0, y0, x1, y1 = region
+            self._fine_turn = False
         self.detections += 1
         boxes = [b for b in map(mask_box, followed) if b is not None]
         crop = (np.array if boxes else np.ascontiguousarray)(rgb[y0:y1, x0:x1])

@@ -163,6 +163,12 @@ PARAMETERS = (
               'few seconds while nobody is followed, over a minute while somebody is); 1 = no '
               'finer squares',
               min_value=0.0, max_value=1.0, read_only=True),
+    ParamSpec('search_where_changed', True, 'blazepose_multi: the search for new people looks '
+              'where the picture changed since its last look, outside the people followed '
+              '(in a square sized for the change), every other search at most: somebody who '
+              'walks into a static camera\'s picture is found within a search or two instead '
+              'of when the turn of regions comes to them; a moving camera changes too much to '
+              'say where, and the turns go on', read_only=True),
     ParamSpec('id_after_frames', 0, 'A new person gets an id (and is published) after being '
               'seen in this many consecutive frames, so that a one-frame false detection never '
               'gets one; 0 = 3 when max_persons > 1, else 1 (the single-person detector '
@@ -969,7 +975,8 @@ class KeypointsNode(Node):
                 threads=p['landmark_threads'],
                 whole_frame_min_height=p['whole_frame_min_height'],
                 whole_frame_leave_height=0.75 * p['whole_frame_min_height'],
-                search_min_person_fraction=p['search_min_person_fraction'])
+                search_min_person_fraction=p['search_min_person_fraction'],
+                search_where_changed=p['search_where_changed'])
         return create_detector(name, tracking=p['tracking'],
                                min_detection_confidence=p['min_detection_confidence'],
                                min_tracking_confidence=p['min_tracking_confidence'])
@@ -1033,7 +1040,9 @@ class KeypointsNode(Node):
         det = self.detector
         if det is not None and hasattr(det, 'fine_searches'):
             self.diag.set_value('searches', f'{det.detections} ({det.fine_searches} in the finer '
-                                f'squares, {det.found_in_fine} people found there), '
+                                f'squares, {det.found_in_fine} people found there; '
+                                f'{det.guided_searches} where the picture changed, '
+                                f'{det.found_guided} found there), '
                                 f'{det.searches_skipped} skipped in a still picture')
         self.diag.set_value('facing_check', self.facing_status)
         self.diag.set_value('mirror_check', self.mirror_status)

@@ -261,3 +261,89 @@ def test_a_person_far_from_the_camera_is_found_by_the_finer_squares(clip_frames,
     assert first < 150 and max(found) == 1, found
     assert np.mean(np.array(found[first:]) == 1) >= 0.8, found
     assert np.median(errors) < 0.1 * 294 * scale, errors
+
+
+def test_changed_patch_is_the_largest_moving_place():
+    from mocap_keypoints.multipose import changed_patch
+    diff = np.zeros((45, 160), bool)
+    assert changed_patch(diff) is None
+    diff[10:20, 100:104] = True                    # somebody walks in
+    diff[30, 5] = diff[31, 7] = True               # a few scattered pixels elsewhere
+    assert changed_patch(diff) == (100, 10, 104, 20)
+    diff[12, 106] = True                           # a pixel of the same person, a gap away
+    assert changed_patch(diff) == (100, 10, 107, 20)
+    assert changed_patch(diff[:, :50]) is None     # fewer than 6 changed pixels
+    diff[:, :60] = True                            # the camera moved: no one place
+    assert changed_patch(diff) is None
+
+
+def test_the_region_for_a_change_holds_it_and_shows_it_small_enough():
+    from mocap_keypoints.multipose import SMALL_PERSON_SIDE_FRACTION
+    with BlazePoseMultiDetector() as det:
+        cycle = set(det.search_regions(640, 360)[0])
+        rng = np.random.default_rng(1)
+        for _ in range(200):
+            side = float(rng.uniform(20, 120))
+            x0, y0 = rng.uniform(0, 640 - side / 2), rng.uniform(0, 360 - side)
+            box = (x0, y0, x0 + side / 2, y0 + side)
+            r = det.region_for(640, 360, box)
+            assert r in cycle
+            assert r[0] <= box[0] and r[1] <= box[1] and box[2] <= r[2] and box[3] <= r[3]
+            if r != (0, 0, 640, 360):
+                assert min(r[2] - r[0], r[3] - r[1]) >= side / SMALL_PERSON_SIDE_FRACTION
+        # a small moving patch gets one of the finest squares, the nearest around it
+        r = det.region_for(640, 360, (300, 150, 310, 190))
+        assert r[2] - r[0] == min(x1 - x0 for x0, y0, x1, y1 in cycle)
+        assert r[0] <= 305 - 40 and 305 + 40 <= r[2]
+        # a change as large as the picture: the whole image
+        assert det.region_for(640, 360, (0, 0, 640, 300)) == (0, 0, 640, 360)
+
+
+def test_somebody_walking_into_a_static_picture_is_looked_for_where_they_are(
+        clip_frames, clip_detections):
+    """The committed clip's person, followed, beside a grey side into which a small copy of
+    the person (about 70 px high) walks from the right edge: the search looks where the
+    picture changed and finds the newcomer soon after they are in; keeping to the cycle of
+    regions finds them later."""
+    import cv2
+    frames = [f.image for f in clip_frames]
+    single = np.concatenate(clip_detections[0])
+    order = list(range(len(frames))) + list(range(len(frames) - 1, -1, -1))
+    enter, n = 20, 110
+
+    def small_person(k):
+        kp = single[k]
+        seen = kp[:, 2] >= 0.5
+        (x0, y0), (x1, y1) = kp[seen, :2].min(0), kp[seen, :2].max(0)
+        mx, my = 0.15 * (x1 - x0), 0.1 * (y1 - y0)
+        crop = frames[k][int(max(0, y0 - my)):int(min(360, y1 + my)),
+                         int(max(0, x0 - mx)):int(min(640, x1 + mx))]
+        return cv2.resize(crop, None, fx=0.25, fy=0.25, interpolation=cv2.INTER_AREA)
+
+    def scene(i, k):
+        side = np.full((360, 640, 3), 110, np.uint8)
+        if i >= enter:
+            sp = small_person(k)
+            x = 640 - 2 * (i - enter)           # 2 px per frame from the right edge
+            w = min(sp.shape[1], 640 - x)
+            side[200:200 + sp.shape[0], x:x + w] = sp[:, :w]
+        return _wide(frames[k], side)
+
+    first = {}
+    for guided in (True, False):
+        with BlazePoseMultiDetector(search_where_changed=guided) as det:
+            found = []
+            for i in range(n):
+                got = det.detect(scene(i, order[i % len(order)]))
+                found.append(bool(len(got)) and bool(np.any(got[:, BODY, 0].mean(1) > 640)))
+                if i < enter:
+                    assert len(got) == 1           # the clip's person alone, followed
+            first[guided] = next((i for i, f in enumerate(found) if f), n)
+            if guided:
+                assert det.found_guided >= 1 and det.guided_searches >= det.found_guided
+                assert all(found[first[guided]:]), found
+            else:
+                assert det.guided_searches == 0
+    # in after about 25 frames (the copy is about 50 px wide), found within 15 more
+    assert first[True] <= enter + 40, first
+    assert first[False] > first[True], first
