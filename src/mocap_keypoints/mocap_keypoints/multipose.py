@@ -40,7 +40,14 @@ the BlazePose way, per person:
   ``still_detection_interval`` frames. Nobody can come into a still picture without changing
   it, and a moving camera changes everything, so searches go on as before there. A change
   starts a full round of regions again. On a static camera this takes most of the search's
-  cost off (one search costs about half a landmark pass).
+  cost off (one search costs about half a landmark pass). The same comparison says where to
+  look (``search_where_changed``): a due search goes to the largest patch of the picture
+  that changed since the last search outside the people followed, in the smallest region of
+  the cycle that holds it and shows it at most :data:`SMALL_PERSON_SIDE_FRACTION` of its side
+  (:func:`changed_patch`, :meth:`~BlazePoseMultiDetector.region_for`), every other search at
+  most, so that the cycle goes on beside it. Somebody walking into a static picture is then
+  looked for where they are; a moving camera changes more than :data:`MAX_CHANGED_SHARE` of
+  the picture and the cycle alone goes on.
 * **A window per person**: every person found that no window already follows gets a square
   window on the image (``window_scale`` x the person's box, at least ``min_window_px``) and
   its own VIDEO-mode landmarker for one pose. The window stays put while the person stays in
