@@ -278,7 +278,7 @@ def test_changed_patch_is_the_largest_moving_place():
 
 
 def test_the_region_for_a_change_holds_it_and_shows_it_small_enough():
-    from mocap_keypoints.multipose import SMALL_PERSON_SIDE_FRACTION
+    from mocap_keypoints.multipose import GUIDED_GROWTH, SMALL_PERSON_SIDE_FRACTION
     with BlazePoseMultiDetector() as det:
         cycle = set(det.search_regions(640, 360)[0])
         rng = np.random.default_rng(1)
@@ -297,6 +297,16 @@ def test_the_region_for_a_change_holds_it_and_shows_it_small_enough():
         assert r[0] <= 305 - 40 and 305 + 40 <= r[2]
         # a change as large as the picture: the whole image
         assert det.region_for(640, 360, (0, 0, 640, 300)) == (0, 0, 640, 360)
+        # after looks that found nobody: a region for a person two and three times the
+        # patch (only the edges of a moving person's clothes change), still around it
+        sides = []
+        for growth in GUIDED_GROWTH:
+            r = det.region_for(640, 360, (300, 150, 310, 190), growth)
+            assert r[0] <= 300 and 310 <= r[2] and r[1] <= 150 and 190 <= r[3]
+            sides.append(min(r[2] - r[0], r[3] - r[1]))
+            if r != (0, 0, 640, 360):
+                assert sides[-1] >= growth * 40 / SMALL_PERSON_SIDE_FRACTION
+        assert sides == sorted(sides) and sides[0] < sides[1] < sides[2], sides
 
 
 def test_somebody_walking_into_a_static_picture_is_looked_for_where_they_are(
