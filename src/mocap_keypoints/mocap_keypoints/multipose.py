@@ -169,6 +169,11 @@ CHANGE_WIDTH = 160
 #: clothes change when they move (measured on rendered walkers 180 px high in a 1280 x 720
 #: video, five frames apart: patches 50-90 px high).
 GUIDED_GROWTH = (1.0, 2.0, 3.0)
+#: After this many such looks in a row that found nobody new, the search keeps to its cycle
+#: for a round of the coarse regions (twice their number where finer squares take turns), so
+#: that something moving that is nobody (leaves, a screen) takes at most this many searches
+#: of every such round.
+GUIDED_MAX_MISSES = 2 * len(GUIDED_GROWTH)
 #: A change over more than this share of that grey copy (outside the people followed) has no
 #: one place to look at (:func:`changed_patch`): the camera moved or the light changed.
 MAX_CHANGED_SHARE = 0.2
@@ -430,6 +435,10 @@ class BlazePoseMultiDetector:
         #: the next such search's region, as a multiple of the size the change asks for
         #: (:data:`GUIDED_GROWTH`: grown after each look that found nobody new)
         self._growth = 0
+        #: such looks in a row that found nobody new, and the searches left that keep to the
+        #: cycle after :data:`GUIDED_MAX_MISSES` of them (something that moves is no person)
+        self._misses = 0
+        self._guided_pause = 0
         #: this frame's small grey image and its scale (:meth:`_small`), for the frame number
         self._small_of: Optional[Tuple[int, np.ndarray, float]] = None
         #: the search's regions in turn per image size (see :meth:`search_regions`), and
@@ -553,8 +562,12 @@ class BlazePoseMultiDetector:
             due = False
         if due:
             self._since_find = self._since_search = 0
-            region = self._changed_region(rgb) if self.search_where_changed and \
-                not self._guided_last else None
+            region = None
+            if self.search_where_changed and not self._guided_last:
+                if self._guided_pause > 0:
+                    self._guided_pause -= 1
+                else:
+                    region = self._changed_region(rgb)
             self._guided_last = region is not None
             new: List[np.ndarray] = []
             for kp in self._find(rgb, [wn.last for wn in self._windows if wn.last is not None],
@@ -571,6 +584,12 @@ class BlazePoseMultiDetector:
                 self.guided_searches += 1
                 self.found_guided += len(new)
                 self._growth = 0 if new else (self._growth + 1) % len(GUIDED_GROWTH)
+                self._misses = 0 if new else self._misses + 1
+                if self._misses >= GUIDED_MAX_MISSES:
+                    # a change that is nobody (leaves, a screen, a reflection): a round of
+                    # the cycle's regions before the next such look
+                    self._misses = 0
+                    self._guided_pause = self.search_regions(w, h)[1]
             elif self._fine_turn:
                 self.fine_searches += 1
                 self.found_in_fine += len(new)
@@ -599,7 +618,7 @@ class BlazePoseMultiDetector:
         self._small_of = None
         self._turn = 0
         self._settled = self._whole_blocked = self._guided_last = False
-        self._growth = 0
+        self._growth = self._misses = self._guided_pause = 0
         self._since_search = 0
 
     def _small(self, rgb: np.ndarray) -> Tuple[np.ndarray, float]:

@@ -357,3 +357,28 @@ def test_somebody_walking_into_a_static_picture_is_looked_for_where_they_are(
     # in after about 25 frames (the copy is about 50 px wide), found within 15 more
     assert first[True] <= enter + 40, first
     assert first[False] > first[True], first
+
+
+def test_something_that_moves_and_is_nobody_takes_few_searches(clip_frames):
+    """A square that changes its colour every frame beside the committed clip's person: the
+    search looks there (nobody), a few times in a row, then keeps to its cycle for a round
+    before it looks again; the person stays followed throughout."""
+    from mocap_keypoints.multipose import GUIDED_MAX_MISSES
+    frames = [f.image for f in clip_frames]
+    order = list(range(len(frames))) + list(range(len(frames) - 1, -1, -1))
+    rng = np.random.default_rng(0)
+    with BlazePoseMultiDetector() as det:
+        per_round = det.search_regions(1280, 360)[1]
+        followed = []
+        for i in range(450):
+            side = np.full((360, 640, 3), 110, np.uint8)
+            side[150:210, 300:360] = rng.integers(0, 256, 3, dtype=np.uint8)
+            got = det.detect(_wide(frames[order[i % len(order)]], side))
+            followed.append(int(np.sum(got[:, BODY, 0].mean(1) < 640)) if len(got) else 0)
+        assert det.found_guided == 0
+        assert det.guided_searches >= GUIDED_MAX_MISSES
+        # (every other search would look there without the pause: about half of them)
+        cycles = 1 + det.detections // (per_round + 2 * GUIDED_MAX_MISSES)
+        assert det.guided_searches <= GUIDED_MAX_MISSES * cycles, \
+            (det.guided_searches, det.detections, per_round)
+        assert np.mean(np.array(followed[5:]) == 1) >= 0.95
