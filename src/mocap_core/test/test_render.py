@@ -549,12 +549,28 @@ def test_two_rendered_people_crossing_keep_their_ids(model, tmp_path):
     assert m['recall'] > 0.5 and m['median_error_rel_height'] < 0.05, m
 
 
+def test_find_delays_are_the_frames_each_appearance_waits_for_an_id():
+    from mocap_core.render.people import find_delays
+    visible = np.zeros((100, 2), bool)
+    found = np.zeros((100, 2), bool)
+    visible[10:40, 0] = True            # appears at 10, found at 17
+    found[17:40, 0] = True
+    visible[50:60, 0] = True            # a glimpse shorter than the minimum: left out
+    visible[70:100, 0] = True           # followed through the occlusion before it: 0
+    found[65:100, 0] = True
+    visible[20:50, 1] = True            # never found
+    assert find_delays(found, visible, min_run=15) == [(7, True), (0, True), (30, False)]
+    assert find_delays(found, visible, min_run=5) == [(7, True), (10, False), (0, True),
+                                                      (30, False)]
+
+
 def test_people_report_keeps_the_held_out_seeds_apart(tmp_path):
     """`mocap eval people` reports the seeds not looked at while tuning on their own."""
     from mocap_core.cli.eval_people import summarise, write_report
     row = dict(scene='cross2', actors=2, frames=100, person_frames=500.0, ids_per_actor=1.0,
                recall=0.8, recall_unhidden=0.9, fragments=0, false_ids=0,
-               median_error_rel_height=0.02, ids={'0': [1], '1': [2]})
+               median_error_rel_height=0.02, ids={'0': [1], '1': [2]},
+               find_delays=[(0, True), (12, True)])
     rows = [dict(row, seed=0, switches=2.0), dict(row, seed=1, switches=0.0),
             dict(row, seed=5, switches=1.0, ids_per_actor=1.5)]
     res = summarise(rows)
@@ -562,8 +578,10 @@ def test_people_report_keeps_the_held_out_seeds_apart(tmp_path):
     assert res['switches_per_1000'] == pytest.approx(2.0)     # 3 in 1500
     write_report(res, tmp_path / 'r.md', 'mocap eval people --seeds 6', held_out_from=5)
     text = (tmp_path / 'r.md').read_text()
-    assert '| seeds 0-4 (looked at while tuning) | 2 | 1000 | 2.00 (2) | 1.00 | 80.0% |' \
+    assert '| seeds 0-4 (looked at while tuning) | 2 | 1000 | 2.00 (2) | 1.00 | 80.0% | 6.0 |' \
         in text, text
-    assert '| seeds 5+ (held out: not looked at) | 1 | 500 | 2.00 (1) | 1.50 | 80.0% |' in text
+    assert '| seeds 5+ (held out: not looked at) | 1 | 500 | 2.00 (1) | 1.50 | 80.0% | 6.0 |' \
+        in text
+    assert ': mean / median; appearances never given one | 6.0 / 6; 0 of 6 |' in text, text
     saved = json.loads((tmp_path / 'r.json').read_text())
     assert saved['groups']['seeds 5+ (held out: not looked at)']['switches'] == 1

@@ -118,7 +118,15 @@ def summarise(rows: List[Dict]) -> Dict:
     """Totals over clip rows of :func:`evaluate_clip` (switches per 1000 person-frames over
     all of them; means of the per-clip rates)."""
     pf = sum(r['person_frames'] for r in rows)
+    delays = [d for r in rows for d in r.get('find_delays', [])]
+    waits = [n for n, hit in delays if hit]
     return {'clips': len(rows),
+            # appearances (mocap_core.render.people.find_delays), pooled over clips: frames
+            # until an id (of those that got one), and how many never got one
+            'appearances': len(delays),
+            'find_delay_mean': float(np.mean(waits)) if waits else float('nan'),
+            'find_delay_median': float(np.median(waits)) if waits else float('nan'),
+            'appearances_never_found': len(delays) - len(waits),
             'person_frames': pf,
             'switches': sum(r['switches'] for r in rows),
             'switches_per_1000': 1000.0 * sum(r['switches'] for r in rows) / max(pf, 1.0),
@@ -133,6 +141,8 @@ def summarise(rows: List[Dict]) -> Dict:
 
 def write_report(res: Dict, out: Path, command: str, held_out_from: int = TUNED_SEEDS
                  ) -> None:
+    from ..render.people import MIN_APPEARANCE_FRAMES
+
     groups = [(f'seeds 0-{held_out_from - 1} (looked at while tuning)',
                [r for r in res['rows'] if r['seed'] < held_out_from]),
               (f'seeds {held_out_from}+ (held out: not looked at)',
@@ -155,15 +165,21 @@ def write_report(res: Dict, out: Path, command: str, held_out_from: int = TUNED_
         f"| ids per actor | {res['ids_per_actor']:.2f} | 1 |",
         f"| recall: actor frames in the picture with an id | {res['recall']:.1%} | |",
         f"| recall, actors not hidden behind a nearer one | {res['recall_unhidden']:.1%} | |",
+        f"| frames in view before an id, per appearance (at least "
+        f"{MIN_APPEARANCE_FRAMES} frames in the picture and not hidden): mean / median; "
+        f"appearances never given one | {res['find_delay_mean']:.1f} / "
+        f"{res['find_delay_median']:.0f}; {res['appearances_never_found']} of "
+        f"{res['appearances']} | |",
         f"| fragments (an actor's id resumes after a gap) | {res['fragments']:.0f} | |",
         f"| ids given to rows that match no actor | {res['unmatched_ids']:.0f} | |",
         f"| keypoint error, median, of the person's height | "
         f"{100 * res['median_error_rel_height']:.1f} % | |", '',
         '| seeds | clips | person-frames | identity switches per 1000 | ids per actor | '
-        'recall |', '|---|---|---|---|---|---|']
+        'recall | frames before an id (mean) |', '|---|---|---|---|---|---|---|']
     lines += [f"| {name} | {g['clips']} | {g['person_frames']:.0f} | "
               f"{g['switches_per_1000']:.2f} ({g['switches']:.0f}) | "
-              f"{g['ids_per_actor']:.2f} | {g['recall']:.1%} |" for name, g in groups]
+              f"{g['ids_per_actor']:.2f} | {g['recall']:.1%} | {g['find_delay_mean']:.1f} |"
+              for name, g in groups]
     lines += ['',
         '| clip | actors | frames | person-frames | switches | ids per actor | recall | '
         'recall (not hidden) | fragments | ids per actor (who got which) |',

@@ -28,7 +28,7 @@ import os
 import shutil
 import time
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -41,6 +41,10 @@ PEOPLE_FORMAT = 1
 #: A detected row is an actor when the median distance of their keypoints is below this
 #: fraction of the actor's height in the image.
 MATCH_FRACTION = 0.15
+
+#: :func:`find_delays` counts appearances (frames in a row where an actor is in the picture
+#: and not hidden) of at least this many frames (half a second at 30 fps).
+MIN_APPEARANCE_FRAMES = 15
 
 
 def render_people(actors: Sequence, frames: int, camera, out_dir: Path, seed: int,
@@ -191,7 +195,8 @@ def score_people_clip(clip_dir: Path, keypoints: Sequence[np.ndarray],
     frames in the picture with a detected row of theirs that has an id), ``recall_unhidden``
     (the same over frames where the actor is not the farther of two overlapping people),
     ``frames``, ``median_error_rel_height`` (a matched row's median keypoint distance over
-    the actor's height in the image) and the per-actor ``ids``.
+    the actor's height in the image), ``find_delays`` (:func:`find_delays` over the frames
+    where the actor is in the picture and not hidden) and the per-actor ``ids``.
     """
     from ..data.multi_person import identity_metrics
 
@@ -224,11 +229,38 @@ def score_people_clip(clip_dir: Path, keypoints: Sequence[np.ndarray],
     pic = in_picture[:F]
     unhidden = pic & ~hidden[:F]
     m.update(frames=F, recall=float(found[:F][pic].mean()) if pic.any() else float('nan'),
+             find_delays=find_delays(found[:F], unhidden),
              recall_unhidden=float(found[:F][unhidden].mean()) if unhidden.any()
              else float('nan'),
              median_error_rel_height=float(np.median(errors)) if errors else float('nan'),
              ids={str(a): sorted(v) for a, v in sorted(ids_of.items())})
     return m
+
+
+def find_delays(found: np.ndarray, visible: np.ndarray, min_run: int = MIN_APPEARANCE_FRAMES
+                ) -> List[Tuple[int, bool]]:
+    """How long each appearance of each actor waited for an id.
+
+    Args:
+        found: (F, A) bool, the actor has a published row with an id in the frame.
+        visible: (F, A) bool, the actor is in the picture and not hidden behind a nearer one.
+        min_run: appearances (runs of ``visible`` frames) shorter than this are left out.
+    Returns: per appearance, in actor and frame order, ``(frames, found)``: the frames from
+    its first until the first with an id (0: found at once, e.g. followed through the
+    occlusion before it), or its length and False when it never got one.
+    """
+    out: List[Tuple[int, bool]] = []
+    F, A = visible.shape
+    for a in range(A):
+        v = np.concatenate([[False], visible[:, a], [False]]).astype(np.int8)
+        starts = np.flatnonzero(np.diff(v) == 1)
+        ends = np.flatnonzero(np.diff(v) == -1)
+        for s, e in zip(starts, ends):
+            if e - s < min_run:
+                continue
+            hit = np.flatnonzero(found[s:e, a])
+            out.append((int(hit[0]), True) if len(hit) else (int(e - s), False))
+    return out
 
 
 def _hidden(truth_kp: np.ndarray, depth: np.ndarray) -> np.ndarray:
