@@ -14,12 +14,13 @@ def test_ping_pong_plays_a_short_clip_back_and_forth_without_a_cut():
 def test_report_has_both_ratios():
     r = {'frames': 10, 'size': '64x48', 'ids': {1: 9}, 'whole_frame_switches': 0}
     for name, med, mean in (('single', 10.0, 11.0), ('multi', 12.0, 16.5),
-                            ('windows', 13.0, 17.0), ('coarse', 11.5, 15.0)):
+                            ('windows', 13.0, 17.0), ('coarse', 11.5, 15.0),
+                            ('cycle', 12.5, 16.0)):
         r.update({f'{name}_ms': med, f'{name}_mean_ms': mean, f'{name}_found': {1: 10}})
     text = render({'clip': r}, 10)
-    assert ('| clip | 10 | 64x48 | 10.0 | 12.0 | 13.0 | 11.5 | 11.0 | 16.5 | 17.0 | 15.0 | '
-            '1.20 | 1.50 |') in text
-    assert '| clip | 1: 10 | 1: 10 | 1: 10 | 1: 10 | 1: 9 | 0 |' in text
+    assert ('| clip | 10 | 64x48 | 10.0 | 12.0 | 13.0 | 11.5 | 12.5 | 11.0 | 16.5 | 17.0 | '
+            '15.0 | 16.0 | 1.20 | 1.50 |') in text
+    assert '| clip | 1: 10 | 1: 10 | 1: 10 | 1: 10 | 1: 10 | 1: 9 | 0 |' in text
     header = next(line for line in text.splitlines() if line.startswith('| clip | frames'))
     rule = text.splitlines()[text.splitlines().index(header) + 1]
     assert header.count('|') == rule.count('|')
