@@ -154,7 +154,8 @@ def write_report(res: Dict, out: Path, command: str, held_out_from: int = TUNED_
         f'`{command}` on {platform.node()} ({platform.machine()}), '
         f"{time.strftime('%Y-%m-%d')}. Scenes of `mocap_core.data.multi_person` rendered "
         'with one Anny body and set of clothes per actor (`mocap_core.render.people`), '
-        'the keypoint node run on each video by `mocap process` with its defaults; each row '
+        'the keypoint node run on each video by `mocap process` with its defaults (but for '
+        'any `--param` in the command); each row '
         'it publishes is matched to the actor whose mesh keypoints it lies on. Seeds '
         f'0-{held_out_from - 1} were looked at while the detector\'s search and the '
         'tracker were tuned (docs/multi_person.md); later seeds were not, and are '
@@ -229,7 +230,8 @@ def cmd_eval_people(args: argparse.Namespace) -> int:
         print(f'mocap eval people: error: {exc}', file=sys.stderr)
         return 1
     command = 'mocap eval people --seeds ' + str(args.seeds) + (
-        '' if list(args.scenes) == list(SCENES) else ' --scenes ' + ' '.join(args.scenes))
+        '' if list(args.scenes) == list(SCENES) else ' --scenes ' + ' '.join(args.scenes)) \
+        + ''.join(f' --param {p}' for p in args.param)
     write_report(res, Path(args.output), command, args.held_out_from)
     print(Path(args.output).read_text())
     return 0
