@@ -696,12 +696,18 @@ class BlazePoseMultiDetector:
         whose moving part is the image box ``(x0, y0, x1, y1)`` (px): the smallest that holds
         the box and shows it at most :data:`SMALL_PERSON_SIDE_FRACTION` / ``growth`` of its
         side (with ``growth`` 1 as the finer squares show the smallest person; more where the
-        person may be larger than the part of them that moved), the one whose centre is
-        nearest the box's among equals; the whole image when none does."""
+        person may be larger than the part of them that moved, and then holding as well
+        (``growth`` - 1) / 2 x the box's larger side above and below it), the one whose
+        centre is nearest the box's among equals; the whole image when none does."""
         regions, _ = self.search_regions(width, height)
         x0, y0, x1, y1 = box
-        need = growth * max(x1 - x0, y1 - y0) / SMALL_PERSON_SIDE_FRACTION
+        side = max(x1 - x0, y1 - y0)
+        need = growth * side / SMALL_PERSON_SIDE_FRACTION
         cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+        # the person the patch is part of may reach above and below it (a moving chest
+        # above still legs): a grown look holds that much more of the image's height too
+        reach = 0.5 * (growth - 1.0) * side
+        y0, y1 = max(0.0, y0 - reach), min(float(height), y1 + reach)
         best, key = None, None
         for r in set(regions):
             rx0, ry0, rx1, ry1 = r

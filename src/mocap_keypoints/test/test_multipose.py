@@ -298,11 +298,14 @@ def test_the_region_for_a_change_holds_it_and_shows_it_small_enough():
         # a change as large as the picture: the whole image
         assert det.region_for(640, 360, (0, 0, 640, 300)) == (0, 0, 640, 360)
         # after looks that found nobody: a region for a person two and three times the
-        # patch (only the edges of a moving person's clothes change), still around it
+        # patch (only the edges of a moving person's clothes change), around it and
+        # reaching further above and below it (the rest of the person)
         sides = []
         for growth in GUIDED_GROWTH:
             r = det.region_for(640, 360, (300, 150, 310, 190), growth)
-            assert r[0] <= 300 and 310 <= r[2] and r[1] <= 150 and 190 <= r[3]
+            reach = 0.5 * (growth - 1) * 40
+            assert r[0] <= 300 and 310 <= r[2]
+            assert r[1] <= max(0, 150 - reach) and min(360, 190 + reach) <= r[3], (growth, r)
             sides.append(min(r[2] - r[0], r[3] - r[1]))
             if r != (0, 0, 640, 360):
                 assert sides[-1] >= growth * 40 / SMALL_PERSON_SIDE_FRACTION
