@@ -41,11 +41,12 @@ the BlazePose way, per person:
   it, and a moving camera changes everything, so searches go on as before there. A change
   starts a full round of regions again. On a static camera this takes most of the search's
   cost off (one search costs about half a landmark pass). The same comparison says where to
-  look (``search_where_changed``): a due search goes to the largest patch of the picture
-  that changed since the last search outside the people followed, in the smallest region of
-  the cycle that holds it and shows it at most :data:`SMALL_PERSON_SIDE_FRACTION` of its side
-  (:func:`changed_patch`, :meth:`~BlazePoseMultiDetector.region_for`), every other search at
-  most, so that the cycle goes on beside it. Somebody walking into a static picture is then
+  look (``search_where_changed``): while somebody is followed, a due search goes to the
+  largest patch of the picture that changed since the last search outside the people
+  followed, in the smallest region of the cycle that holds it and shows it at most
+  :data:`SMALL_PERSON_SIDE_FRACTION` of its side (:func:`changed_patch`,
+  :meth:`~BlazePoseMultiDetector.region_for`), every other search at most, so that the cycle
+  goes on beside it. Somebody walking into a static picture is then
   looked for where they are; a moving camera changes more than :data:`MAX_CHANGED_SHARE` of
   the picture and the cycle alone goes on.
 * **A window per person**: every person found that no window already follows gets a square
@@ -390,10 +391,11 @@ class BlazePoseMultiDetector:
             ``max(min_person_px, this x the image's short side)`` high, at least
             :data:`SMALLEST_SEARCHED_PX` (a smaller fraction: more squares, so each is
             scanned less often); 1 scans only :meth:`regions`.
-        search_where_changed: a due search looks where the picture changed since the last
-            search, outside the people followed (:meth:`_changed_region`: the region of the
-            cycle sized for the largest patch of change that holds it), every other search
-            at most; the others keep to the cycle of :meth:`search_regions`. Somebody who
+        search_where_changed: while somebody is followed, a due search looks where the
+            picture changed since the last search, outside the people followed
+            (:meth:`_changed_region`: the region of the cycle sized for the largest patch of
+            change that holds it), every other search at most; the others keep to the cycle
+            of :meth:`search_regions`. Somebody who
             walks into a static camera's picture is then looked for where they are within a
             search or two, instead of when the cycle comes to their region (up to a minute for
             a small person while somebody else is followed). A camera that moves changes too
@@ -563,7 +565,9 @@ class BlazePoseMultiDetector:
         if due:
             self._since_find = self._since_search = 0
             region = None
-            if self.search_where_changed and not self._guided_last:
+            # (only while somebody is followed: searches are then sparse; while nobody is,
+            # one comes every frame and the cycle's first regions find most people soonest)
+            if self.search_where_changed and not self._guided_last and self._windows:
                 if self._guided_pause > 0:
                     self._guided_pause -= 1
                 else:
