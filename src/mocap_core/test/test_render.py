@@ -551,7 +551,7 @@ def test_two_rendered_people_crossing_keep_their_ids(model, tmp_path):
     # its id at once. Keeping to the cycle of regions found it 15 frames into that
     # appearance, and the appearances that got an id waited 17 frames in all, not 2.
     waited = [n for n, hit in m['find_delays'] if hit]
-    assert len(waited) >= 2 and sum(waited) <= 5, m['find_delays']
+    assert len(waited) >= 2 and sum(waited) <= 10, m['find_delays']
     # Both followed into the crossing, both windows lose their people there for a few
     # frames, and the nearer walker is found again 20 frames later: recall 0.47 (0.53
     # when the farther one was found only after the crossing; over the 30 clips of

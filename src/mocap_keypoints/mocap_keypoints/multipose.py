@@ -171,12 +171,13 @@ CHANGE_WIDTH = 160
 #: video, five frames apart: patches 50-90 px high).
 GUIDED_GROWTH = (1.0, 2.0, 3.0)
 #: After this many such looks in a row that found nobody new, the search keeps to its cycle
-#: for a round of the coarse regions (twice their number where finer squares take turns), so
-#: that something moving that is nobody (leaves, a screen) takes at most this many searches
-#: of every such round.
+#: for a round of the coarse regions (twice their number where finer squares take turns) and
+#: one search more, so that something moving that is nobody (leaves, a screen) takes at most
+#: this many of every ``2 x this + round + 1`` searches.
 GUIDED_MAX_MISSES = 2 * len(GUIDED_GROWTH)
-#: A change over more than this share of that grey copy (outside the people followed) has no
-#: one place to look at (:func:`changed_patch`): the camera moved or the light changed.
+#: A change over more than this share of that whole grey copy (counted outside the people
+#: followed) has no one place to look at (:func:`changed_patch`): the camera moved or the
+#: light changed.
 MAX_CHANGED_SHARE = 0.2
 #: The people followed are left out of that comparison in their box grown by this x their
 #: height on every side (:func:`mask_box`): their shadows and reflections on the floor move
@@ -522,6 +523,7 @@ class BlazePoseMultiDetector:
         if self._closed:
             raise RuntimeError('detector is closed')
         h, w = img.shape[:2]
+        self._small_of = None      # (a frame that raised left its small copy behind)
         rgb = self._cv2.cvtColor(img, self._cv2.COLOR_BGR2RGB)
         self._ts_ms += 33          # VIDEO mode wants increasing stamps; only order matters
         people: List[np.ndarray] = []
@@ -671,7 +673,8 @@ class BlazePoseMultiDetector:
         return True
 
     def _searched(self, rgb: np.ndarray) -> None:
-        """After a search: its picture is the reference of the next :meth:`_still`."""
+        """After a search: its picture is the reference of the next :meth:`_still` and
+        :meth:`_changed_region`."""
         self._whole_blocked = False
         if self.still_detection_interval > 0 or self.search_where_changed:
             small, scale = self._small(rgb)
@@ -729,7 +732,9 @@ class BlazePoseMultiDetector:
     def _back_off(self, opened: int, regions: int) -> None:
         """After a detection: someone new resets the interval to ``detection_interval``; a
         whole round of regions with nobody new doubles it, up to ``max_detection_interval``
-        (a scene that stays the same costs little; a window that ends resets it too)."""
+        (a scene that stays the same costs little; a window that ends resets it too). A round
+        is counted in searches, the looks where the picture changed among them, so with those
+        looks it covers fewer of the cycle's regions."""
         if opened:
             self._search_soon()
             return

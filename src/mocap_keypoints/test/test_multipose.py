@@ -359,7 +359,7 @@ def test_somebody_walking_into_a_static_picture_is_looked_for_where_they_are(
                 assert det.guided_searches == 0
     # in after about 25 frames (the copy is about 50 px wide), found within 15 more
     assert first[True] <= enter + 40, first
-    assert first[False] > first[True], first
+    assert first[False] >= first[True] + 20, first
 
 
 def test_something_that_moves_and_is_nobody_takes_few_searches(clip_frames):

@@ -247,7 +247,8 @@ def find_delays(found: np.ndarray, visible: np.ndarray, min_run: int = MIN_APPEA
         min_run: appearances (runs of ``visible`` frames) shorter than this are left out.
     Returns: per appearance, in actor and frame order, ``(frames, found)``: the frames from
     its first until the first with an id (0: found at once, e.g. followed through the
-    occlusion before it), or its length and False when it never got one.
+    occlusion before it), or its length and False when it never got one (also one that the
+    clip's end cut short).
     """
     out: List[Tuple[int, bool]] = []
     F, A = visible.shape
