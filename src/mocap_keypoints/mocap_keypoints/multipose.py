@@ -46,9 +46,9 @@ the BlazePose way, per person:
   followed, in the smallest region of the cycle that holds it and shows it at most
   :data:`SMALL_PERSON_SIDE_FRACTION` of its side (:func:`changed_patch`,
   :meth:`~BlazePoseMultiDetector.region_for`), every other search at most, so that the cycle
-  goes on beside it. Somebody walking into a static picture is then
-  looked for where they are; a moving camera changes more than :data:`MAX_CHANGED_SHARE` of
-  the picture and the cycle alone goes on.
+  goes on beside it. Somebody walking into a static picture is then looked for where they
+  are; a moving camera changes more than :data:`MAX_CHANGED_SHARE` of the picture and the
+  cycle alone goes on.
 * **A window per person**: every person found that no window already follows gets a square
   window on the image (``window_scale`` x the person's box, at least ``min_window_px``) and
   its own VIDEO-mode landmarker for one pose. The window stays put while the person stays in
@@ -396,10 +396,10 @@ class BlazePoseMultiDetector:
             picture changed since the last search, outside the people followed
             (:meth:`_changed_region`: the region of the cycle sized for the largest patch of
             change that holds it), every other search at most; the others keep to the cycle
-            of :meth:`search_regions`. Somebody who
-            walks into a static camera's picture is then looked for where they are within a
-            search or two, instead of when the cycle comes to their region (up to a minute for
-            a small person while somebody else is followed). A camera that moves changes too
+            of :meth:`search_regions`. Somebody who walks into a static camera's picture is
+            then looked for where they are within a search or two, instead of when the cycle
+            comes to their region (up to a minute for a small person while somebody else is
+            followed). A camera that moves changes too
             much of the picture (:data:`MAX_CHANGED_SHARE`) to say where: the cycle goes on.
     """
 
@@ -442,8 +442,8 @@ class BlazePoseMultiDetector:
         #: cycle after :data:`GUIDED_MAX_MISSES` of them (something that moves is no person)
         self._misses = 0
         self._guided_pause = 0
-        #: this frame's small grey image and its scale (:meth:`_small`), for the frame number
-        self._small_of: Optional[Tuple[int, np.ndarray, float]] = None
+        #: this frame's small grey image and its scale (:meth:`_small`; cleared each frame)
+        self._small_of: Optional[Tuple[np.ndarray, float]] = None
         #: the search's regions in turn per image size (see :meth:`search_regions`), and
         #: the number of searches in a round of them
         self._scan: dict = {}
@@ -523,7 +523,7 @@ class BlazePoseMultiDetector:
         if self._closed:
             raise RuntimeError('detector is closed')
         h, w = img.shape[:2]
-        self._small_of = None      # (a frame that raised left its small copy behind)
+        self._small_of = None      # this frame's small copy is made when first needed
         rgb = self._cv2.cvtColor(img, self._cv2.COLOR_BGR2RGB)
         self._ts_ms += 33          # VIDEO mode wants increasing stamps; only order matters
         people: List[np.ndarray] = []
@@ -631,11 +631,9 @@ class BlazePoseMultiDetector:
         """The image grey, reduced by an integer factor to :data:`CHANGE_WIDTH` - 319 px wide
         (the last rows and columns that do not fill a block are left out), and its scale
         (made once per frame: ``rgb`` is this frame's image)."""
-        if self._small_of is not None and self._small_of[0] == self._frame:
-            return self._small_of[1], self._small_of[2]
-        small, scale = self._make_small(rgb)
-        self._small_of = (self._frame, small, scale)
-        return small, scale
+        if self._small_of is None:
+            self._small_of = self._make_small(rgb)
+        return self._small_of
 
     def _make_small(self, rgb: np.ndarray) -> Tuple[np.ndarray, float]:
         h, w = rgb.shape[:2]
@@ -697,15 +695,15 @@ class BlazePoseMultiDetector:
         return self.region_for(w, h, tuple(v / scale for v in patch),
                                GUIDED_GROWTH[self._growth])
 
-    def region_for(self, width: int, height: int, box: tuple, growth: float = 1.0
-                   ) -> Optional[tuple]:
+    def region_for(self, width: int, height: int, box: tuple, growth: float = 1.0) -> tuple:
         """The region of the search's cycle (:meth:`search_regions`) to look for a person in
         whose moving part is the image box ``(x0, y0, x1, y1)`` (px): the smallest that holds
         the box and shows it at most :data:`SMALL_PERSON_SIDE_FRACTION` / ``growth`` of its
         side (with ``growth`` 1 as the finer squares show the smallest person; more where the
         person may be larger than the part of them that moved, and then holding as well
         (``growth`` - 1) / 2 x the box's larger side above and below it), the one whose
-        centre is nearest the box's among equals; the whole image when none does."""
+        centre is nearest the box's among equals; the whole image (always a region of the
+        cycle, and exempt from the size) when none does."""
         regions, _ = self.search_regions(width, height)
         x0, y0, x1, y1 = box
         side = max(x1 - x0, y1 - y0)
