@@ -37,11 +37,14 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, JointState, PointCloud2
 from std_msgs.msg import String
@@ -55,11 +58,14 @@ from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.guard import guarded
-from mocap_core.parameters import ParamSpec, declare_parameters, help_requested, spin_node
+from mocap_core.camera_pose import KnownCameraPoses
+from mocap_core.parameters import (ParamSpec, camera_pose_params, declare_parameters,
+                                  help_requested, spin_node)
 from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS, input_qos
 from mocap_core.urdf import skeleton_to_urdf
 
 from .intrinsics import StreamIntrinsics
+from .known_floor import SizeFromKnownFloor, scale_pose
 from .online import (DEFAULT_HOLD_UNSEEN_S, DEFAULT_VIRTUAL_CAMERA, LiftedFrame,
                      OnlineLifter, PeopleStep, PeopleStreams)
 from .output_smoothing import DEFAULT_OUTPUT_ROOT_SIGMA, DEFAULT_OUTPUT_SIGMA
@@ -157,6 +163,17 @@ PARAMETERS = (
     ParamSpec('device', 'cpu', "Torch device ('cpu' or 'cuda')", read_only=True),
     ParamSpec('threads', 1, 'Torch CPU threads (1 is fastest for per-frame inference of this '
               'small network, see docs/lifter.md)', min_value=1, read_only=True),
+) + camera_pose_params(
+    'each person\'s size is then measured from their stance feet on the floor of that frame '
+    '(size_from_camera_pose)', 'it gives no size sample') + (
+    ParamSpec('size_from_camera_pose', True, 'With a known camera pose (camera_pose_topic): '
+              'scale each person (bones and root, along the camera rays) so that their stance '
+              'feet stand on the floor z = camera_pose_floor_z of the pose\'s frame, the median '
+              'over the last 20 s of stance points (docs/lifter.md, "The size from a known '
+              'floor"); a given subject_height wins', read_only=True),
+    ParamSpec('camera_pose_floor_z', 0.0, 'The floor\'s height in the camera pose\'s world '
+              'frame (z up), m: 0 for the odom or map frame of a ground robot',
+              read_only=True),
 )
 
 
@@ -251,6 +268,28 @@ class LifterNode(Node):
         self._report_intrinsics()
         self.frame_id = 'camera_optical_frame'
         self.last_input = time.monotonic()
+        #: the known camera pose and each person's size from it (size_from_camera_pose)
+        self.known_poses: Optional[KnownCameraPoses] = None
+        self.sizers: Dict[int, SizeFromKnownFloor] = {}
+        #: person -> stamp -> the skeleton height applied to that stamp (None: none yet), so
+        #: that a stamp's unsmoothed and smoothed frames take the same size
+        self.size_at: Dict[int, Dict[int, Optional[float]]] = {}
+        self.camera_pose_missing = 0
+        if p['camera_pose_topic'] and p['size_from_camera_pose']:
+            if p['camera_pose_type'] not in ('odometry', 'pose'):
+                raise ValueError(f"camera_pose_type must be odometry or pose, got "
+                                 f"{p['camera_pose_type']!r}")
+            if p['subject_height'] > 0:
+                self.get_logger().info('subject_height given: the size is not measured from '
+                                       'the camera pose')
+            else:
+                self.known_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
+                                                    p['camera_pose_convention'])
+                self.diag.set_value('body_size', 'from the known floor: no stance yet')
+                self.diag.watch('camera_pose', self.create_subscription(
+                    Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped,
+                    p['camera_pose_topic'], guarded(self, self.on_camera_pose, 'camera pose'),
+                    STREAM_QOS))
         self.create_timer(0.1, guarded(self, self.on_idle, 'idle flush'))
         self.create_subscription(CameraInfo, topics.CAMERA_INFO,
                                  guarded(self, self.on_info, 'camera_info'), STREAM_QOS)
@@ -276,6 +315,42 @@ class LifterNode(Node):
                 self.get_logger().warn(f'ignoring camera_info: {exc}',
                                        throttle_duration_sec=5.0)
         self._report_intrinsics()
+
+    def on_camera_pose(self, msg) -> None:
+        """Keep the camera's known pose (camera_pose_topic)."""
+        if self.known_poses.add(*rc.camera_pose_from_msg(msg)) == 'invalid':
+            self.diag.errors += 1
+            self.get_logger().warn('ignoring camera pose: not finite',
+                                   throttle_duration_sec=5.0)
+
+    def _sized(self, pid: int, frame: LiftedFrame) -> LiftedFrame:
+        """``frame`` at the size its person's stance feet on the known floor give
+        (:mod:`mocap_lifter.known_floor`); unchanged without a known camera pose. A stamp's
+        first frame (the unsmoothed one) is measured; later frames of the stamp take its
+        size."""
+        if self.known_poses is None:
+            return frame
+        sizer = self.sizers.get(pid)
+        if sizer is None:
+            sizer = self.sizers[pid] = SizeFromKnownFloor(self.p['camera_pose_floor_z'])
+        memo = self.size_at.setdefault(pid, {})
+        stamp = int(frame.stamp_ns)
+        if stamp in memo:
+            height = memo[stamp]
+        else:
+            camera = self.known_poses.at(stamp)
+            if camera is None:
+                self.camera_pose_missing += 1
+                self.get_logger().warn('no camera pose near a lifted frame: no size sample',
+                                       throttle_duration_sec=5.0)
+            sizer.observe(stamp, frame.pose, frame.contacts, camera)
+            height = memo[stamp] = sizer.applied_height
+            while len(memo) > 512:
+                del memo[next(iter(memo))]
+        if height is None:
+            return frame
+        factor = height / frame.pose.skeleton.height()
+        return replace(frame, pose=scale_pose(frame.pose, factor), depth=frame.depth * factor)
 
     def on_keypoints(self, msg: PointCloud2) -> None:
         self.diag.input.tick()
@@ -338,8 +413,12 @@ class LifterNode(Node):
                 self.get_logger().error(f'frame dropped: {error}', throttle_duration_sec=2.0)
             released.append((pid, [f for f in st.frames if self._finite(f)]))
         self._report_intrinsics()
-        self.publish_unsmoothed([(pid, [f for f in st.unsmoothed if self._finite(f, quiet=True)])
-                                 for pid, st in step.steps.items()])
+        # the unsmoothed frames first: a stamp's first frame is the one measured for its size
+        unsmoothed = [(pid, [self._sized(pid, f) for f in st.unsmoothed
+                             if self._finite(f, quiet=True)])
+                      for pid, st in step.steps.items()]
+        released = [(pid, [self._sized(pid, f) for f in frames]) for pid, frames in released]
+        self.publish_unsmoothed(unsmoothed)
         for stamp, frames in by_stamp(released, self.main_id):   # the main person first
             # combined first: the next stage, which follows everybody from the combined
             # motion, hears it before the single-person topics
@@ -351,6 +430,8 @@ class LifterNode(Node):
                     self.publish(frame)
         for pid in step.ended:
             self.bodies.remove(pid)
+            self.sizers.pop(pid, None)
+            self.size_at.pop(pid, None)
             self.body_lengths.pop(pid, None)
             self.signatures_changed |= self.signatures.pop(pid, None) is not None
             self.get_logger().info(f'person {pid} gone: their topics are removed')
@@ -457,8 +538,8 @@ class LifterNode(Node):
             self.pub['urdf'].publish(rc.urdf_to_msg(
                 skeleton_to_urdf(pose.skeleton, self.p['body_mass'])))
             self.published_lengths = lengths
-            source = 'given' if self.p['subject_height'] > 0 else 'estimated from the keypoints'
-            self.diag.set_value('body_size', f'{source}: stature {pose.skeleton.stature():.2f} m')
+            self.diag.set_value('body_size', f'{self._size_source()}: stature '
+                                f'{pose.skeleton.stature():.2f} m')
         self.pub['motion'].publish(cdr.pose_to_motion(pose, header))
         # the others only while someone listens (mocap_core.publishing)
         publish_if_heard(self.pub['joints3d'],
@@ -470,6 +551,20 @@ class LifterNode(Node):
         self.diag.output.tick()
         self.diag.set_value('skeleton', 'held' if frame.skeleton_fixed else 'estimating')
         self.diag.set_value('root_depth_m', f'{frame.depth:.2f}')
+        if self.known_poses is not None:
+            self.diag.set_value('camera_pose_missing', self.camera_pose_missing)
+
+    def _size_source(self) -> str:
+        """Where the main person's size comes from, for the diagnostics."""
+        if self.p['subject_height'] > 0:
+            return 'given'
+        sizer = self.sizers.get(self.main_id) if self.known_poses is not None else None
+        if sizer is None:
+            return 'estimated from the keypoints'
+        if sizer.applied_height is None:
+            return (f'estimated from the keypoints (known floor: {sizer.samples} of '
+                    f'{sizer.min_samples} stance samples)')
+        return f'from the known floor ({sizer.samples} stance samples)'
 
 
 def main(args: Optional[List[str]] = None) -> int:

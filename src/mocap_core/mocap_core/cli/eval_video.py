@@ -458,7 +458,7 @@ def cmd_eval_video(args: argparse.Namespace) -> int:
     if args.known_camera_pose:
         tag += '_pose'
         args.param = list(args.param) + [
-            f'{node}.{k}' for node in ('physics', 'gmr') for k in (
+            f'{node}.{k}' for node in ('lifter', 'physics', 'gmr') for k in (
                 f'camera_pose_topic={T_GT_CAMERA_POSE}', 'camera_pose_type=pose')]
     tag = ''.join(c if c.isalnum() or c in '-_.=' else '_' for c in tag)
     work_root = Path(args.work) if args.work else Path.home() / '.cache' / 'mocap' / 'eval_video'
@@ -536,10 +536,12 @@ def add_eval_parser(sub) -> None:
                    "multi-person detector); keypoints: reuse the render's detections (the "
                    "single-person detector, faster)")
     p.add_argument('--known-camera-pose', action='store_true',
-                   help="give the physics and world stages the render camera's true pose "
-                   '(/mocap/groundtruth/camera_pose; --start keypoints), as a robot that knows '
-                   "its camera's pose would: the physics stage carries the body with it, the "
-                   'world output is in the true world frame, scored without alignment')
+                   help="give the lifter, physics and world stages the render camera's true "
+                   'pose (/mocap/groundtruth/camera_pose; --start keypoints), as a robot that '
+                   "knows its camera's pose would: the lifter sizes the person by their stance "
+                   'feet on the floor (--param lifter.size_from_camera_pose=false: not), the '
+                   'physics stage carries the body with it, the world output is in the true '
+                   'world frame, scored without alignment')
     p.add_argument('--known-height', action='store_true',
                    help="give the lifter each rendered body's stature "
                    '(lifter.subject_height), as a user who knows the performer\'s height would')

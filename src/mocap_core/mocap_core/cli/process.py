@@ -307,9 +307,10 @@ def process(input_path: Path, output: Path, *, start: str = 'auto', image_topic:
         problems.append(warning)
         log(f'  warning: {warning}')
     plan = plan_for(topics, start, image_topic, video)
-    pose_topic = str(params.get('gmr', {}).get('camera_pose_topic', '') or '')
-    if pose_topic and pose_topic in topics and pose_topic not in plan.feed_topics:
-        plan.feed_topics.append(pose_topic)     # a known camera pose for the world stage
+    for node_params in params.values():         # a known camera pose for the stages
+        pose_topic = str(node_params.get('camera_pose_topic', '') or '')
+        if pose_topic and pose_topic in topics and pose_topic not in plan.feed_topics:
+            plan.feed_topics.append(pose_topic)
     log(f'mocap process: {input_path} -> {output}; start: {plan.start}; nodes: '
         f"{', '.join(plan.nodes)}" + (f"; feeding {', '.join(plan.feed_topics)}"
                                      if plan.feed_topics else ''))

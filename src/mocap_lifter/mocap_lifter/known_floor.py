@@ -1,0 +1,162 @@
+"""The person's size from a known camera pose: the stance feet stand on the floor (no ROS
+imports).
+
+2D keypoints of one person fix their pose up to one scale: a tall person far away and a short
+one nearby project alike, and the network's guess of the size carries little information
+(docs/lifter.md, "What the keypoints cannot tell"). A robot that knows its camera's pose in a
+world frame whose floor is known (REP-105's ``odom`` or ``map`` of a ground robot: the floor is
+``z = floor_z``, z up) knows more: a foot that stands on the floor is on that plane. Scaling the
+lifted body by ``k`` about the camera centre (every bone and the root position, along the
+camera rays: the projection is unchanged) moves a contact point ``X`` (camera optical frame, m)
+to ``k X``, at world height ``k (u . X) + t_z`` with ``u`` the world's up in camera axes (the
+third row of ``R_world_camera``) and ``t_z`` the camera's height. A stance point sits
+``contact_height`` above the floor (:data:`CONTACT_HEIGHTS`), so each one gives::
+
+    k = (floor_z + contact_height - t_z) / (u . X)
+
+:class:`SizeFromKnownFloor` turns every such sample into the height (:meth:`Skeleton.height`)
+the person's skeleton would need, keeps the samples of the last ``window_s`` seconds, and
+gives each frame the factor that takes its skeleton to the median height. Samples whose
+point is less than ``min_drop`` below the camera (a camera near the floor: the ratio is
+ill-conditioned) or whose factor is outside the plausible statures are not taken. The
+factor changes only when the median moves by more than ``update`` (a fraction), so that the
+skeleton the later stages build their models from does not change every frame.
+
+Conventions: poses in the camera's optical frame (x right, y down, z forward), m; the camera
+pose ``(R, t)`` with ``p_world = R p_optical + t``
+(:class:`mocap_core.camera_pose.KnownCameraPoses`); contact probabilities in
+:data:`~mocap_core.skeleton.CONTACT_POINT_NAMES` order.
+"""
+
+from __future__ import annotations
+
+import collections
+from typing import Deque, Optional, Tuple
+
+import numpy as np
+
+from mocap_core.pose import Pose
+from mocap_core.skeleton import CONTACT_POINT_NAMES, STATURE_OFFSET, STATURE_SLOPE, Skeleton
+
+#: Height above the floor of each contact point (:meth:`Skeleton.contact_points`, in
+#: :data:`CONTACT_POINT_NAMES` order: the heel point, the toe joint) of a foot that stands, m:
+#: the median over the still frames of rendered bodies' ground truth (docs/lifter.md, "The
+#: size from a known floor").
+CONTACT_HEIGHTS = (0.0, 0.035, 0.0, 0.035)
+
+
+class SizeFromKnownFloor:
+    """One person's size from their stance feet on a known floor (module docstring).
+
+    Args:
+        floor_z: the floor's height in the camera pose's world frame, m.
+        contact_heights: (4,) height of each stance contact point above the floor, m.
+        window_s: samples older than this (by stamp, behind the newest) are forgotten.
+        min_samples: samples needed before a factor other than 1 is given (each stance
+            point of a frame gives one: 40 are half a second of a person standing).
+        min_drop: a point less than this far below the camera (m, along the world's up) gives
+            no sample.
+        threshold: contact probability from which a point is in stance.
+        update: the applied height changes only when the median moves by more than this
+            fraction of it.
+        statures: (min, max) plausible statures, m; samples outside are not taken.
+    """
+
+    def __init__(self, floor_z: float = 0.0,
+                 contact_heights: Tuple[float, ...] = CONTACT_HEIGHTS,
+                 window_s: float = 20.0, min_samples: int = 40, min_drop: float = 0.3,
+                 threshold: float = 0.5, update: float = 0.01,
+                 statures: Tuple[float, float] = (1.0, 2.2)) -> None:
+        heights = np.asarray(contact_heights, dtype=float)
+        if not (np.isfinite(floor_z) and heights.shape == (len(CONTACT_POINT_NAMES),)
+                and np.all(np.isfinite(heights))):
+            raise ValueError('floor_z must be finite, contact_heights (4,) finite')
+        if window_s <= 0 or min_samples < 1 or min_drop <= 0 or update < 0:
+            raise ValueError('window_s, min_samples and min_drop must be > 0, update >= 0')
+        lo, hi = statures
+        if not STATURE_OFFSET < lo < hi:
+            raise ValueError(f'statures must satisfy {STATURE_OFFSET} < min < max')
+        self.floor_z = float(floor_z)
+        self.contact_heights = heights
+        self.window_ns = int(window_s * 1e9)
+        self.min_samples = int(min_samples)
+        self.min_drop = float(min_drop)
+        self.threshold = float(threshold)
+        self.update = float(update)
+        # heights (Skeleton.height) of the plausible statures
+        self.heights = tuple((s - STATURE_OFFSET) / STATURE_SLOPE for s in statures)
+        self._samples: Deque[Tuple[int, float]] = collections.deque()
+        #: the skeleton height the factors take the body to (None: no estimate yet)
+        self.applied_height: Optional[float] = None
+        #: samples taken and refused (out of the plausible statures) so far
+        self.taken = 0
+        self.refused = 0
+
+    def reset(self) -> None:
+        """Forget the samples and the estimate (a new person)."""
+        self._samples.clear()
+        self.applied_height = None
+
+    def observe(self, stamp_ns: int, pose: Pose, contacts: np.ndarray,
+                camera: Optional[Tuple[np.ndarray, np.ndarray]]) -> int:
+        """Take the samples of one lifted frame (``pose`` in the camera's optical frame as the
+        network gave it, before any factor of this class; ``contacts`` (4,) probabilities;
+        ``camera`` the pose (R (3, 3), t (3,)) of the frame's stamp, or None). Returns the
+        samples taken."""
+        if camera is None:
+            return 0
+        R, t = camera
+        up = np.asarray(R, dtype=float)[2]             # the world's up in camera axes
+        cps = pose.contact_positions()
+        height = pose.skeleton.height()
+        probs = np.asarray(contacts, dtype=float).reshape(-1)
+        taken = 0
+        for name, p, above in zip(CONTACT_POINT_NAMES, probs, self.contact_heights):
+            if not p > self.threshold:
+                continue
+            drop = float(up @ cps[name])                # < 0: below the camera
+            if not drop < -self.min_drop:
+                continue
+            k = (self.floor_z + above - float(t[2])) / drop
+            h = k * height
+            if not (np.isfinite(h) and self.heights[0] <= h <= self.heights[1]):
+                self.refused += 1
+                continue
+            self._samples.append((int(stamp_ns), h))
+            taken += 1
+        self.taken += taken
+        newest = self._samples[-1][0] if self._samples else None
+        while self._samples and self._samples[0][0] < newest - self.window_ns:
+            self._samples.popleft()
+        if len(self._samples) >= self.min_samples:
+            median = float(np.median([h for _, h in self._samples]))
+            if self.applied_height is None or \
+                    abs(median / self.applied_height - 1.0) > self.update:
+                self.applied_height = median
+        return taken
+
+    @property
+    def samples(self) -> int:
+        """Samples in the window."""
+        return len(self._samples)
+
+    def factor(self, skeleton: Skeleton) -> float:
+        """The factor that takes ``skeleton`` (and the root position) to the estimated size;
+        1 without an estimate."""
+        if self.applied_height is None:
+            return 1.0
+        return float(self.applied_height / skeleton.height())
+
+    def stature(self) -> Optional[float]:
+        """The estimated stature (floor to the top of the head, m), None without one."""
+        if self.applied_height is None:
+            return None
+        return float(STATURE_SLOPE * self.applied_height + STATURE_OFFSET)
+
+
+def scale_pose(pose: Pose, factor: float) -> Pose:
+    """``pose`` with every bone and the root position ``factor`` times as long: the body
+    scaled about the frame's origin (for a camera-frame pose, along the camera rays)."""
+    if factor == 1.0:
+        return pose
+    return Pose(pose.skeleton.scaled(factor), pose.rotations, pose.root_position * factor)
