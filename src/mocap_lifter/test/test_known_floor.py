@@ -71,8 +71,9 @@ def test_the_stance_feet_on_the_known_floor_give_the_size(pitch):
 
 
 def test_only_stance_points_below_the_camera_count():
-    """Points in the air (probability 0.5 or less), frames without a camera pose, a camera at
-    the feet's height and sizes no adult has give no sample."""
+    """Points in the air (probability 0.5 or less), points without a height (the default's
+    heels), frames without a camera pose, a camera at the feet's height and sizes no adult
+    has give no sample."""
     camera = _camera()
     pose = scale_pose(_standing(Skeleton.default(), camera), 1.1)
     sizer = SizeFromKnownFloor(contact_heights=HEIGHTS, min_samples=1)
@@ -83,6 +84,8 @@ def test_only_stance_points_below_the_camera_count():
     giant = _standing(Skeleton.default().scaled(1.5), camera)       # 2.5 m
     assert sizer.observe(3, giant, np.ones(4), camera) == 0 and sizer.refused == 4
     assert sizer.samples == 2
+    toes = SizeFromKnownFloor(min_samples=1)
+    assert toes.observe(0, pose, np.ones(4), camera) == 2
 
 
 def test_the_size_follows_the_median_and_changes_in_steps():
@@ -121,6 +124,8 @@ def test_the_size_follows_the_median_and_changes_in_steps():
 def test_bad_settings_are_refused():
     with pytest.raises(ValueError):
         SizeFromKnownFloor(contact_heights=(0.0, 0.0))
+    with pytest.raises(ValueError):
+        SizeFromKnownFloor(contact_heights=(float('nan'),) * 4)
     with pytest.raises(ValueError):
         SizeFromKnownFloor(floor_z=float('nan'))
     with pytest.raises(ValueError):
