@@ -10,6 +10,12 @@ probabilities), ``/mocap/lifter/markers`` (MarkerArray), ``/mocap/skeleton/urdf`
 transient local; re-published when the skeleton estimate changes by more than
 ``skeleton_tolerance``) and ``/diagnostics``.
 
+With a known camera pose (``camera_pose_topic``, nav_msgs/Odometry or geometry_msgs/PoseStamped
+of the camera in a world frame whose floor is ``z = camera_pose_floor_z``) each person is
+scaled, bones and root along the camera rays, so that their stance toes stand on that floor
+(:mod:`mocap_lifter.known_floor`; ``size_from_camera_pose``, on when a pose topic is given);
+the diagnostics value ``body_size`` says where the main person's size comes from.
+
 Several people (docs/multi_person.md): the cloud's rows are persons with an ``id`` field (a
 cloud without it: persons 1, 2, ... in row order). Each id gets its own lifting state
 (:class:`mocap_lifter.online.PeopleStreams`), ended ``person_timeout_s`` after the person was

@@ -57,7 +57,7 @@ def test_the_stance_feet_on_the_known_floor_give_the_size(pitch):
                                truth.joint_positions()[:, :2] / truth.joint_positions()[:, 2:],
                                atol=1e-12)
     assert np.all(_world_heights(lifted, camera) < -0.05)        # sunk into the floor
-    sizer = SizeFromKnownFloor(contact_heights=HEIGHTS, min_samples=8)
+    sizer = SizeFromKnownFloor(contact_heights=HEIGHTS, min_samples=8, rate=0.0)
     contacts = np.ones(4)
     sizer.observe(0, lifted, contacts, camera)          # 4 samples of the 8 needed
     assert sizer.applied_height is None and sizer.factor(lifted.skeleton) == 1.0
@@ -95,7 +95,7 @@ def test_the_size_follows_the_median_and_changes_in_steps():
     camera = _camera()
     truth = _standing(Skeleton.default(), camera)
     sizer = SizeFromKnownFloor(contact_heights=HEIGHTS, min_samples=4, window_s=2.0,
-                               update=0.02)
+                               update=0.02, rate=0.0)
     ns = 33_333_333
     for k in range(30):
         sizer.observe(k * ns, truth, np.ones(4), camera)
@@ -119,6 +119,36 @@ def test_the_size_follows_the_median_and_changes_in_steps():
             sizer.observe(k * ns, other, np.ones(4), camera)
         start += 70
         assert sizer.applied_height == pytest.approx(applied, rel=1e-9)
+
+
+def test_the_size_applied_follows_the_estimate_at_its_rate():
+    """From the network's own size when the first estimate comes, at most ``rate`` of itself
+    per second (30 frames/s: 0.33 % a frame), then held; a gap in the frames counts as
+    ``MAX_RAMP_STEP_S``: the size never jumps."""
+    from mocap_lifter.known_floor import MAX_RAMP_STEP_S
+
+    camera = _camera()
+    truth = _standing(Skeleton.default(), camera)
+    lifted = scale_pose(truth, 1.12)
+    sizer = SizeFromKnownFloor(contact_heights=HEIGHTS, min_samples=8, rate=0.1)
+    ns = 33_333_333
+    factors = []
+    for k in range(90):
+        sizer.observe(k * ns, lifted, np.ones(4), camera)
+        factors.append(sizer.factor(lifted.skeleton))
+    factors = np.array(factors)
+    assert factors[0] == 1.0                    # 4 samples; with 8 the target, one step
+    assert factors[1] == pytest.approx(1 - 0.1 / 30)
+    steps = np.abs(np.diff(factors))
+    assert steps.max() <= 0.1 / 30 * 1.0001
+    reached = int(np.argmax(np.abs(factors - 1 / 1.12) < 1e-9))
+    assert 30 < reached < 45                              # 10.7 % at 10 %/s (of the size)
+    assert np.all(factors[reached:] == factors[reached])
+    gap = SizeFromKnownFloor(contact_heights=HEIGHTS, min_samples=4, rate=0.1)
+    gap.observe(0, lifted, np.ones(4), camera)
+    start = gap.applied_height
+    gap.observe(10**10, lifted, np.ones(4), camera)                 # 10 s later
+    assert gap.applied_height == pytest.approx(start * (1 - 0.1 * MAX_RAMP_STEP_S))
 
 
 def test_bad_settings_are_refused():
