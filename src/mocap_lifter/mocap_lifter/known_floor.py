@@ -64,7 +64,7 @@ class SizeFromKnownFloor:
             the point gives no sample).
         window_s: samples older than this (by stamp, behind the newest) are forgotten.
         min_samples: samples needed before a factor other than 1 is given (each stance
-            point of a frame gives one: the toes of a person standing give 40 in 0.7 s).
+            point of a frame gives one: the toes of a person standing give 20 in 0.33 s).
         min_drop: a point less than this far below the camera (m, along the world's up) gives
             no sample.
         threshold: contact probability from which a point is in stance.
@@ -78,8 +78,8 @@ class SizeFromKnownFloor:
 
     def __init__(self, floor_z: float = 0.0,
                  contact_heights: Tuple[float, ...] = CONTACT_HEIGHTS,
-                 window_s: float = 20.0, min_samples: int = 40, min_drop: float = 0.3,
-                 threshold: float = 0.5, update: float = 0.01, rate: float = 0.1,
+                 window_s: float = 20.0, min_samples: int = 20, min_drop: float = 0.3,
+                 threshold: float = 0.5, update: float = 0.01, rate: float = 0.3,
                  statures: Tuple[float, float] = (1.0, 2.2)) -> None:
         heights = np.asarray(contact_heights, dtype=float)
         if not (np.isfinite(floor_z) and heights.shape == (len(CONTACT_POINT_NAMES),)
