@@ -155,9 +155,9 @@ def test_a_known_camera_pose_gives_the_rendered_person_their_size(tmp_path):
     """``camera_pose_topic`` (the render camera's pose, as a robot knows its camera's): the
     lifter node scales the person so that their stance feet stand on the floor
     (``mocap_lifter.known_floor``). The network alone takes the 1.54 m person for 1.71 m;
-    with the pose, measured 2026-11-30: 1.55 m, MPJPE 84.5 -> 62.2 mm (the network's size
-    for the first 0.3 s, then 0.4 s to reach the estimate at 30 % a second; the network's
-    depth happened to be right on this clip: the root error rises, 48 -> 127 mm, as with the
+    with the pose, measured 2026-11-30: 1.55 m, MPJPE 84.5 -> 63.8 mm (the network's size
+    for the first 0.3 s, then 1.1 s to reach the estimate at 10 % a second; the network's
+    depth happened to be right on this clip: the root error rises, 48 -> 116 mm, as with the
     stature given, ``test_a_known_stature_sizes_the_body_and_keeps_its_image``)."""
     from mocap_core.bag_io import BagReader, deserialize
     from mocap_core.cli.process import parse_params, process

@@ -79,7 +79,7 @@ class SizeFromKnownFloor:
     def __init__(self, floor_z: float = 0.0,
                  contact_heights: Tuple[float, ...] = CONTACT_HEIGHTS,
                  window_s: float = 20.0, min_samples: int = 20, min_drop: float = 0.3,
-                 threshold: float = 0.5, update: float = 0.01, rate: float = 0.3,
+                 threshold: float = 0.5, update: float = 0.01, rate: float = 0.1,
                  statures: Tuple[float, float] = (1.0, 2.2)) -> None:
         heights = np.asarray(contact_heights, dtype=float)
         if not (np.isfinite(floor_z) and heights.shape == (len(CONTACT_POINT_NAMES),)

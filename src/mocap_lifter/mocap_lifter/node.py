@@ -180,7 +180,7 @@ PARAMETERS = (
     ParamSpec('camera_pose_floor_z', 0.0, 'The floor\'s height in the camera pose\'s world '
               'frame (z up), m: 0 for the odom or map frame of a ground robot',
               read_only=True),
-    ParamSpec('size_rate', 0.3, 'size_from_camera_pose: the size applied follows the '
+    ParamSpec('size_rate', 0.1, 'size_from_camera_pose: the size applied follows the '
               'estimate at most this fraction of itself per second, from the network\'s own '
               'size (0: at once, a jump of the whole body along the camera rays)',
               min_value=0.0, max_value=10.0, read_only=True),
