@@ -113,11 +113,6 @@ class SizeFromKnownFloor:
         self.taken = 0
         self.refused = 0
 
-    def reset(self) -> None:
-        """Forget the samples and the estimate (a new person)."""
-        self._samples.clear()
-        self.target_height = self.applied_height = self._last_stamp = None
-
     def observe(self, stamp_ns: int, pose: Pose, contacts: np.ndarray,
                 camera: Optional[Tuple[np.ndarray, np.ndarray]]) -> int:
         """Take the samples of one lifted frame (``pose`` in the camera's optical frame as the
