@@ -11,7 +11,7 @@ imports.
 from __future__ import annotations
 
 import collections
-from typing import Deque, Optional, Tuple
+from typing import Any, Deque, Mapping, Optional, Tuple
 
 import numpy as np
 
@@ -90,3 +90,20 @@ class KnownCameraPoses:
 
 
 __all__ = ['KnownCameraPoses', 'BODY_TO_OPTICAL', 'CONVENTIONS']
+
+
+#: the message types a known camera pose comes as (``camera_pose_type``): nav_msgs/Odometry,
+#: geometry_msgs/PoseStamped
+CAMERA_POSE_TYPES = ('odometry', 'pose')
+
+
+def known_camera_poses(params: Mapping[str, Any], max_frames: int = 600) -> KnownCameraPoses:
+    """The store of a node's known camera poses, from its ``camera_pose_*`` parameters
+    (:func:`mocap_core.parameters.camera_pose_params`: ``camera_pose_type``,
+    ``camera_pose_convention``, ``camera_pose_max_age_s``). Raises ValueError for a type or
+    convention the nodes do not know."""
+    if params['camera_pose_type'] not in CAMERA_POSE_TYPES:
+        raise ValueError(f"camera_pose_type must be odometry or pose, got "
+                         f"{params['camera_pose_type']!r}")
+    return KnownCameraPoses(params['camera_pose_max_age_s'], params['camera_pose_convention'],
+                            max_frames)

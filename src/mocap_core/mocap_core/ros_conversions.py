@@ -727,6 +727,12 @@ def odometry_to_camera_motion(msg: Odometry) -> Tuple[str, np.ndarray, np.ndarra
     return state, q / np.linalg.norm(q), w
 
 
+def camera_pose_message_type(kind: str) -> type:
+    """The message class of a known camera pose of ``camera_pose_type`` ``kind``: 'odometry'
+    (nav_msgs/Odometry) or 'pose' (geometry_msgs/PoseStamped)."""
+    return Odometry if kind == 'odometry' else PoseStamped
+
+
 def camera_pose_from_msg(msg) -> Tuple[int, np.ndarray, np.ndarray]:
     """A known camera pose (nav_msgs/Odometry or geometry_msgs/PoseStamped) -> (stamp ns,
     position (3,) m, orientation (4,) x, y, z, w), unchecked

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocap_core.camera_pose import BODY_TO_OPTICAL, KnownCameraPoses
+from mocap_core.camera_pose import BODY_TO_OPTICAL, KnownCameraPoses, known_camera_poses
 from mocap_core.rotations import axis_angle_to_matrix, matrix_to_quat
 
 MS = 1_000_000
@@ -57,3 +57,17 @@ def test_a_body_frame_pose_gives_the_optical_frame():
     np.testing.assert_allclose(R[:, 1], [0.0, 0.0, -1.0], atol=1e-12)
     with pytest.raises(ValueError, match='optical or body'):
         KnownCameraPoses(convention='link')
+
+
+def test_the_store_from_a_nodes_parameters():
+    """known_camera_poses: the nodes' camera_pose_* parameters give the store (its age limit
+    and convention); a message type or convention no node knows is refused."""
+    p = {'camera_pose_type': 'pose', 'camera_pose_convention': 'body',
+         'camera_pose_max_age_s': 0.05}
+    store = known_camera_poses(p, max_frames=7)
+    assert store.convention == 'body' and store.max_age_ns == 0.05e9
+    assert store.poses.maxlen == 7
+    with pytest.raises(ValueError, match='camera_pose_type'):
+        known_camera_poses({**p, 'camera_pose_type': 'tf'})
+    with pytest.raises(ValueError, match='convention'):
+        known_camera_poses({**p, 'camera_pose_convention': 'camera'})

@@ -71,7 +71,7 @@ from typing import Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
-from geometry_msgs.msg import PoseStamped, TransformStamped
+from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry, Path as PathMsg
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, PointCloud2
@@ -81,7 +81,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import ros_conversions as rc
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
-from mocap_core.camera_pose import KnownCameraPoses
+from mocap_core.camera_pose import known_camera_poses
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.tf import TfBroadcaster
@@ -221,6 +221,17 @@ PARAMETERS = (
               "lifter's and is moved to put the feet on its floor: docs/global.md); "
               "'input' = the input's root", read_only=True,
               additional_constraints='lifter or input'),
+    ParamSpec('camera_pose_height', 'input', "With a known camera pose and a floor input "
+              "(the physics output): where the person's height comes from. 'input' = the "
+              "input's height above its floor (the physics floor, fitted to the feet, is "
+              "the world's z = 0); 'lifter' = the whole body is raised by the height of the "
+              "lifter's root in the pose's world above the input root (camera_pose_root "
+              "lifter), its median over camera_pose_height_window_s: the world's z = 0 is then "
+              "the pose frame's floor (docs/global.md)", read_only=True,
+              additional_constraints='input or lifter'),
+    ParamSpec('camera_pose_height_window_s', 2.0, "camera_pose_height lifter: the raise is "
+              "the median over this many seconds before the frame, s (0 = the frame's own)",
+              read_only=True, min_value=0.0),
     ParamSpec('fused_root', 'lifter', "Camera mode auto with a floor input (the physics "
               "output), a frame the camera-motion estimate fixes in the world (a static "
               "camera, one whose translation was measured over the floor, or with "
@@ -420,7 +431,7 @@ class GMRNode(Node):
         self.camera_pose_missing = 0
         #: frames with a known pose but no lifter root of their stamp (camera_pose_root)
         self.camera_pose_root_missing = 0
-        for name in ('camera_pose_root', 'fused_root'):
+        for name in ('camera_pose_root', 'fused_root', 'camera_pose_height'):
             if p[name] not in ('lifter', 'input'):
                 raise ValueError(f'{name} must be lifter or input, got {p[name]!r}')
         if p['fusion_measured_root_average'] not in MEASURED_ROOT_AVERAGES:
@@ -428,11 +439,7 @@ class GMRNode(Node):
                              f"{p['fusion_measured_root_average']!r}")
         #: fixed frames without a lifter root of their stamp (fused_root lifter; all persons)
         self.fused_root_missing = 0
-        if p['camera_pose_topic'] and p['camera_pose_type'] not in ('odometry', 'pose'):
-            raise ValueError(f"camera_pose_type must be odometry or pose, got "
-                             f"{p['camera_pose_type']!r}")
-        self.camera_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
-                                             p['camera_pose_convention'], MAX_CAMERA_FRAMES)
+        self.camera_poses = known_camera_poses(p, MAX_CAMERA_FRAMES)
         if p['camera_pose_topic']:
             self.camera_mode = 'known'
         #: stamp -> (state, R0 (3, 3), camera position (3,) m in the first camera frame or
@@ -467,9 +474,8 @@ class GMRNode(Node):
                     decode=cdr.decode_motion), 'bodies motion'),
                 input_qos(STREAM_QOS, p['queue_depth']), raw=True))
         if self.camera_mode == 'known':
-            msg_type = Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped
             self.diag.watch('camera_pose', self.create_subscription(
-                msg_type, p['camera_pose_topic'],
+                rc.camera_pose_message_type(p['camera_pose_type']), p['camera_pose_topic'],
                 guarded(self, self.on_camera_pose, 'camera pose'),
                 input_qos(STREAM_QOS, p['queue_depth'])))
         if self.camera_mode in ('auto', 'known') and p['floor_topic']:
@@ -573,7 +579,12 @@ class GMRNode(Node):
                           transition_time_constant_s=p['transition_time_constant_s'],
                           measured_root_half_window=min(
                               p['fusion_measured_root_half_window'], p['lookahead']),
-                          measured_root_average=p['fusion_measured_root_average'])
+                          measured_root_average=p['fusion_measured_root_average'],
+                          measured_height_window_s=(
+                              p['camera_pose_height_window_s']
+                              if self.camera_mode == 'known'
+                              and p['camera_pose_height'] == 'lifter'
+                              and p['camera_pose_root'] == 'lifter' else None))
         self.diag.set_value('inference', state.inference)
         return state
 

@@ -83,6 +83,17 @@ as the network's input, the heading and the path come from the lifter's legs and
 that is placed is still the physics output (its height, tilt and feet). A frame without a
 network pose uses its own.
 
+Known heights (``measured_height_window_s``, with a floor input and known camera poses): the
+input's floor (the physics floor, fitted to the lifter's stance feet) is the world's z = 0,
+so the input's height carries that floor's error, and the joints the floor is fitted to lie
+above the sole. A known camera pose measures the height too: the measured root
+(:attr:`InputAnchor.root`, averaged as for the horizontal position) lies some height above
+the input root; the median of that difference over the window (past frames only; the frame's
+own for a window of 0) raises the whole emitted body, and the input frame's place in the
+world (``WorldFrame.input_translation``) with it. The world's z = 0 is then the pose frame's,
+and the body's feet stand where the lifter's root puts them: a few centimetres above z = 0 as
+the joints are (measured in docs/global.md, "The height from a known pose").
+
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
 accumulation restarts from a new gravity-aligned first pose, and :meth:`push` reports why.
@@ -157,7 +168,8 @@ class WorldFrame:
     #: frame, or the camera frame when the lifter feeds the stage) in the world, so that
     #: ``p_world = input_rotation @ p_input + input_translation`` holds for the root of this
     #: frame. With a floor input it is a turn about z and a shift along the floor
-    #: (translation z = 0): the two floors are one plane.
+    #: (translation z = 0: the two floors are one plane; with known heights, z is the raise,
+    #: module docstring).
     input_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     input_translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
@@ -427,7 +439,8 @@ class OnlineGMR:
                  contact_threshold: float = 0.5,
                  transition_time_constant_s: float = 0.0,
                  measured_root_half_window: int = 0, inference: str = 'numpy',
-                 measured_root_average: str = 'root') -> None:
+                 measured_root_average: str = 'root',
+                 measured_height_window_s: Optional[float] = None) -> None:
         self.model = model.eval()
         if inference not in INFERENCE_ENGINES:
             raise ValueError(f'inference must be one of {INFERENCE_ENGINES}, got {inference!r}')
@@ -472,6 +485,17 @@ class OnlineGMR:
             raise ValueError(f'measured_root_average must be one of {MEASURED_ROOT_AVERAGES}, '
                              f'got {measured_root_average!r}')
         self.measured_root_average = measured_root_average
+        #: None: the height stays the input's; else a floor input's heights are raised by
+        #: the median, over this window (s; 0: the frame's own), of the measured roots'
+        #: height above the input root (known camera poses only; module docstring)
+        self.measured_height_window_s = None if measured_height_window_s is None \
+            else float(measured_height_window_s)
+        if self.measured_height_window_s is not None \
+                and not self.measured_height_window_s >= 0:
+            raise ValueError('measured_height_window_s must be >= 0 or None, got '
+                             f'{measured_height_window_s}')
+        #: the height the floor input is raised by now, m (None: not measured yet)
+        self.measured_height: Optional[float] = None
         if not self.transition_time_constant_s >= 0:
             raise ValueError('transition_time_constant_s must be >= 0, got '
                              f'{transition_time_constant_s}')
@@ -537,6 +561,8 @@ class OnlineGMR:
         self._cache: Optional[Tuple[int, dict]] = None
         self._last_motion: Tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))
         self._last_up = _EZ.copy()
+        self.measured_height = None
+        self._heights: Deque[Tuple[int, float]] = collections.deque()
         if self.fusion is not None:
             self.fusion.reset()
         if self.planter is not None:
@@ -891,8 +917,9 @@ class OnlineGMR:
                 R = R @ axis_angle_to_matrix(self.tilt_correction * corr)
             dt = (self._stamps[pos] - self._stamps[pos - 1]) * 1e-9
         self._placed = False
+        anchor_s = self._smoothed_anchor(pos)
         if self.fusion is not None:
-            R, T, fused = self._fuse(R, T, pose, self._smoothed_anchor(pos), up, k == 0)
+            R, T, fused = self._fuse(R, T, pose, anchor_s, up, k == 0)
         if k % 64 == 0:
             R = quat_to_matrix(matrix_to_quat(R))       # re-orthonormalise
         T_gmr = T
@@ -920,6 +947,9 @@ class OnlineGMR:
             elif self.foot_lock:
                 T = self._lock_feet(k, R, T, T_gmr, pose)
                 treatment = 'lock'
+        lift = self._height_lift(anchor_s, pose, self._stamps[pos]) \
+            if self.floor_input else 0.0
+        T = np.array([T[0], T[1], T[2] + lift])
         self._T_out = T                                 # the treatments' own state
         T = self._continue(k, T, treatment, dt)
         if k > 0 and dt > 0:
@@ -934,14 +964,38 @@ class OnlineGMR:
         rot[0] = matrix_to_quat(R)
         R_wi = R @ quat_to_matrix(pose.rotations[0]).T
         t_wi = T - R_wi @ np.asarray(pose.root_position, dtype=float)
-        if self.floor_input:        # exact: a turn about z, the floors coincide (z = 0)
+        if self.floor_input:        # exact: a turn about z, the floors parallel
             R_wi = heading_rotation(yaw_of(R_wi))
-            t_wi[2] = 0.0
-        out_pose = Pose(pose.skeleton, rot, T)
+            t_wi[2] = lift              # (0 unless raised to the measured roots' height)
         if self.planter is not None:
-            out_pose = self._plant(out_pose, self._stamps[pos], dt)
+            # planted on the input's floor (z = 0 before the lift), then lifted
+            planted = self._plant(Pose(pose.skeleton, rot, T - [0.0, 0.0, lift]),
+                                  self._stamps[pos], dt)
+            out_pose = Pose(pose.skeleton, planted.rotations,
+                            np.asarray(planted.root_position, float) + [0.0, 0.0, lift])
+        else:
+            out_pose = Pose(pose.skeleton, rot, T)
         return WorldFrame(self._stamps[pos], out_pose, lin, ang, k == 0, fused, held, R_wi,
                           t_wi)
+
+    def _height_lift(self, anchor: Optional[InputAnchor], pose: Pose, stamp_ns: int) -> float:
+        """How far (m) a floor input's heights are raised in this frame: with
+        ``measured_height_window_s`` set, the median over that window of the measured root's
+        height (a known camera pose's world, :attr:`InputAnchor.root` averaged as the
+        horizontal is) above the input root's; held across frames without one, 0 before the
+        first of a segment and without the option (module docstring, known heights)."""
+        window = self.measured_height_window_s
+        if window is None:
+            return 0.0
+        if anchor is not None and anchor.known and anchor.root is not None:
+            d = float(anchor.root[2]) - float(pose.root_position[2])
+            if math.isfinite(d):
+                self._heights.append((stamp_ns, d))
+        while self._heights and self._heights[0][0] < stamp_ns - window * 1e9:
+            self._heights.popleft()
+        if self._heights:
+            self.measured_height = float(np.median([d for _, d in self._heights]))
+        return 0.0 if self.measured_height is None else self.measured_height
 
     def _continue(self, k: int, T: np.ndarray, treatment: str, dt: float) -> np.ndarray:
         """The emitted root position (3,) m for the treatment's root ``T`` (module

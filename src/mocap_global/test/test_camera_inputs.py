@@ -261,6 +261,30 @@ def test_a_known_camera_pose_with_the_physics_floor_input(graph_node):
     assert _values(node)['camera_pose_missing_frames'] == '1'
 
 
+def _publish_known_frame(graph, i, person, lifter, offset):
+    """Frame ``i`` of a person seen by :func:`_camera_and_its_floor`'s camera, whose pose is
+    known (``/robot/camera``): the camera pose, the physics floor (``/floor``), the lifter's
+    camera-frame pose of ``lifter`` (a world pose; None: none this frame) and the physics
+    input (``/in/motion``): ``person`` with its root moved by ``offset`` (3,) m in the world,
+    in the floor frame."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    t_wc, R_wc, t_wf, R_wf, A, b = _camera_and_its_floor()
+    graph.publish('/robot/camera', rc.root_to_odometry(
+        t_wc, matrix_to_quat(R_wc), rc.make_header(i * DT_NS, 'odom'), 'camera_optical_frame'))
+    graph.publish('/floor', rc.transform_stamped(
+        rc.make_header(i * DT_NS, 'camera_optical_frame'), 'floor', A, b))
+    if lifter is not None:
+        graph.publish(topics.LIFTER_UNSMOOTHED_MOTION, rc.pose_to_motion(
+            _in_camera([lifter], R_wc, t_wc)[0],
+            rc.make_header(i * DT_NS, 'camera_optical_frame')))
+    rot = np.array(person.rotations)
+    rot[0] = matrix_to_quat(R_wf.T @ quat_to_matrix(person.rotations[0]))
+    in_floor = Pose(person.skeleton, rot, R_wf.T @ (person.root_position + offset - t_wf))
+    graph.publish('/in/motion', rc.pose_to_motion(in_floor, rc.make_header(i * DT_NS, 'floor')))
+
+
 @pytest.mark.parametrize('root,noise', [('lifter', 0.0), ('input', 0.0), ('lifter', 0.05)])
 def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
     """camera_pose_root lifter: with a known pose the horizontal position is the lifter's
@@ -279,25 +303,12 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
                                   fusion_static_position_time_constant_s=1e-6,
                                   fusion_measured_position_time_constant_s=1e-6)
     world = _poses(40)
-    t_wc, R_wc, t_wf, R_wf, A, b = _camera_and_its_floor()
     lag = np.array([-0.3, 0.0, -0.05])
     for i, p in enumerate(world):
-        header = rc.make_header(i * DT_NS, 'odom')
-        graph.publish('/robot/camera', rc.root_to_odometry(t_wc, matrix_to_quat(R_wc), header,
-                                                           'camera_optical_frame'))
-        graph.publish('/floor', rc.transform_stamped(
-            rc.make_header(i * DT_NS, 'camera_optical_frame'), 'floor', A, b))
-        if i != 25:     # the lifter's frame of stamp 25 is missing
-            shaky = Pose(p.skeleton, p.rotations,
-                         p.root_position + [noise * (-1) ** i, 0.0, 0.0])
-            graph.publish(topics.LIFTER_UNSMOOTHED_MOTION, rc.pose_to_motion(
-                _in_camera([shaky], R_wc, t_wc)[0],
-                rc.make_header(i * DT_NS, 'camera_optical_frame')))
-        rot = np.array(p.rotations)
-        rot[0] = matrix_to_quat(R_wf.T @ quat_to_matrix(p.rotations[0]))
-        in_floor = Pose(p.skeleton, rot, R_wf.T @ (p.root_position + lag - t_wf))
-        graph.publish('/in/motion', rc.pose_to_motion(in_floor, rc.make_header(i * DT_NS,
-                                                                               'floor')))
+        # the lifter's frame of stamp 25 is missing
+        shaky = None if i == 25 else Pose(p.skeleton, p.rotations,
+                                          p.root_position + [noise * (-1) ** i, 0.0, 0.0])
+        _publish_known_frame(graph, i, p, shaky, lag)
     graph.flush()
     odom = [m for t, m in out if t == topics.WORLD_ODOM]
     assert len(odom) == 40
@@ -315,6 +326,52 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
     else:
         np.testing.assert_allclose(T[:, :2], T_true[:, :2] + lag[:2], atol=0.02)
         assert 'camera_pose_root' not in _values(node)
+
+
+@pytest.mark.parametrize('height,window', [('input', 1.0), ('lifter', 0.0), ('lifter', 1.0)])
+def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, window):
+    """camera_pose_height lifter: the physics floor here is 5 cm too high under the person
+    (its root 5 cm low in the world; the feet rest on that floor), and from frame 20 on it
+    is 4 cm higher still. With ``input`` the output's height is the physics', its floor the
+    world's z = 0. With ``lifter`` the whole body is raised by the lifter's root height
+    above the physics root: with a window of 0 s to the lifter's height in every frame, the
+    published floor (the input frame in the world) 5 cm, then 9 cm up; with the median over
+    1 s, the step of frame 20 is taken once it fills more than half the window (frame 35),
+    the offset before it at once."""
+    from mocap_core import ros_conversions as rc
+    from mocap_core import topics
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
+                                  camera_pose_height=height,
+                                  camera_pose_height_window_s=window, lookahead=10,
+                                  fusion_static_position_time_constant_s=1e-6,
+                                  fusion_measured_position_time_constant_s=1e-6)
+    world = _poses(40)
+    for i, p in enumerate(world):
+        _publish_known_frame(graph, i, p, p, [0.0, 0.0, -0.05 if i < 20 else -0.09])
+    graph.flush()
+    odom = [m for t, m in out if t == topics.WORLD_ODOM]
+    floors = [m for t, m in out if t == topics.WORLD_FLOOR]
+    assert len(odom) == 40 and len(floors) == 40
+    z = np.stack([rc.odometry_to_root(m)[0] for m in odom])[:, 2]
+    z_true = np.stack([p.root_position for p in world])[:, 2]
+    lift = np.array([rc.transform_stamped_to_arrays(m)[1][2] for m in floors])
+    before, after = slice(3, 12), slice(30, 40)     # away from the step's +-8 frame average
+    if height == 'input':
+        np.testing.assert_allclose(z[before], z_true[before] - 0.05, atol=0.005)
+        np.testing.assert_allclose(z[after], z_true[after] - 0.09, atol=0.005)
+        np.testing.assert_allclose(lift, 0.0, atol=1e-9)
+        return
+    np.testing.assert_allclose(z[before], z_true[before], atol=0.005)
+    np.testing.assert_allclose(lift[before], 0.05, atol=0.005)
+    if window == 0.0:
+        np.testing.assert_allclose(z[after], z_true[after], atol=0.005)
+        np.testing.assert_allclose(lift[after], 0.09, atol=0.005)
+    else:
+        np.testing.assert_allclose(lift[20:34], 0.05, atol=0.005)
+        np.testing.assert_allclose(lift[36:], 0.09, atol=0.005)
+        np.testing.assert_allclose(z - lift, z_true - np.where(np.arange(40) < 20, 0.05, 0.09),
+                                   atol=0.005)
 
 
 def _floor_of(R_wc, t_wc):

@@ -49,8 +49,6 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
-from geometry_msgs.msg import PoseStamped
-from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, JointState, PointCloud2
 from std_msgs.msg import String
@@ -64,7 +62,7 @@ from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
 from mocap_core.publishing import publish_if_heard
 from mocap_core.guard import guarded
-from mocap_core.camera_pose import KnownCameraPoses
+from mocap_core.camera_pose import KnownCameraPoses, known_camera_poses
 from mocap_core.parameters import (ParamSpec, camera_pose_params, declare_parameters,
                                   help_requested, spin_node)
 from mocap_core.qos import LATCHED_QOS, SENSOR_QOS, STREAM_QOS, input_qos
@@ -286,18 +284,15 @@ class LifterNode(Node):
         self.size_at: Dict[int, Dict[int, Optional[float]]] = {}
         self.camera_pose_missing = 0
         if p['camera_pose_topic'] and p['size_from_camera_pose']:
-            if p['camera_pose_type'] not in ('odometry', 'pose'):
-                raise ValueError(f"camera_pose_type must be odometry or pose, got "
-                                 f"{p['camera_pose_type']!r}")
+            poses = known_camera_poses(p)
             if p['subject_height'] > 0:
                 self.get_logger().info('subject_height given: the size is not measured from '
                                        'the camera pose')
             else:
-                self.known_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
-                                                    p['camera_pose_convention'])
+                self.known_poses = poses
                 self.diag.set_value('body_size', 'from the known floor: no stance yet')
                 self.diag.watch('camera_pose', self.create_subscription(
-                    Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped,
+                    rc.camera_pose_message_type(p['camera_pose_type']),
                     p['camera_pose_topic'], guarded(self, self.on_camera_pose, 'camera pose'),
                     STREAM_QOS))
         self.create_timer(0.1, guarded(self, self.on_idle, 'idle flush'))

@@ -97,7 +97,7 @@ import sys
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-from geometry_msgs.msg import PointStamped, PoseStamped, TransformStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, TransformStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, PointCloud2
@@ -107,7 +107,7 @@ from visualization_msgs.msg import MarkerArray
 from mocap_core import topics
 from mocap_core.bodies import BodyPublishers, CombinedPublishers, by_stamp
 from mocap_core import cdr
-from mocap_core.camera_pose import KnownCameraPoses
+from mocap_core.camera_pose import KnownCameraPoses, known_camera_poses
 from mocap_core.publishing import publish_if_heard
 from mocap_core.diagnostics import NodeDiagnostics
 from mocap_core.guard import KeyedRateLimit, deserialised_unless, guarded
@@ -118,7 +118,7 @@ from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bod
                                         motion_to_pose, msg_to_bodies_contacts,
                                         msg_to_contacts, odometry_to_camera_motion,
                                         odometry_to_camera_position, pose_marker_specs,
-                                        camera_pose_from_msg,
+                                        camera_pose_from_msg, camera_pose_message_type,
                                         stamp_to_ns, wrench_to_msg)
 from mocap_core.rotations import quat_to_matrix
 
@@ -448,11 +448,7 @@ class PhysicsNode(Node):
         self.known_poses: Optional[KnownCameraPoses] = None
         self.camera_pose_missing = 0
         if self.carry and p['camera_pose_topic']:
-            if p['camera_pose_type'] not in ('odometry', 'pose'):
-                raise ValueError(f"camera_pose_type must be odometry or pose, got "
-                                 f"{p['camera_pose_type']!r}")
-            self.known_poses = KnownCameraPoses(p['camera_pose_max_age_s'],
-                                                p['camera_pose_convention'])
+            self.known_poses = known_camera_poses(p)
         #: the keypoint node's camera-motion estimate (none where a known pose is followed)
         self.rotations: Optional[CameraRotations] = None if self.known_poses is not None \
             else CameraRotations(translation=self.carry,
@@ -518,7 +514,7 @@ class PhysicsNode(Node):
                 guarded(self, self.on_bodies_contacts, 'bodies contacts'), qos)
         if self.known_poses is not None:
             self.diag.watch('camera_pose', self.create_subscription(
-                Odometry if p['camera_pose_type'] == 'odometry' else PoseStamped,
+                camera_pose_message_type(p['camera_pose_type']),
                 p['camera_pose_topic'], guarded(self, self.on_camera_pose, 'camera pose'),
                 qos))
         elif self.derotate or self.carry or ((self.drift or self.moving_gains)
