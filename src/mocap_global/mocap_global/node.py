@@ -221,13 +221,13 @@ PARAMETERS = (
               "lifter's and is moved to put the feet on its floor: docs/global.md); "
               "'input' = the input's root", read_only=True,
               additional_constraints='lifter or input'),
-    ParamSpec('camera_pose_height', 'input', "With a known camera pose and a floor input "
-              "(the physics output): where the person's height comes from. 'input' = the "
-              "input's height above its floor (the physics floor, fitted to the feet, is "
-              "the world's z = 0); 'lifter' = the whole body is raised by the height of the "
-              "lifter's root in the pose's world above the input root (camera_pose_root "
-              "lifter), its median over camera_pose_height_window_s: the world's z = 0 is then "
-              "the pose frame's floor (docs/global.md)", read_only=True,
+    ParamSpec('camera_pose_height', 'lifter', "With a known camera pose and a floor input "
+              "(the physics output): where the person's height comes from. 'lifter' = the "
+              "whole body is raised by the height of the lifter's root in the pose's world "
+              "above the input root (camera_pose_root lifter), its median over "
+              "camera_pose_height_window_s: the world's z = 0 is then the pose frame's floor; "
+              "'input' = the input's height above its floor (the physics floor, fitted to the "
+              "feet, is the world's z = 0; docs/global.md)", read_only=True,
               additional_constraints='input or lifter'),
     ParamSpec('camera_pose_height_window_s', 2.0, "camera_pose_height lifter: the raise is "
               "the median over this many seconds before the frame, s (0 = the frame's own)",
@@ -551,7 +551,12 @@ class GMRNode(Node):
         self.diag.set_value('vertical', 'input' if on_floor else 'gmr')
         if on_floor:
             self.get_logger().info(f"the input '{frame_id}' is a floor frame: height and tilt "
-                                   'from the input, heading and horizontal path from GMR')
+                                   'from the input, heading and horizontal path from GMR' + (
+                                       "; with the known camera pose, the height from the "
+                                       "lifter's root (camera_pose_height)"
+                                       if self.camera_mode == 'known'
+                                       and p['camera_pose_height'] == 'lifter'
+                                       and p['camera_pose_root'] == 'lifter' else ''))
         state = OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
                           p['tilt_correction'], fusion, model_up, p['device'],
                           chunk=p['chunk'], floor_input=on_floor,
@@ -1083,6 +1088,13 @@ class GMRNode(Node):
                 if self.p['camera_pose_root'] == 'lifter':
                     self.diag.set_value('camera_pose_root', _measured_root_text(
                         online.measured_root_frames, self.camera_pose_root_missing, ''))
+                if online.measured_height_window_s is not None:
+                    self.diag.set_value('camera_pose_height', (
+                        "the lifter's root: the body raised by "
+                        f'{100 * online.measured_height:.1f} cm (median over '
+                        f'{online.measured_height_window_s:g} s)')
+                        if online.measured_height is not None
+                        else "the lifter's root: not measured yet")
             if self.camera_mode == 'auto':
                 self.diag.set_value('camera_motion_frames', ', '.join(
                     f'{k} {v}' for k, v in sorted(self.camera_frames.items())))

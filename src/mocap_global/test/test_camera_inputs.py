@@ -288,7 +288,8 @@ def _publish_known_frame(graph, i, person, lifter, offset):
 @pytest.mark.parametrize('root,noise', [('lifter', 0.0), ('input', 0.0), ('lifter', 0.05)])
 def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
     """camera_pose_root lifter: with a known pose the horizontal position is the lifter's
-    camera-frame root of each stamp moved by the pose, the height the physics input's; the
+    camera-frame root of each stamp moved by the pose, the height the physics input's
+    (``camera_pose_height`` input: the lifter's height is tested below); the
     physics root here lags 30 cm behind along the walk and stands 5 cm lower. With
     ``input`` the physics root is taken. A stamp without a lifter pose is counted and takes
     its neighbours' mean. A lifter
@@ -299,7 +300,8 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
     from mocap_core import topics
 
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
-                                  camera_pose_root=root, lookahead=10,
+                                  camera_pose_root=root, camera_pose_height='input',
+                                  lookahead=10,
                                   fusion_static_position_time_constant_s=1e-6,
                                   fusion_measured_position_time_constant_s=1e-6)
     world = _poses(40)
@@ -358,12 +360,15 @@ def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, win
     lift = np.array([rc.transform_stamped_to_arrays(m)[1][2] for m in floors])
     before, after = slice(3, 12), slice(30, 40)     # away from the step's +-8 frame average
     if height == 'input':
+        assert 'camera_pose_height' not in _values(node)
         np.testing.assert_allclose(z[before], z_true[before] - 0.05, atol=0.005)
         np.testing.assert_allclose(z[after], z_true[after] - 0.09, atol=0.005)
         np.testing.assert_allclose(lift, 0.0, atol=1e-9)
         return
     np.testing.assert_allclose(z[before], z_true[before], atol=0.005)
     np.testing.assert_allclose(lift[before], 0.05, atol=0.005)
+    assert _values(node)['camera_pose_height'].startswith(
+        "the lifter's root: the body raised by 9.0 cm")
     if window == 0.0:
         np.testing.assert_allclose(z[after], z_true[after], atol=0.005)
         np.testing.assert_allclose(lift[after], 0.09, atol=0.005)
