@@ -229,6 +229,16 @@ PARAMETERS = (
               "'input' = the input's height above its floor (the physics floor, fitted to the "
               "feet, is the world's z = 0; docs/global.md)", read_only=True,
               additional_constraints='input or lifter'),
+    ParamSpec('camera_pose_root_half_window', 15, "With a known camera pose "
+              "(camera_pose_root lifter): the measured root averaged over this many frames "
+              "before and after its own, at most the look-ahead (the known-pose counterpart of "
+              "fusion_measured_root_half_window: a pose carries no estimate noise, so a wider "
+              "average places the person better; docs/global.md)", read_only=True,
+              min_value=0),
+    ParamSpec('camera_pose_position_time_constant_s', 0.05, "With a known camera pose "
+              "(camera_pose_root lifter): time constant of the pull towards the measured root "
+              "(the known-pose counterpart of fusion_measured_position_time_constant_s; longer "
+              "trails a walker, GMR's steps being short)", read_only=True, min_value=0.0),
     ParamSpec('camera_pose_height_window_s', 2.0, "camera_pose_height lifter: the raise is "
               "the median over this many seconds before the frame, s (0 = the frame's own)",
               read_only=True, min_value=0.0),
@@ -243,8 +253,9 @@ PARAMETERS = (
               "input or one the physics derotated (floor_start)", read_only=True,
               additional_constraints='lifter or input'),
     ParamSpec('fusion_measured_root_half_window', 8, "A root measured apart from the input "
-              "(camera_pose_root or fused_root lifter) averaged over this many frames before "
-              "and after its own, at most the look-ahead (no delay added)", read_only=True,
+              "(fused_root lifter; a known pose's: camera_pose_root_half_window) averaged over "
+              "this many frames before and after its own, at most the look-ahead (no delay "
+              "added)", read_only=True,
               min_value=0),
     ParamSpec('fusion_measured_root_average', 'root', "What that average is taken of: "
               "'root' = the measured roots; 'offset' = their horizontal offsets from the "
@@ -253,9 +264,9 @@ PARAMETERS = (
               "docs/global.md)", read_only=True,
               additional_constraints=' or '.join(MEASURED_ROOT_AVERAGES)),
     ParamSpec('fusion_measured_position_time_constant_s', 0.15, "Time constant of the "
-              "position correction towards a root measured apart from the input "
-              "(camera_pose_root or fused_root lifter): GMR's steps between, the lifter's "
-              "noise filtered",
+              "position correction towards a root measured apart from the input (fused_root "
+              "lifter; a known pose's: camera_pose_position_time_constant_s): GMR's steps "
+              "between, the lifter's noise filtered",
               min_value=0.0),
     ParamSpec('fusion_measured_velocity_correction', False, "With a root measured apart "
               "from the input (camera_pose_root or fused_root lifter): fuse it with an "
@@ -534,7 +545,8 @@ class GMRNode(Node):
                 static_orientation_time_constant_s=p[
                     'fusion_static_orientation_time_constant_s'],
                 measured_position_time_constant_s=p[
-                    'fusion_measured_position_time_constant_s'],
+                    'camera_pose_position_time_constant_s' if self.camera_mode == 'known'
+                    else 'fusion_measured_position_time_constant_s'],
                 measured_velocity_correction=p['fusion_measured_velocity_correction'])
             self.get_logger().info(
                 ('static camera: fusing' if self.camera_mode == 'static' else
@@ -582,8 +594,9 @@ class GMRNode(Node):
                           contacts=self.contacts.setdefault(pid, {}),
                           contact_threshold=p['contact_threshold'],
                           transition_time_constant_s=p['transition_time_constant_s'],
-                          measured_root_half_window=min(
-                              p['fusion_measured_root_half_window'], p['lookahead']),
+                          measured_root_half_window=min(p[
+                              'camera_pose_root_half_window' if self.camera_mode == 'known'
+                              else 'fusion_measured_root_half_window'], p['lookahead']),
                           measured_root_average=p['fusion_measured_root_average'],
                           measured_height_window_s=(
                               p['camera_pose_height_window_s']

@@ -819,8 +819,9 @@ class OnlineGMR:
         is an approximation (across an unmeasured camera step the fixed frame moved by
         that step), measured better than stopping at such a frame (docs/global.md).
 
-        With ``measured_root_average`` 'offset' the average is of each root's horizontal
-        offset from its frame's input root moved by the same anchor, and the result is this
+        With ``measured_root_average`` 'offset' the average is of each root's offset (the
+        horizontal part is what the fusion reads, the height only the known heights) from its
+        frame's input root moved by the same anchor, and the result is this
         frame's input root (so moved) plus that mean offset: the measured root's slow part
         (where the person is) with the input's motion from frame to frame (the physics
         body's, whose feet stand where that root puts them)."""
@@ -840,8 +841,8 @@ class OnlineGMR:
             if a is None or not a.fixed or a.known != anchor.known or a.root is None:
                 return None
             if offset:
-                d = np.asarray(a.root, float) - moved_input(i)
-                return np.array([d[0], d[1], 0.0])
+                # (the height too: only the known heights read it, InputAnchor.apply does not)
+                return np.asarray(a.root, float) - moved_input(i)
             return a.root
         own = root(pos)
         roots = [] if own is None else [own]

@@ -301,9 +301,10 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
 
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
                                   camera_pose_root=root, camera_pose_height='input',
+                                  camera_pose_root_half_window=8,
                                   lookahead=10,
                                   fusion_static_position_time_constant_s=1e-6,
-                                  fusion_measured_position_time_constant_s=1e-6)
+                                  camera_pose_position_time_constant_s=1e-6)
     world = _poses(40)
     lag = np.array([-0.3, 0.0, -0.05])
     for i, p in enumerate(world):
@@ -347,7 +348,7 @@ def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, win
                                   camera_pose_height=height,
                                   camera_pose_height_window_s=window, lookahead=10,
                                   fusion_static_position_time_constant_s=1e-6,
-                                  fusion_measured_position_time_constant_s=1e-6)
+                                  camera_pose_position_time_constant_s=1e-6)
     world = _poses(40)
     for i, p in enumerate(world):
         _publish_known_frame(graph, i, p, p, [0.0, 0.0, -0.05 if i < 20 else -0.09])
@@ -377,6 +378,27 @@ def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, win
         np.testing.assert_allclose(lift[36:], 0.09, atol=0.005)
         np.testing.assert_allclose(z - lift, z_true - np.where(np.arange(40) < 20, 0.05, 0.09),
                                    atol=0.005)
+
+
+@pytest.mark.parametrize('known', [True, False])
+def test_a_known_pose_takes_its_own_average_and_pull(graph_node, known):
+    """A known camera pose's measured roots are averaged over camera_pose_root_half_window
+    frames on each side (at most the look-ahead) and pulled in with
+    camera_pose_position_time_constant_s; the camera-motion estimate's (fused_root) over
+    fusion_measured_root_half_window frames with fusion_measured_position_time_constant_s."""
+    import math
+
+    graph, node, out = graph_node(camera_pose_topic='/robot/camera' if known else '',
+                                  floor_topic='/floor', lookahead=12,
+                                  camera_pose_root_half_window=20,
+                                  camera_pose_position_time_constant_s=0.05,
+                                  fusion_measured_root_half_window=5,
+                                  fusion_measured_position_time_constant_s=0.4)
+    online = node._make_online('floor')
+    tau = 0.05 if known else 0.4
+    assert online.measured_root_half_window == (12 if known else 5)
+    assert online.fusion.alpha_p_measured == pytest.approx(
+        1.0 - math.exp(-1.0 / (node.fps * tau)))
 
 
 def _floor_of(R_wc, t_wc):
