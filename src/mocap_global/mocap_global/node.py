@@ -225,9 +225,11 @@ PARAMETERS = (
               "(the physics output): where the person's height comes from. 'lifter' = the "
               "whole body is raised by the height of the lifter's root in the pose's world "
               "above the input root (camera_pose_root lifter), its median over "
-              "camera_pose_height_window_s: the world's z = 0 is then the pose frame's floor; "
-              "'input' = the input's height above its floor (the physics floor, fitted to the "
-              "feet, is the world's z = 0; docs/global.md)", read_only=True,
+              "camera_pose_height_window_s and the look-ahead: the heights are then the pose "
+              "frame's (the feet on the floor the lifter was sized by, its "
+              "camera_pose_floor_z); 'input' = the input's height above its floor (the physics "
+              "floor, fitted to the feet, is the world's z = 0; docs/global.md)",
+              read_only=True,
               additional_constraints='input or lifter'),
     ParamSpec('camera_pose_root_half_window', 15, "With a known camera pose "
               "(camera_pose_root lifter): the measured root averaged over this many frames "
@@ -450,7 +452,10 @@ class GMRNode(Node):
                              f"{p['fusion_measured_root_average']!r}")
         #: fixed frames without a lifter root of their stamp (fused_root lifter; all persons)
         self.fused_root_missing = 0
-        self.camera_poses = known_camera_poses(p, MAX_CAMERA_FRAMES)
+        # (its message type checked only where a pose topic is given, as in the other nodes)
+        self.camera_poses = known_camera_poses(
+            p if p['camera_pose_topic'] else dict(p, camera_pose_type='odometry'),
+            MAX_CAMERA_FRAMES)
         if p['camera_pose_topic']:
             self.camera_mode = 'known'
         #: stamp -> (state, R0 (3, 3), camera position (3,) m in the first camera frame or
@@ -600,7 +605,7 @@ class GMRNode(Node):
                           measured_root_average=p['fusion_measured_root_average'],
                           measured_height_window_s=(
                               p['camera_pose_height_window_s']
-                              if self.camera_mode == 'known'
+                              if on_floor and self.camera_mode == 'known'
                               and p['camera_pose_height'] == 'lifter'
                               and p['camera_pose_root'] == 'lifter' else None))
         self.diag.set_value('inference', state.inference)

@@ -89,10 +89,13 @@ so the input's height carries that floor's error, and the joints the floor is fi
 above the sole. A known camera pose measures the height too: the measured root
 (:attr:`InputAnchor.root`, averaged as for the horizontal position) lies some height above
 the input root; the median of that difference over the window (past frames only; the frame's
-own for a window of 0) raises the whole emitted body, and the input frame's place in the
-world (``WorldFrame.input_translation``) with it. The world's z = 0 is then the pose frame's,
-and the body's feet stand where the lifter's root puts them: a few centimetres above z = 0 as
-the joints are (measured in docs/global.md, "The height from a known pose").
+own for a window of 0; with the look-ahead frames after it, their own differences, so that a
+segment's first frames are not raised by one or two lifter frames) raises the whole emitted
+body, and the input frame's place in the world (``WorldFrame.input_translation``) with it.
+The heights are then those of the pose's frame: the feet stand where the lifter's root puts
+them, on the floor the lifter was sized by (its ``camera_pose_floor_z``), the joints a few
+centimetres above it as real ones are (measured in docs/global.md, "The height from a known
+pose").
 
 Segments: a stamp that does not advance or a gap longer than ``max_gap_s`` ends the segment:
 the frames waiting for look-ahead are emitted with the future frames that exist, the
@@ -193,8 +196,9 @@ class InputAnchor:
     ``root``: (3,) m, the person's root in the fixed frame as measured apart from the input
     (a known camera pose, or the camera motion estimated from the image, applied to the
     lifter's camera-frame root): its horizontal position
-    (x, y) replaces the input root's in the measurement, the height stays the input's; such
-    frames are fused with the fusion's ``measured_position_time_constant_s``."""
+    (x, y) replaces the input root's in the measurement (the height stays the input's there;
+    a known pose's height raises the emitted body instead, ``measured_height_window_s``);
+    such frames are fused with the fusion's ``measured_position_time_constant_s``."""
 
     fixed: bool
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
@@ -948,8 +952,7 @@ class OnlineGMR:
             elif self.foot_lock:
                 T = self._lock_feet(k, R, T, T_gmr, pose)
                 treatment = 'lock'
-        lift = self._height_lift(anchor_s, pose, self._stamps[pos]) \
-            if self.floor_input else 0.0
+        lift = self._height_lift(anchor_s, pose, pos) if self.floor_input else 0.0
         T = np.array([T[0], T[1], T[2] + lift])
         self._T_out = T                                 # the treatments' own state
         T = self._continue(k, T, treatment, dt)
@@ -979,23 +982,35 @@ class OnlineGMR:
         return WorldFrame(self._stamps[pos], out_pose, lin, ang, k == 0, fused, held, R_wi,
                           t_wi)
 
-    def _height_lift(self, anchor: Optional[InputAnchor], pose: Pose, stamp_ns: int) -> float:
-        """How far (m) a floor input's heights are raised in this frame: with
-        ``measured_height_window_s`` set, the median over that window of the measured root's
-        height (a known camera pose's world, :attr:`InputAnchor.root` averaged as the
-        horizontal is) above the input root's; held across frames without one, 0 before the
-        first of a segment and without the option (module docstring, known heights)."""
+    def _height_lift(self, anchor: Optional[InputAnchor], pose: Pose, pos: int) -> float:
+        """How far (m) a floor input's heights are raised in the frame at buffer position
+        ``pos``: with ``measured_height_window_s`` set, the median of the measured root's
+        height (a known camera pose's world, :attr:`InputAnchor.root`; ``anchor`` is this
+        frame's, averaged as the horizontal is) above the input root's, over the frames of
+        that window before this one and the look-ahead frames after it (their own roots), so
+        that a segment's first frames are not raised by one or two of their own (a window of
+        0: this frame's alone); held across
+        frames without one, 0 before the first of a segment and without the option (module
+        docstring, known heights)."""
         window = self.measured_height_window_s
         if window is None:
             return 0.0
+        stamp_ns = self._stamps[pos]
         if anchor is not None and anchor.known and anchor.root is not None:
             d = float(anchor.root[2]) - float(pose.root_position[2])
             if math.isfinite(d):
                 self._heights.append((stamp_ns, d))
         while self._heights and self._heights[0][0] < stamp_ns - window * 1e9:
             self._heights.popleft()
-        if self._heights:
-            self.measured_height = float(np.median([d for _, d in self._heights]))
+        values = [d for _, d in self._heights]
+        for later in range(pos + 1, len(self._anchors_in) if window > 0 else 0):
+            a = self._anchors_in[later]
+            if a is not None and a.known and a.root is not None:
+                d = float(a.root[2]) - float(self._poses[later].root_position[2])
+                if math.isfinite(d):
+                    values.append(d)
+        if values:
+            self.measured_height = float(np.median(values))
         return 0.0 if self.measured_height is None else self.measured_height
 
     def _continue(self, k: int, T: np.ndarray, treatment: str, dt: float) -> np.ndarray:

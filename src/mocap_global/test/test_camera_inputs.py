@@ -331,15 +331,19 @@ def test_a_known_camera_pose_places_the_lifters_root(graph_node, root, noise):
         assert 'camera_pose_root' not in _values(node)
 
 
-@pytest.mark.parametrize('height,window', [('input', 1.0), ('lifter', 0.0), ('lifter', 1.0)])
-def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, window):
+@pytest.mark.parametrize('height,window,average', [
+    ('input', 1.0, 'root'), ('lifter', 0.0, 'root'), ('lifter', 1.0, 'root'),
+    ('lifter', 0.0, 'offset')])
+def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, window, average):
     """camera_pose_height lifter: the physics floor here is 5 cm too high under the person
     (its root 5 cm low in the world; the feet rest on that floor), and from frame 20 on it
     is 4 cm higher still. With ``input`` the output's height is the physics', its floor the
     world's z = 0. With ``lifter`` the whole body is raised by the lifter's root height
     above the physics root: with a window of 0 s to the lifter's height in every frame, the
-    published floor (the input frame in the world) 5 cm, then 9 cm up; with the median over
-    1 s, the step of frame 20 is taken once it fills more than half the window (frame 35),
+    published floor (the input frame in the world) 5 cm, then 9 cm up (also with the offsets
+    averaged instead of the roots, which smears the step over the +-10 frames); with the
+    median over the second before and the 10 look-ahead frames, the step of frame 20 is
+    taken once it fills more than half of those (frame 31; frames 29-30 are half and half),
     the offset before it at once."""
     from mocap_core import ros_conversions as rc
     from mocap_core import topics
@@ -347,6 +351,7 @@ def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, win
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
                                   camera_pose_height=height,
                                   camera_pose_height_window_s=window, lookahead=10,
+                                  fusion_measured_root_average=average,
                                   fusion_static_position_time_constant_s=1e-6,
                                   camera_pose_position_time_constant_s=1e-6)
     world = _poses(40)
@@ -359,7 +364,7 @@ def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, win
     z = np.stack([rc.odometry_to_root(m)[0] for m in odom])[:, 2]
     z_true = np.stack([p.root_position for p in world])[:, 2]
     lift = np.array([rc.transform_stamped_to_arrays(m)[1][2] for m in floors])
-    before, after = slice(3, 12), slice(30, 40)     # away from the step's +-8 frame average
+    before, after = slice(3, 10), slice(30, 40)     # the +-10 frame averages off the step
     if height == 'input':
         assert 'camera_pose_height' not in _values(node)
         np.testing.assert_allclose(z[before], z_true[before] - 0.05, atol=0.005)
@@ -374,8 +379,9 @@ def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, win
         np.testing.assert_allclose(z[after], z_true[after], atol=0.005)
         np.testing.assert_allclose(lift[after], 0.09, atol=0.005)
     else:
-        np.testing.assert_allclose(lift[20:34], 0.05, atol=0.005)
-        np.testing.assert_allclose(lift[36:], 0.09, atol=0.005)
+        np.testing.assert_allclose(lift[:29], 0.05, atol=1e-6)
+        np.testing.assert_allclose(lift[29:31], 0.07, atol=1e-6)
+        np.testing.assert_allclose(lift[31:], 0.09, atol=1e-6)
         np.testing.assert_allclose(z - lift, z_true - np.where(np.arange(40) < 20, 0.05, 0.09),
                                    atol=0.005)
 
