@@ -241,8 +241,9 @@ PARAMETERS = (
               "(camera_pose_root lifter): time constant of the pull towards the measured root "
               "(the known-pose counterpart of fusion_measured_position_time_constant_s; longer "
               "trails a walker, GMR's steps being short)", read_only=True, min_value=0.0),
-    ParamSpec('camera_pose_height_window_s', 2.0, "camera_pose_height lifter: the raise is "
-              "the median over this many seconds before the frame, s (0 = the frame's own)",
+    ParamSpec('camera_pose_height_window_s', 2.0, "camera_pose_height lifter: the raise "
+              "follows (in 0.5 s) the median over this many seconds before the frame and the "
+              "look-ahead frames after it, s (0 = the frame's own, at once)",
               read_only=True, min_value=0.0),
     ParamSpec('fused_root', 'lifter', "Camera mode auto with a floor input (the physics "
               "output), a frame the camera-motion estimate fixes in the world (a static "
@@ -1110,7 +1111,7 @@ class GMRNode(Node):
                     self.diag.set_value('camera_pose_height', (
                         "the lifter's root: the body raised by "
                         f'{100 * online.measured_height:.1f} cm (median over '
-                        f'{online.measured_height_window_s:g} s)')
+                        f'{online.measured_height_window_s:g} s and the look-ahead)')
                         if online.measured_height is not None
                         else "the lifter's root: not measured yet")
             if self.camera_mode == 'auto':

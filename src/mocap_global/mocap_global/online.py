@@ -216,6 +216,11 @@ class InputAnchor:
         return self.rotation @ R_in, T
 
 
+#: s: the raise of the known heights (``OnlineGMR(measured_height_window_s=...)``, a window
+#: above 0) follows its median with this time constant: the median steps as samples enter and
+#: leave the window
+HEIGHT_FOLLOW_TIME_CONSTANT_S = 0.5
+
 #: what :class:`OnlineGMR` averages of the measured roots (``measured_root_average``)
 MEASURED_ROOT_AVERAGES = ('root', 'offset')
 
@@ -567,6 +572,7 @@ class OnlineGMR:
         self._last_up = _EZ.copy()
         self.measured_height = None
         self._heights: Deque[Tuple[int, float]] = collections.deque()
+        self._height_stamp: Optional[int] = None     # of the last raise
         if self.fusion is not None:
             self.fusion.reset()
         if self.planter is not None:
@@ -989,7 +995,7 @@ class OnlineGMR:
         frame's, averaged as the horizontal is) above the input root's, over the frames of
         that window before this one and the look-ahead frames after it (their own roots), so
         that a segment's first frames are not raised by one or two of their own (a window of
-        0: this frame's alone); held across
+        0: this frame's alone), followed with :data:`HEIGHT_FOLLOW_TIME_CONSTANT_S`; held across
         frames without one, 0 before the first of a segment and without the option (module
         docstring, known heights)."""
         window = self.measured_height_window_s
@@ -1010,7 +1016,16 @@ class OnlineGMR:
                 if math.isfinite(d):
                     values.append(d)
         if values:
-            self.measured_height = float(np.median(values))
+            median = float(np.median(values))
+            tau = HEIGHT_FOLLOW_TIME_CONSTANT_S if window > 0 else 0.0
+            if self.measured_height is None or self._height_stamp is None or tau <= 0:
+                self.measured_height = median
+            else:
+                # the median steps between samples as they enter and leave: followed smoothly
+                dt = max(stamp_ns - self._height_stamp, 0) * 1e-9
+                self.measured_height += (1.0 - math.exp(-dt / tau)) * (
+                    median - self.measured_height)
+            self._height_stamp = stamp_ns
         return 0.0 if self.measured_height is None else self.measured_height
 
     def _continue(self, k: int, T: np.ndarray, treatment: str, dt: float) -> np.ndarray:
