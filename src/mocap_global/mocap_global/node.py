@@ -242,9 +242,13 @@ PARAMETERS = (
               "(the known-pose counterpart of fusion_measured_position_time_constant_s; longer "
               "trails a walker, GMR's steps being short)", read_only=True, min_value=0.0),
     ParamSpec('camera_pose_height_window_s', 2.0, "camera_pose_height lifter: the raise "
-              "follows (in 0.5 s) the median over this many seconds before the frame and the "
-              "look-ahead frames after it, s (0 = the frame's own, at once)",
+              "follows the median over this many seconds before the frame and the look-ahead "
+              "frames after it, s (0 = the frame's own, at once)",
               read_only=True, min_value=0.0),
+    ParamSpec('camera_pose_height_follow_s', 0.5, "camera_pose_height lifter: time constant "
+              "with which the raise follows that median, s (the median steps as frames enter "
+              "and leave the window: without it the body bobs)", read_only=True,
+              min_value=0.0),
     ParamSpec('fused_root', 'lifter', "Camera mode auto with a floor input (the physics "
               "output), a frame the camera-motion estimate fixes in the world (a static "
               "camera, one whose translation was measured over the floor, or with "
@@ -608,7 +612,8 @@ class GMRNode(Node):
                               p['camera_pose_height_window_s']
                               if on_floor and self.camera_mode == 'known'
                               and p['camera_pose_height'] == 'lifter'
-                              and p['camera_pose_root'] == 'lifter' else None))
+                              and p['camera_pose_root'] == 'lifter' else None),
+                          measured_height_follow_s=p['camera_pose_height_follow_s'])
         self.diag.set_value('inference', state.inference)
         return state
 

@@ -216,11 +216,6 @@ class InputAnchor:
         return self.rotation @ R_in, T
 
 
-#: s: the raise of the known heights (``OnlineGMR(measured_height_window_s=...)``, a window
-#: above 0) follows its median with this time constant: the median steps as samples enter and
-#: leave the window
-HEIGHT_FOLLOW_TIME_CONSTANT_S = 0.5
-
 #: what :class:`OnlineGMR` averages of the measured roots (``measured_root_average``)
 MEASURED_ROOT_AVERAGES = ('root', 'offset')
 
@@ -449,7 +444,8 @@ class OnlineGMR:
                  transition_time_constant_s: float = 0.0,
                  measured_root_half_window: int = 0, inference: str = 'numpy',
                  measured_root_average: str = 'root',
-                 measured_height_window_s: Optional[float] = None) -> None:
+                 measured_height_window_s: Optional[float] = None,
+                 measured_height_follow_s: float = 0.5) -> None:
         self.model = model.eval()
         if inference not in INFERENCE_ENGINES:
             raise ValueError(f'inference must be one of {INFERENCE_ENGINES}, got {inference!r}')
@@ -503,6 +499,12 @@ class OnlineGMR:
                 and not self.measured_height_window_s >= 0:
             raise ValueError('measured_height_window_s must be >= 0 or None, got '
                              f'{measured_height_window_s}')
+        #: s: with a window above 0 the raise follows its median with this time constant
+        #: (the median steps as samples enter and leave the window)
+        self.measured_height_follow_s = float(measured_height_follow_s)
+        if not self.measured_height_follow_s >= 0:
+            raise ValueError('measured_height_follow_s must be >= 0, got '
+                             f'{measured_height_follow_s}')
         #: the height the floor input is raised by now, m (None: not measured yet)
         self.measured_height: Optional[float] = None
         if not self.transition_time_constant_s >= 0:
@@ -995,7 +997,7 @@ class OnlineGMR:
         frame's, averaged as the horizontal is) above the input root's, over the frames of
         that window before this one and the look-ahead frames after it (their own roots), so
         that a segment's first frames are not raised by one or two of their own (a window of
-        0: this frame's alone), followed with :data:`HEIGHT_FOLLOW_TIME_CONSTANT_S`; held across
+        0: this frame's alone), followed with ``measured_height_follow_s``; held across
         frames without one, 0 before the first of a segment and without the option (module
         docstring, known heights)."""
         window = self.measured_height_window_s
@@ -1017,7 +1019,7 @@ class OnlineGMR:
                     values.append(d)
         if values:
             median = float(np.median(values))
-            tau = HEIGHT_FOLLOW_TIME_CONSTANT_S if window > 0 else 0.0
+            tau = self.measured_height_follow_s if window > 0 else 0.0
             if self.measured_height is None or self._height_stamp is None or tau <= 0:
                 self.measured_height = median
             else:
