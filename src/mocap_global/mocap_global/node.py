@@ -245,7 +245,7 @@ PARAMETERS = (
               "follows the median over this many seconds before the frame and the look-ahead "
               "frames after it, s (0 = the frame's own, at once)",
               read_only=True, min_value=0.0),
-    ParamSpec('camera_pose_height_follow_s', 0.5, "camera_pose_height lifter: time constant "
+    ParamSpec('camera_pose_height_follow_s', 0.2, "camera_pose_height lifter: time constant "
               "with which the raise follows that median, s (the median steps as frames enter "
               "and leave the window: without it the body bobs)", read_only=True,
               min_value=0.0),

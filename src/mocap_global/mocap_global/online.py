@@ -445,7 +445,7 @@ class OnlineGMR:
                  measured_root_half_window: int = 0, inference: str = 'numpy',
                  measured_root_average: str = 'root',
                  measured_height_window_s: Optional[float] = None,
-                 measured_height_follow_s: float = 0.5) -> None:
+                 measured_height_follow_s: float = 0.2) -> None:
         self.model = model.eval()
         if inference not in INFERENCE_ENGINES:
             raise ValueError(f'inference must be one of {INFERENCE_ENGINES}, got {inference!r}')

@@ -351,6 +351,7 @@ def test_a_known_camera_pose_can_give_the_lifters_height(graph_node, height, win
     graph, node, out = graph_node(camera_pose_topic='/robot/camera', floor_topic='/floor',
                                   camera_pose_height=height,
                                   camera_pose_height_window_s=window, lookahead=10,
+                                  camera_pose_height_follow_s=0.5,
                                   fusion_measured_root_average=average,
                                   fusion_static_position_time_constant_s=1e-6,
                                   camera_pose_position_time_constant_s=1e-6)
