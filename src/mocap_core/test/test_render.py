@@ -507,7 +507,12 @@ def test_eval_video_scores_the_pipeline_on_a_rendered_clip(rendered, tmp_path, c
     assert rc == 0, capsys.readouterr().err
     (again,) = json.loads((replay / 'report.json').read_text())['clips']
     assert again['scored'] == 22 and again['live_keypoint_share'] == 1.0
-    assert abs(again['mpjpe'] - clip['mpjpe']) < 1.0        # no frame missing: nothing to fill
+    # the live run's keypoints (every frame, the default detector) processed offline: the
+    # offline run of the video gives the same figures (no frame missing: nothing to fill).
+    # Not the live run's own: on a loaded machine the detector can pause longer than the
+    # lifter's flush_after_s (0.3 s), and the live lifter then emits the waiting frames
+    # without their look-ahead (2.4 mm apart once, CI beside other jobs)
+    assert abs(again['mpjpe'] - reports['video_default']['clips'][0]['mpjpe']) < 1.0
     # a clip folder without any lifter output is counted, not scored
     gt, _ = load_clip(clip_dir)
     assert gt['keypoints'].shape == (24, 23, 3)
