@@ -570,15 +570,16 @@ class GMRNode(Node):
             model_up = up if up is not None else np.array([0.0, -1.0, 0.0])
         mode = p['vertical']
         on_floor = ('optical' not in frame_id) if mode == 'auto' else mode == 'input'
+        # a known pose's height from the lifter's root (camera_pose_height)
+        known_height = on_floor and self.camera_mode == 'known' \
+            and p['camera_pose_height'] == 'lifter' and p['camera_pose_root'] == 'lifter'
         self.diag.set_value('vertical', 'input' if on_floor else 'gmr')
         if on_floor:
             self.get_logger().info(f"the input '{frame_id}' is a floor frame: height and tilt "
                                    'from the input, heading and horizontal path from GMR' + (
                                        "; with the known camera pose, the height from the "
                                        "lifter's root (camera_pose_height)"
-                                       if self.camera_mode == 'known'
-                                       and p['camera_pose_height'] == 'lifter'
-                                       and p['camera_pose_root'] == 'lifter' else ''))
+                                       if known_height else ''))
         state = OnlineGMR(self.model, p['lookahead'], p['window'] or None, p['max_gap_s'],
                           p['tilt_correction'], fusion, model_up, p['device'],
                           chunk=p['chunk'], floor_input=on_floor,
@@ -609,10 +610,7 @@ class GMRNode(Node):
                               else 'fusion_measured_root_half_window'], p['lookahead']),
                           measured_root_average=p['fusion_measured_root_average'],
                           measured_height_window_s=(
-                              p['camera_pose_height_window_s']
-                              if on_floor and self.camera_mode == 'known'
-                              and p['camera_pose_height'] == 'lifter'
-                              and p['camera_pose_root'] == 'lifter' else None),
+                              p['camera_pose_height_window_s'] if known_height else None),
                           measured_height_follow_s=p['camera_pose_height_follow_s'])
         self.diag.set_value('inference', state.inference)
         return state

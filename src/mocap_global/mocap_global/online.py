@@ -88,10 +88,11 @@ input's floor (the physics floor, fitted to the lifter's stance feet) is the wor
 so the input's height carries that floor's error, and the joints the floor is fitted to lie
 above the sole. A known camera pose measures the height too: the measured root
 (:attr:`InputAnchor.root`, averaged as for the horizontal position) lies some height above
-the input root; the median of that difference over the window (past frames only; the frame's
-own for a window of 0; with the look-ahead frames after it, their own differences, so that a
-segment's first frames are not raised by one or two lifter frames) raises the whole emitted
-body, and the input frame's place in the world (``WorldFrame.input_translation``) with it.
+the input root; the median of that difference over the window's past frames and the
+look-ahead frames after it (their own differences, so that a segment's first frames are not
+raised by one or two lifter frames), followed with ``measured_height_follow_s`` (a window of
+0: the frame's own difference, at once), raises the whole emitted body, and the input frame's
+place in the world (``WorldFrame.input_translation``) with it.
 The heights are then those of the pose's frame: the feet stand where the lifter's root puts
 them, on the floor the lifter was sized by (its ``camera_pose_floor_z``), the joints a few
 centimetres above it as real ones are (measured in docs/global.md, "The height from a known
@@ -1003,20 +1004,24 @@ class OnlineGMR:
         window = self.measured_height_window_s
         if window is None:
             return 0.0
+
+        def above(a: Optional[InputAnchor], p: Pose) -> Optional[float]:
+            if a is None or not a.known or a.root is None:
+                return None
+            d = float(a.root[2]) - float(p.root_position[2])
+            return d if math.isfinite(d) else None
+
         stamp_ns = self._stamps[pos]
-        if anchor is not None and anchor.known and anchor.root is not None:
-            d = float(anchor.root[2]) - float(pose.root_position[2])
-            if math.isfinite(d):
-                self._heights.append((stamp_ns, d))
+        d = above(anchor, pose)
+        if d is not None:
+            self._heights.append((stamp_ns, d))
         while self._heights and self._heights[0][0] < stamp_ns - window * 1e9:
             self._heights.popleft()
         values = [d for _, d in self._heights]
         for later in range(pos + 1, len(self._anchors_in) if window > 0 else 0):
-            a = self._anchors_in[later]
-            if a is not None and a.known and a.root is not None:
-                d = float(a.root[2]) - float(self._poses[later].root_position[2])
-                if math.isfinite(d):
-                    values.append(d)
+            d = above(self._anchors_in[later], self._poses[later])
+            if d is not None:
+                values.append(d)
         if values:
             median = float(np.median(values))
             tau = self.measured_height_follow_s if window > 0 else 0.0
