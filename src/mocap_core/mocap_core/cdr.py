@@ -31,6 +31,7 @@ import numpy as np
 from std_msgs.msg import Header
 
 from .pose import Pose
+from .rotations import matrix_to_quat
 from .ros_conversions import (KEYPOINT_ID_FIELD, POSITION_FIELDS, DecodedMotion, MessageError,
                               bodies_cloud_values, cloud_values, contact_values,
                               effort_values, pose_marker_specs, positions_cloud_values)
@@ -38,11 +39,12 @@ from .skeleton import CONTACT_POINT_NAMES
 from .topics import body_name
 from .urdf import revolute_joint_names
 
-__all__ = ['CdrWriter', 'DecodedMotion', 'PathTrail', 'bodies_contacts_to_msg',
+__all__ = ['CdrWriter', 'DecodedMotion', 'PathTrail', 'bodies_bone_lengths_to_msg',
+           'bodies_contacts_to_msg',
            'bodies_to_cloud', 'bodies_to_motion', 'built_messages', 'contacts_to_msg',
            'decode_motion', 'marker_array', 'pose_to_joint_state', 'pose_to_markers',
-           'pose_to_motion', 'pose_transforms', 'positions_to_cloud', 'root_to_odometry',
-           'tf_message']
+           'point_to_msg', 'pose_to_motion', 'pose_transforms', 'positions_to_cloud',
+           'root_to_odometry', 'tf_message', 'transform_stamped', 'wrench_to_msg']
 
 _ENCAPSULATION = b'\x00\x01\x00\x00'      # CDR_LE, no options
 _I32 = struct.Struct('<i')
@@ -311,6 +313,22 @@ def pose_to_joint_state(pose: Pose, header, efforts: Optional[np.ndarray] = None
     return _joint_state(header, names, pose.revolute_angles().reshape(-1), eff)
 
 
+def bodies_bone_lengths_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header) -> bytes:
+    """As :func:`mocap_core.ros_conversions.bodies_bone_lengths_to_msg`, serialised (the
+    same ValueError for a wrong number of lengths)."""
+    from .skeleton import BONE_GROUP_NAMES
+    names: list = []
+    values: list = []
+    for pid, lengths in bodies:
+        lengths = np.asarray(lengths, dtype=np.float64).ravel()
+        if len(lengths) != len(BONE_GROUP_NAMES):
+            raise ValueError(f'expected {len(BONE_GROUP_NAMES)} bone-group lengths, got '
+                             f'{len(lengths)}')
+        names += [f'{body_name(pid)}/{n}' for n in BONE_GROUP_NAMES]
+        values.append(lengths)
+    return _joint_state(header, names, np.concatenate(values) if values else np.zeros(0))
+
+
 def contacts_to_msg(probabilities, header) -> bytes:
     """As :func:`mocap_core.ros_conversions.contacts_to_msg`, serialised."""
     return _joint_state(header, CONTACT_POINT_NAMES, contact_values(probabilities))
@@ -456,6 +474,40 @@ def root_to_odometry(position: np.ndarray, orientation: np.ndarray, header,
     return w.data()
 
 
+# ---------------------------------------------------------------------------------------------
+# geometry_msgs: WrenchStamped, TransformStamped, PointStamped
+# ---------------------------------------------------------------------------------------------
+def wrench_to_msg(force: np.ndarray, torque: np.ndarray, header) -> bytes:
+    """As :func:`mocap_core.ros_conversions.wrench_to_msg`, serialised: force (3,) N and
+    moment (3,) N m."""
+    w = CdrWriter()
+    w.header(header)
+    w.float64s(np.concatenate([np.asarray(force, dtype=float).reshape(3),
+                               np.asarray(torque, dtype=float).reshape(3)]))
+    return w.data()
+
+
+def transform_stamped(header, child_frame_id: str, rotation: np.ndarray,
+                      translation: np.ndarray) -> bytes:
+    """As :func:`mocap_core.ros_conversions.transform_stamped`, serialised: ``rotation`` (3, 3)
+    or a quaternion (4,) x, y, z, w; ``translation`` (3,) m."""
+    r = np.asarray(rotation, dtype=float)
+    q = matrix_to_quat(r) if r.shape == (3, 3) else r.reshape(4)
+    w = CdrWriter()
+    w.header(header)
+    w.string(child_frame_id)
+    w.float64s(np.concatenate([np.asarray(translation, dtype=float).reshape(3), q]))
+    return w.data()
+
+
+def point_to_msg(point: np.ndarray, header) -> bytes:
+    """As :func:`mocap_core.ros_conversions.point_to_msg`, serialised: a point (3,) m."""
+    w = CdrWriter()
+    w.header(header)
+    w.float64s(np.asarray(point, dtype=float).reshape(3))
+    return w.data()
+
+
 class PathTrail:
     """The poses of a nav_msgs/Path kept as arrays, newest last, at most ``max_length`` (0:
     no limit); :meth:`message` serialises the Path in one pass over the arrays.
@@ -525,7 +577,8 @@ class PathTrail:
 # ---------------------------------------------------------------------------------------------
 _ENCODERS = ('pose_to_motion', 'bodies_to_motion', 'pose_to_joint_state', 'contacts_to_msg',
              'bodies_contacts_to_msg', 'positions_to_cloud', 'bodies_to_cloud',
-             'pose_to_markers', 'marker_array', 'root_to_odometry')
+             'pose_to_markers', 'marker_array', 'root_to_odometry', 'wrench_to_msg',
+             'transform_stamped', 'point_to_msg', 'bodies_bone_lengths_to_msg')
 
 
 @contextlib.contextmanager

@@ -30,8 +30,8 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
-from geometry_msgs.msg import (Point, Pose as PoseMsg, PoseStamped, Quaternion, Transform,
-                               TransformStamped, Vector3, Wrench, WrenchStamped)
+from geometry_msgs.msg import (Point, PointStamped, Pose as PoseMsg, PoseStamped, Quaternion,
+                               Transform, TransformStamped, Vector3, Wrench, WrenchStamped)
 from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import CameraInfo, JointState, PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header, String
@@ -595,6 +595,12 @@ def wrench_to_msg(force: np.ndarray, torque: np.ndarray, header: Header) -> Wren
     """Force (3,) N and moment (3,) N m -> WrenchStamped."""
     return WrenchStamped(header=header, wrench=Wrench(force=_vec_msg(np.asarray(force)),
                                                       torque=_vec_msg(np.asarray(torque))))
+
+
+def point_to_msg(point: np.ndarray, header: Header) -> PointStamped:
+    """A point (3,) m -> PointStamped (e.g. the centre of mass)."""
+    return PointStamped(header=header, point=Point(x=float(point[0]), y=float(point[1]),
+                                                   z=float(point[2])))
 
 
 def transform_stamped(header: Header, child_frame_id: str, rotation: np.ndarray,

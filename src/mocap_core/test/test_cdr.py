@@ -10,7 +10,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from mocap_core import cdr
 from mocap_core import ros_conversions as rc
 from mocap_core.pose import Pose
-from mocap_core.rotations import quat_normalize
+from mocap_core.rotations import quat_normalize, quat_to_matrix
 from mocap_core.skeleton import CONTACT_POINT_NAMES, NUM_JOINTS, Skeleton
 from mocap_core.tf import pose_frames, pose_to_transforms
 from trajectory_msgs.msg import MultiDOFJointTrajectory
@@ -124,6 +124,35 @@ def test_odometry():
         lin, ang = rng.normal(size=3), rng.normal(size=3)
         _same(cdr.root_to_odometry(pos, quat, header, 'body_2', lin, ang),
               rc.root_to_odometry(pos, quat, header, 'body_2', lin, ang))
+
+
+def test_wrench_transform_and_point():
+    """The physics' forces, centre of mass and floor and the world's floor: every header
+    length (the padding before the float64 fields changes with it), a matrix or a
+    quaternion for the rotation."""
+    rng = np.random.default_rng(4)
+    for header in HEADERS:
+        f, t, p = rng.normal(size=3) * 500, rng.normal(size=3) * 50, rng.normal(size=3)
+        _same(cdr.wrench_to_msg(f, t, header), rc.wrench_to_msg(f, t, header))
+        _same(cdr.point_to_msg(p, header), rc.point_to_msg(p, header))
+        q = quat_normalize(rng.normal(size=4))
+        for child in ('', 'floor', 'body_12/pelvis'):
+            _same(cdr.transform_stamped(header, child, q, p),
+                  rc.transform_stamped(header, child, q, p))
+        R = quat_to_matrix(q)
+        _same(cdr.transform_stamped(header, 'floor', R, p),
+              rc.transform_stamped(header, 'floor', R, p))
+
+
+def test_bone_lengths():
+    rng = np.random.default_rng(6)
+    for header in HEADERS:
+        for bodies in ([], [(1, rng.uniform(0.1, 0.5, 10))],
+                       [(3, rng.uniform(0.1, 0.5, 10)), (12, rng.uniform(0.1, 0.5, 10))]):
+            _same(cdr.bodies_bone_lengths_to_msg(bodies, header),
+                  rc.bodies_bone_lengths_to_msg(bodies, header))
+    with pytest.raises(ValueError):
+        cdr.bodies_bone_lengths_to_msg([(1, np.ones(4))], HEADERS[0])
 
 
 @pytest.mark.parametrize('frame_id', ['', 'w', 'world', 'odom_frame', 'map_12345'])

@@ -1140,7 +1140,7 @@ class GMRNode(Node):
         publish_if_heard(pub['odom'], lambda: odom)
         publish_if_heard(pub['path'], path.message)
         publish_if_heard(pub['markers'], lambda: cdr.pose_to_markers(pose, header, ns='world'))
-        publish_if_heard(pub['floor'], lambda: rc.transform_stamped(
+        publish_if_heard(pub['floor'], lambda: cdr.transform_stamped(
             header, self.input_frame or 'input', f.input_rotation, f.input_translation))
 
     def _publish_body(self, pid: int, pose, header, odom: bytes, path: cdr.PathTrail) -> None:

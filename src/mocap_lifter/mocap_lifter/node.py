@@ -444,7 +444,7 @@ class LifterNode(Node):
         stamps = [int(f.stamp_ns) for _, frames in released for f in frames]
         if self.signatures_changed and stamps:
             self.signatures_changed = False
-            self.pub['bone_lengths'].publish(rc.bodies_bone_lengths_to_msg(
+            self.pub['bone_lengths'].publish(cdr.bodies_bone_lengths_to_msg(
                 sorted(self.signatures.items()), rc.make_header(max(stamps), self.frame_id)))
         self.diag.set_value('persons', len(self.people.streams))
         self.diag.set_value('person_ids', ' '.join(map(str, sorted(self.people.streams)))

@@ -67,18 +67,13 @@ _FLOOR_CACHE: dict = {}
 
 
 def floor_transform_msg(header, floor, child_frame_id: str):
-    """geometry_msgs/TransformStamped of the floor frame in the source (camera) frame:
-    ``header.frame_id`` = source frame, ``child_frame_id`` = the floor frame, transform =
-    ``T_floor_camera^-1`` (a point p_floor in the floor frame is
-    ``rotation * p_floor + translation`` in the camera frame), as tf2 would store it."""
-    from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
+    """geometry_msgs/TransformStamped (serialised, bytes) of the floor frame in the source
+    (camera) frame: ``header.frame_id`` = source frame, ``child_frame_id`` = the floor frame,
+    transform = ``T_floor_camera^-1`` (a point p_floor in the floor frame is ``rotation *
+    p_floor + translation`` in the camera frame), as tf2 would store it."""
+    from mocap_core import cdr
 
     if _FLOOR_CACHE.get("floor") is not floor:   # the same floor until a fit is blended in
         inv = floor.inverse()
         _FLOOR_CACHE.update(floor=floor, q=inv.quaternion(), t=inv.translation)
-    q, t = _FLOOR_CACHE['q'], _FLOOR_CACHE['t']
-    return TransformStamped(
-        header=header, child_frame_id=child_frame_id,
-        transform=Transform(translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
-                            rotation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]),
-                                                w=float(q[3]))))
+    return cdr.transform_stamped(header, child_frame_id, _FLOOR_CACHE['q'], _FLOOR_CACHE['t'])

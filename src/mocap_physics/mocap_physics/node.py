@@ -119,7 +119,7 @@ from mocap_core.ros_conversions import (MessageError, make_header, motion_to_bod
                                         msg_to_contacts, odometry_to_camera_motion,
                                         odometry_to_camera_position, pose_marker_specs,
                                         camera_pose_from_msg, camera_pose_message_type,
-                                        stamp_to_ns, wrench_to_msg)
+                                        stamp_to_ns)
 from mocap_core.rotations import quat_to_matrix
 
 from .cycle_params import PhysicsParams
@@ -898,7 +898,8 @@ class PhysicsNode(Node):
                                            res.joint_torques.reshape(-1, 3))))
         for foot in ('left', 'right'):
             w = res.feet[foot]
-            b.publish(pid, f'grf/{foot}', lambda w=w: wrench_to_msg(w.force, w.moment, header))
+            b.publish(pid, f'grf/{foot}',
+                      lambda w=w: cdr.wrench_to_msg(w.force, w.moment, header))
 
     def _publish_floor(self, frame: PhysicsFrame) -> None:
         """The floor of the main person's frame (once per stamp), before its motion: the
@@ -929,13 +930,9 @@ class PhysicsNode(Node):
                                            res.joint_torques.reshape(-1, 3))))
         for foot, pub in self.pub_grf.items():
             w = res.feet[foot]
-            publish_if_heard(pub, lambda w=w: wrench_to_msg(w.force, w.moment, header))
+            publish_if_heard(pub, lambda w=w: cdr.wrench_to_msg(w.force, w.moment, header))
 
-        def com() -> PointStamped:
-            msg = PointStamped(header=header)
-            msg.point.x, msg.point.y, msg.point.z = (float(c) for c in res.center_of_mass)
-            return msg
-        publish_if_heard(self.pub_com, com)
+        publish_if_heard(self.pub_com, lambda: cdr.point_to_msg(res.center_of_mass, header))
         if self.pub_markers is not None:
             publish_if_heard(self.pub_markers, lambda: self._markers(frame, header))
 
