@@ -311,11 +311,15 @@ class PhysicsCycle:
         k, k_s = self.params.free_limb_weight, self.params.stance_leg_weight
         if k == 1.0 and k_s == 1.0:
             return None
-        scale = np.full(self.model.nv, k)
-        scale[:6] = 1.0
-        for points, dofs in self._leg_dofs:
-            if np.any(stance[points]):
-                scale[dofs] = k_s
+        key = stance.tobytes()
+        scale = self._scale_cache.get(key)
+        if scale is None:              # (a few stance sets; the callers only read it)
+            scale = np.full(self.model.nv, k)
+            scale[:6] = 1.0
+            for points, dofs in self._leg_dofs:
+                if stance[points].any():
+                    scale[dofs] = k_s
+            self._scale_cache[key] = scale
         return scale
 
     def _build(self, skeleton: Skeleton) -> None:
@@ -338,6 +342,7 @@ class PhysicsCycle:
             # per leg: its contact points (mask) and its joints' velocity indices (hip to
             # toe), for free_limb_weight
             names, feet = skeleton.joint_names, np.array(model.contact_feet)
+            self._scale_cache: Dict[bytes, np.ndarray] = {}
             self._leg_dofs = [
                 (feet == side,
                  np.concatenate([np.arange(3) + model.idx_v[names.index(f'{side}_{j}')]
@@ -358,12 +363,15 @@ class PhysicsCycle:
             self._q = self._lift(self._q)   # longer legs must not start in the floor
 
     # -- helpers -----------------------------------------------------------------------------
-    def _difference(self, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
-        """Tangent vector from q0 to q1 (root decoupled: R0^T dp, log(R0^T R1))."""
+    def _difference(self, q0: np.ndarray, q1: np.ndarray,
+                    R1: Optional[np.ndarray] = None) -> np.ndarray:
+        """Tangent vector from q0 to q1 (root decoupled: R0^T dp, log(R0^T R1)); ``R1``: q1's
+        root rotation (3, 3) when the caller has it."""
         model = self.model.model
         d = pin.difference(model, q0, q1)
         R0 = pin.XYZQUATToSE3(q0[:7]).rotation
-        R1 = pin.XYZQUATToSE3(q1[:7]).rotation
+        if R1 is None:
+            R1 = pin.XYZQUATToSE3(q1[:7]).rotation
         d[0:3] = R0.T @ (q1[0:3] - q0[0:3])
         d[3:6] = pin.log3(R0.T @ R1)
         return d
@@ -761,7 +769,7 @@ class PhysicsCycle:
                                               vertical=self._stick_vertical)
                 if self._stick_vertical:
                     rows = rows & ~stick
-            if np.any(rows) or A_eq is not None:
+            if rows.any() or A_eq is not None:
                 A = Jc[rows, 2, :]
                 b = b_all[rows]
                 solve_metric, scale = None, 1.0
@@ -797,7 +805,7 @@ class PhysicsCycle:
                     self.stats.penetration_failures += 1
                     raise _Fallback(f'penetration QP failed ({res.status})')
                 v_new = res.velocity
-            if not (np.all(np.isfinite(v_new)) and np.abs(v_new).max() <= p.max_speed):
+            if not (np.isfinite(v_new).all() and np.abs(v_new).max() <= p.max_speed):
                 raise _Fallback('the simulated state diverged')
             q = pin.integrate(model, q, v_new * dt)
             v = v_new
@@ -840,11 +848,17 @@ class PhysicsCycle:
         anchor, anchored = self._anchor.copy(), self._anchored.copy()
         w_s = p.stance_gain
         feet = m.contact_feet
-        lower = np.tril_indices(m.nv, -1)
+        lower, upper = m.lower_flat, m.upper_flat
+        # the guard points start with the contact points (PhysicsModel): their rows are the
+        # contacts' own
+        shared = n_c if guards[:n_c] == m.contact_frame_ids else 0
+        drift = np.empty((n_c, 3))
+        R_hat = pin.XYZQUATToSE3(q_hat[:7]).rotation
         for _ in range(n_sub):
             pin.computeAllTerms(model, data, q, v)
             M = data.M.copy()                   # Pinocchio fills the upper triangle
-            M[lower] = M.T[lower]
+            M_flat = M.reshape(-1)
+            M_flat[lower] = M_flat[upper]
             h = data.nle.copy()
             pin.forwardKinematics(model, data, q, v, zeros)   # data.a: drift terms
             pin.updateFramePlacements(model, data)
@@ -852,13 +866,16 @@ class PhysicsCycle:
                 Jc[c] = pin.getFrameJacobian(model, data, fid, _LWA)[:3]
                 pos[c] = data.oMf[fid].translation
                 vel[c] = pin.getFrameVelocity(model, data, fid, _LWA).linear
-            drift = np.array([pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear
-                              for fid in m.contact_frame_ids])
-            for g, fid in enumerate(guards):
+                drift[c] = pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear
+            if shared:
+                Jg[:shared] = Jc[:shared, 2]
+                zg[:shared] = pos[:shared, 2]
+            for g in range(shared, len(guards)):
+                fid = guards[g]
                 Jg[g] = pin.getFrameJacobian(model, data, fid, _LWA)[2]
                 zg[g] = data.oMf[fid].translation[2]
             # -- desired accelerations (PD, eq. 7 without the inertia factor) ----------------
-            e = self._difference(q, q_hat)
+            e = self._difference(q, q_hat, R_hat)
             vel_err = v if v_ff is None else v - v_ff
             if self.dynet is not None:
                 kp, kd, alpha_net = self.dynet(q_hat, q, v, np.diag(M).copy(), e)
@@ -898,13 +915,13 @@ class PhysicsCycle:
                 if res.saturated:
                     acc['saturated'] += 1
                     self.stats.residual_saturations += 1
-                if np.any(res.sliding):
+                if res.sliding.any():
                     anchor[res.sliding] = pos[res.sliding, :2]   # re-anchor where it slid to
                     acc['sliding'] |= res.sliding
                     self.stats.sliding_substeps += 1
-            tangential = np.linalg.norm(lam[:, :2], axis=1)
-            cone_bad = int(np.sum((lam[:, 2] < -1e-9)
-                                  | (tangential > p.friction * lam[:, 2] * (1 + 1e-6) + 1e-6)))
+            tangential = np.sqrt(lam[:, 0] * lam[:, 0] + lam[:, 1] * lam[:, 1])
+            cone_bad = int(((lam[:, 2] < -1e-9)
+                            | (tangential > p.friction * lam[:, 2] * (1 + 1e-6) + 1e-6)).sum())
             if cone_bad:
                 acc['cone'] += cone_bad
                 self.stats.cone_violations += cone_bad
@@ -921,14 +938,14 @@ class PhysicsCycle:
             hold = stance & ~(res.sliding if res.ok else np.zeros(n_c, dtype=bool)) \
                 if self.params.foot_stick else np.zeros(n_c, dtype=bool)
             A_eq = b_eq = None
-            if np.any(hold):
+            if hold.any():
                 target = p.stick_gain * (anchor - pos[:, :2])
                 speed = np.linalg.norm(target, axis=1, keepdims=True)
                 target *= np.minimum(1.0, p.stick_speed / np.maximum(speed, 1e-12))
                 zc = Jc[:, 2, :] @ v_new
                 zc_keep = np.maximum(zc, np.minimum(-pos[:, 2] / dt, p.recovery_speed))
                 A_eq, b_eq = self._stick_rows(Jc, pos[:, :2], target, hold, zc_keep)
-            if np.any(rows) or A_eq is not None:
+            if rows.any() or A_eq is not None:
                 b_all = np.minimum(-zg / dt, p.recovery_speed)
                 d = np.maximum(np.diag(M), 1e-6)
 
@@ -949,7 +966,7 @@ class PhysicsCycle:
                     self.stats.penetration_failures += 1
                     raise _Fallback(f'penetration QP failed ({res_pen.status})')
                 v_new = res_pen.velocity
-            if not (np.all(np.isfinite(v_new)) and np.abs(v_new).max() <= p.max_speed):
+            if not (np.isfinite(v_new).all() and np.abs(v_new).max() <= p.max_speed):
                 raise _Fallback('the simulated state diverged')
             q = pin.integrate(model, q, v_new * dt)
             v = v_new

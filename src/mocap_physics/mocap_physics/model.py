@@ -138,6 +138,11 @@ class PhysicsModel:
         self.guard_frame_ids: Tuple[int, ...] = tuple(guard_ids)
         self.model = model
         self.data = model.createData()
+        lower = np.tril_indices(model.nv, -1)
+        #: flat indices of the lower triangle of an (nv, nv) matrix and of the upper triangle's
+        #: entries that mirror them (Pinocchio fills only the upper triangle of the inertia)
+        self.lower_flat = np.ravel_multi_index(lower, (model.nv, model.nv))
+        self.upper_flat = np.ravel_multi_index(lower[::-1], (model.nv, model.nv))
         self.nq = model.nq
         self.nv = model.nv
         self.joint_ids = tuple(joint_ids)

@@ -277,12 +277,13 @@ class WholeBodyID:
         stance = np.asarray(stance, dtype=bool)
         sliding = np.zeros(self.num_contacts, dtype=bool)
         slide_dir = np.zeros((self.num_contacts, 2))
-        if not np.any(stance):
+        any_stance = bool(stance.any())
+        if not any_stance:
             self._need.clear()                     # flight: no foot carries a history
         res = self._solve(M, h, a_des, Jc, drift, stance, a_ref, xy, sliding, slide_dir,
                           feet, body_mass, gravity, R, weight_scale)
         solves = 1
-        if res is not None and np.any(stance):
+        if res is not None and any_stance:
             lam, r1 = res[1], res[2]
             # a foot slides when its total friction is saturated: one point of a rigid foot
             # at its own pyramid's edge is held by the other one
@@ -311,7 +312,7 @@ class WholeBodyID:
                 self._need[foot] = old + a * ((need if sat[pts].any() else 0.0) - old)
                 if self._need[foot] < self.slide_threshold:
                     sat[pts] = False
-            if np.any(sat):
+            if sat.any():
                 for c in np.flatnonzero(sat):
                     v = velocity[c, :2]
                     speed = float(np.linalg.norm(v))
@@ -372,7 +373,7 @@ class WholeBodyID:
         k = len(act)
         ny = 3 * k + 6
         row_c, row_d = stance_rows(feet, stance, xy, sliding)
-        n_slide = int(np.sum(sliding & stance))
+        n_slide = int((sliding & stance).sum())
         n_dyn = 6 + len(row_c)
         # -- the weights of qdd and of y -------------------------------------------------
         # (floored: the lightest DoFs, e.g. the toes, would make the problem ill-conditioned)
@@ -416,9 +417,8 @@ class WholeBodyID:
         lam[act] = x[nv:nv + 3 * k].reshape(k, 3) * mg
         # solver tolerance must not put a force outside the pyramid (or, sliding, the cone)
         lam[:, 2] = np.maximum(lam[:, 2], 0.0)
-        bound = self.mu_pyramid * lam[:, 2]
-        lam[:, 0] = np.clip(lam[:, 0], -bound, bound)
-        lam[:, 1] = np.clip(lam[:, 1], -bound, bound)
+        bound = (self.mu_pyramid * lam[:, 2])[:, None]
+        lam[:, :2] = np.minimum(np.maximum(lam[:, :2], -bound), bound)
         r_world = x[nv + 3 * k:] * mg
         r = np.concatenate([R.T @ r_world[:3], R.T @ r_world[3:]])   # root frame
         return qdd, lam, r, status
@@ -495,7 +495,7 @@ class WholeBodyID:
         # (LAPACK directly: numpy's and scipy's checked wrappers cost more than the solve)
         L, info = lapack.dpotrf(K, lower=1, clean=0)
         piv = np.abs(L.diagonal())
-        if info != 0 or not np.all(np.isfinite(piv)) or piv.min() ** 2 < 1e-10 * piv.max() ** 2:
+        if info != 0 or not np.isfinite(piv).all() or piv.min() ** 2 < 1e-10 * piv.max() ** 2:
             return None, 'singular'
         sol, info = lapack.dpotrs(L, np.column_stack([F, c]), lower=1)
         if info != 0:
@@ -553,7 +553,7 @@ class WholeBodyID:
             self.last_status = f'daqp error: {exc}'
             return None
         self.last_status = f'daqp {flag}'
-        if flag < 1 or not np.all(np.isfinite(x)):
+        if flag < 1 or not np.isfinite(x).all():
             return None
         return np.asarray(x, dtype=float)
 
