@@ -311,7 +311,7 @@ class PhysicsCycle:
         k, k_s = self.params.free_limb_weight, self.params.stance_leg_weight
         if k == 1.0 and k_s == 1.0:
             return None
-        key = stance.tobytes()
+        key = (k, k_s, stance.tobytes())
         scale = self._scale_cache.get(key)
         if scale is None:              # (a few stance sets; the callers only read it)
             scale = np.full(self.model.nv, k)
@@ -342,7 +342,7 @@ class PhysicsCycle:
             # per leg: its contact points (mask) and its joints' velocity indices (hip to
             # toe), for free_limb_weight
             names, feet = skeleton.joint_names, np.array(model.contact_feet)
-            self._scale_cache: Dict[bytes, np.ndarray] = {}
+            self._scale_cache: Dict[tuple, np.ndarray] = {}
             self._leg_dofs = [
                 (feet == side,
                  np.concatenate([np.arange(3) + model.idx_v[names.index(f'{side}_{j}')]
@@ -857,7 +857,7 @@ class PhysicsCycle:
         for _ in range(n_sub):
             pin.computeAllTerms(model, data, q, v)
             M = data.M.copy()                   # Pinocchio fills the upper triangle
-            M_flat = M.reshape(-1)
+            M_flat = M.reshape(-1)              # (a view: the copy is C-contiguous)
             M_flat[lower] = M_flat[upper]
             h = data.nle.copy()
             pin.forwardKinematics(model, data, q, v, zeros)   # data.a: drift terms

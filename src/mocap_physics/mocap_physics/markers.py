@@ -2,7 +2,7 @@
 
 :func:`friction_cone_lines` gives the geometry (plain numpy, tested on its own);
 :func:`friction_cone_spec` and :func:`friction_cone_marker` wrap it in a marker and
-:func:`floor_transform_msg` writes the floor frame as a geometry_msgs/TransformStamped.
+:func:`floor_transform_msg` writes the floor frame as a serialised geometry_msgs/TransformStamped.
 """
 
 from __future__ import annotations
