@@ -174,6 +174,52 @@ def stance_rows(feet: Sequence[str], stance: np.ndarray, xy: np.ndarray,
     return idx, dirs
 
 
+class _Rows:
+    """The layout of :func:`stance_rows` for one stance and sliding set: the rows along a
+    world axis (``unit_pos`` in the row order, their point ``unit_c`` and axis
+    ``unit_axis``), the rows across a heel-toe line (``normal_pos``, the point ``normal_k``
+    and the foot's first point ``normal_ref`` that the line starts from), the stance points
+    ``act``, the sliding stance points ``n_slide`` and the solver key of the problem."""
+
+    def __init__(self, feet: Sequence[str], stance: np.ndarray, sliding: np.ndarray) -> None:
+        held = np.flatnonzero(stance)
+        # the layout with the points of one foot apart (no degenerate heel-toe line)
+        spread = np.zeros((len(stance), 2))
+        spread[:, 0] = np.arange(len(stance))
+        row_c, row_d = stance_rows(feet, stance, spread, sliding)
+        unit = [(r, c, a) for r, (c, d) in enumerate(zip(row_c, row_d))
+                for a, ax in enumerate((_EX, _EY, _EZ)) if d is ax]
+        first = {}
+        for c in held:
+            first.setdefault(feet[c], int(c))
+        normal = [(r, c, first[feet[c]]) for r, (c, d) in enumerate(zip(row_c, row_d))
+                  if not any(d is ax for ax in (_EX, _EY, _EZ))]
+        self.n_rows = len(row_c)
+        self.unit_pos = np.array([u[0] for u in unit], dtype=int)
+        self.unit_c = np.array([u[1] for u in unit], dtype=int)
+        self.unit_axis = np.array([u[2] for u in unit], dtype=int)
+        self.normal_pos = np.array([n[0] for n in normal], dtype=int)
+        self.normal_k = np.array([n[1] for n in normal], dtype=int)
+        self.normal_ref = np.array([n[2] for n in normal], dtype=int)
+        self.act = held
+        self.n_slide = int((sliding & stance).sum())
+        self.key = (len(held), len(row_c), self.n_slide, tuple(row_c),
+                    tuple(np.flatnonzero(sliding)))
+
+    def normal_directions(self, xy: np.ndarray) -> Optional[np.ndarray]:
+        """(n, 3) the across-the-line directions of the normal rows for the points' ``xy``
+        (C, 2), as :func:`stance_rows` computes them; None when a heel and toe are closer
+        than 1 mm horizontally (stance_rows then leaves that row out)."""
+        out = np.zeros((len(self.normal_pos), 3))
+        for i, (k, c) in enumerate(zip(self.normal_k, self.normal_ref)):
+            lx, ly = float(xy[k, 0] - xy[c, 0]), float(xy[k, 1] - xy[c, 1])
+            length = (lx * lx + ly * ly) ** 0.5
+            if length < 1e-3:
+                return None
+            out[i, 0], out[i, 1] = -ly / length, lx / length
+        return out
+
+
 class WholeBodyID:
     """The whole-body inverse-dynamics QP (module docstring), one instance per cycle.
 
@@ -242,6 +288,7 @@ class WholeBodyID:
         self.last_status = ''
         self._feet_key: Optional[tuple] = None
         self._by_foot: dict = {}
+        self._structures: dict = {}
 
     def reset(self) -> None:
         """Forget the previous forces (smoothness term) and the warm starts."""
@@ -338,14 +385,30 @@ class WholeBodyID:
                               solve_time=elapsed, solves=solves)
         qdd, lam, r, status = res
         weight = body_mass * gravity
-        saturated = bool((self.residual_bound > 0 and np.any(
-            np.abs(r[:3]) >= weight * self.residual_bound * (1 - 1e-3)))
-            or (self.residual_moment_bound > 0 and np.any(
-                np.abs(r[3:]) >= weight * self.residual_moment_bound * (1 - 1e-3))))
+        reach = np.abs(r)
+        saturated = bool((self.residual_bound > 0 and
+                          reach[:3].max() >= weight * self.residual_bound * (1 - 1e-3))
+                         or (self.residual_moment_bound > 0 and
+                             reach[3:].max() >= weight * self.residual_moment_bound * (1 - 1e-3)))
         tau = M[6:] @ qdd + h[6:] - np.einsum('cin,ci->n', Jc[:, :, 6:], lam)
         self._prev = lam.copy()
         return WbidResult(qdd, tau, lam, r, stance, sliding, saturated, True, status,
                           elapsed, solves)
+
+    def _structure(self, feet: Sequence[str], stance: np.ndarray,
+                   sliding: np.ndarray) -> '_Rows':
+        """The stance rows' layout for this stance and sliding set (:class:`_Rows`), kept
+        per set: which point and world axis each row of :func:`stance_rows` reads, and which
+        rows are across a heel-toe line (their direction is the only part that changes from
+        one sub-step to the next)."""
+        cache_key = (tuple(feet), stance.tobytes(), sliding.tobytes())
+        st = self._structures.get(cache_key)
+        if st is None:
+            st = _Rows(feet, stance, sliding)
+            if len(self._structures) >= 64:
+                self._structures.clear()
+            self._structures[cache_key] = st
+        return st
 
     def _foot_points(self, feet: Sequence[str]) -> dict:
         """{foot: (n,) int indices of its contact points}, cached per ``feet``."""
@@ -369,12 +432,13 @@ class WholeBodyID:
         nv = self.nv
         C = self.num_contacts
         mg = body_mass * gravity
-        act = np.flatnonzero(stance)
-        k = len(act)
+        st = self._structure(feet, stance, sliding)
+        act, k, n_slide, key = st.act, len(st.act), st.n_slide, st.key
         ny = 3 * k + 6
-        row_c, row_d = stance_rows(feet, stance, xy, sliding)
-        n_slide = int((sliding & stance).sum())
-        n_dyn = 6 + len(row_c)
+        normals = st.normal_directions(xy)
+        if normals is None:             # heel and toe over one another: as stance_rows says
+            row_c, row_d = stance_rows(feet, stance, xy, sliding)
+        n_dyn = 6 + st.n_rows if normals is not None else 6 + len(row_c)
         # -- the weights of qdd and of y -------------------------------------------------
         # (floored: the lightest DoFs, e.g. the toes, would make the problem ill-conditioned)
         w = np.maximum(np.diag(M) / body_mass, 1e-3)
@@ -396,13 +460,22 @@ class WholeBodyID:
         F[:3, 3 * k:3 * k + 3] = -gravity * R.T
         F[3:6, 3 * k + 3:] = -gravity * R.T
         e[:6] = -h[:6] / body_mass
-        if row_c:
+        if normals is not None:
+            # a row along a world axis is that axis' row of the point's Jacobian (the
+            # product with a unit vector, exactly)
+            rhs = a_ref - drift
+            E[6 + st.unit_pos] = Jc[st.unit_c, st.unit_axis]
+            e[6 + st.unit_pos] = rhs[st.unit_c, st.unit_axis]
+            if len(normals):
+                E[6 + st.normal_pos] = np.einsum('ri,rin->rn', normals, Jc[st.normal_k])
+                e[6 + st.normal_pos] = np.einsum('ri,ri->r', normals, rhs[st.normal_k])
+        elif row_c:
             d = np.asarray(row_d)
             E[6:] = np.einsum('ri,rin->rn', d, Jc[row_c])
             e[6:] = np.einsum('ri,ri->r', d, a_ref[row_c] - drift[row_c])
+            key = (k, len(row_c), n_slide, tuple(row_c), tuple(np.flatnonzero(sliding)))
         # -- rows on y alone: kinetic friction (equalities), pyramid and bounds ------------
         A_y, S_y, lo, up = self._y_rows(act, sliding, slide_dir)
-        key = (k, len(row_c), n_slide, tuple(row_c), tuple(np.flatnonzero(sliding)))
         x = None
         if self.condensed and daqp is not None:
             x, status = self._solve_condensed(key, w, a_des, E, F, e, hy, gy, A_y, lo, up,
@@ -432,10 +505,12 @@ class WholeBodyID:
         them. Cached per stance set when nothing slides (the rows are then constant).
         """
         k = len(act)
+        if not sliding.any():
+            rows = self._rows_cache.get((k, ()))
+            if rows is not None:
+                return rows
         slide_pts = [i for i, c in enumerate(act) if sliding[c]]
         cache_key = (k, tuple(slide_pts))
-        if not slide_pts and cache_key in self._rows_cache:
-            return self._rows_cache[cache_key]
         n_slide = len(slide_pts)
         ny = 3 * k + 6
         m = 2 * n_slide + 5 * (k - n_slide) + n_slide + 6

@@ -415,6 +415,46 @@ def test_stance_rows_of_a_rigid_foot():
     assert sorted(idx) == [0, 1]
 
 
+def test_the_kept_row_layout_gives_the_stance_rows_exactly():
+    """The QP's stance rows are built from a layout kept per stance and sliding set
+    (``_Rows``): for every such set of two rigid feet and random positions, the rows and
+    values are those of :func:`stance_rows` taken as they are, bit for bit; a heel and toe
+    over one another (no line between them) leave that row out as stance_rows does."""
+    import itertools
+
+    from mocap_physics.wbid import _Rows
+    feet = ('left', 'left', 'right', 'right')
+    rng = np.random.default_rng(5)
+    for bits in itertools.product([0, 1], repeat=8):
+        stance = np.array(bits[:4], bool)
+        sliding = np.array(bits[4:], bool) & stance
+        if not np.array_equal(np.array(bits[4:], bool), sliding):
+            continue
+        layout = _Rows(feet, stance, sliding)
+        for trial in range(3):
+            xy = rng.normal(scale=0.2, size=(4, 2))
+            if trial == 2:
+                xy[1] = xy[0] + 1e-4                 # the left toe over the heel
+            J = rng.normal(size=(4, 3, 9))
+            rhs = rng.normal(size=(4, 3))
+            idx, dirs = stance_rows(feet, stance, xy, sliding)
+            want_E = np.einsum('ri,rin->rn', np.asarray(dirs).reshape(-1, 3), J[idx])
+            want_e = np.einsum('ri,ri->r', np.asarray(dirs).reshape(-1, 3), rhs[idx])
+            normals = layout.normal_directions(xy)
+            if normals is None:
+                assert trial == 2 and stance[0] and stance[1] and not sliding[1]
+                continue
+            assert layout.n_rows == len(idx)
+            E, e = np.zeros((len(idx), 9)), np.zeros(len(idx))
+            E[layout.unit_pos] = J[layout.unit_c, layout.unit_axis]
+            e[layout.unit_pos] = rhs[layout.unit_c, layout.unit_axis]
+            if len(normals):
+                E[layout.normal_pos] = np.einsum('ri,rin->rn', normals, J[layout.normal_k])
+                e[layout.normal_pos] = np.einsum('ri,ri->r', normals, rhs[layout.normal_k])
+            assert np.array_equal(E, want_E) and np.array_equal(e, want_e)
+            assert layout.key[3] == tuple(idx)
+
+
 def test_runs_are_bit_identical(skeleton):
     """The default solver gives the same bits on every run (mocap process is deterministic)."""
     rng = np.random.default_rng(3)
