@@ -305,7 +305,7 @@ class PenetrationQP:
                                        np.zeros(n, dtype=np.int32))
         except Exception as exc:  # noqa: BLE001 - a solver error is a failure
             return None, None, f'daqp error: {exc}'
-        if flag < 1 or not np.all(np.isfinite(y)):
+        if flag < 1 or not np.isfinite(y).all():
             return None, None, f'daqp {flag}'
         return np.asarray(y, dtype=float), osqp.SolverStatus.OSQP_SOLVED, 'daqp solved'
 
@@ -375,15 +375,15 @@ class PenetrationQP:
         m, m_eq = A.shape[0], E.shape[0]
         slack = A @ v - b
         eq_res = E @ v - e
-        if (m == 0 or np.all(slack >= -self.tolerance)) and \
-                (m_eq == 0 or np.all(np.abs(eq_res) <= self.tolerance)):
+        if (m == 0 or (slack >= -self.tolerance).all()) and \
+                (m_eq == 0 or (np.abs(eq_res) <= self.tolerance).all()):
             return PenetrationResult(v.copy(), np.zeros(m + m_eq))
         G = np.concatenate([A, E]) if m_eq else A
         q = np.concatenate([slack, eq_res]) if m_eq else slack
         WinvGt = G.T.copy() if solve_metric is None else solve_metric(G.T)
         D = G @ WinvGt
         D = 0.5 * (D + D.T)
-        D.flat[::D.shape[0] + 1] += 1e-10 * max(np.trace(D), 1e-12)
+        D.reshape(-1)[::D.shape[0] + 1] += 1e-10 * max(D.trace(), 1e-12)
         t0 = time.perf_counter()
         status_val, y, status_text = None, None, 'daqp missing'
         def violation(vel: np.ndarray) -> float:
@@ -418,20 +418,20 @@ class PenetrationQP:
                 status_text = f'{status_text}, then {_status_name(status_val)}'
             except Exception as exc:
                 status_val, y, status_text = None, None, f'{status_text}, then error: {exc}'
-        if status_val not in _OSQP_OK or y is None or not np.all(np.isfinite(y)):
+        if status_val not in _OSQP_OK or y is None or not np.isfinite(y).all():
             # second chance: Clarabel on the same dual (scaled the same way)
             try:
                 y, text = self._clarabel(scale * D, q, m_eq)
             except Exception as exc:  # pragma: no cover - solver errors are failures
                 y, text = None, f'clarabel error: {exc}'
             status_text = f'{status_text}, then {text}'
-            if y is not None and np.all(np.isfinite(y)):
+            if y is not None and np.isfinite(y).all():
                 status_val = osqp.SolverStatus.OSQP_SOLVED
                 self.second_chances += 1
         dt = time.perf_counter() - t0
         self.solves += 1
         viol0 = float(max(0.0, -slack.min(initial=0.0), np.abs(eq_res).max(initial=0.0)))
-        if status_val not in _OSQP_OK or y is None or not np.all(np.isfinite(y)):
+        if status_val not in _OSQP_OK or y is None or not np.isfinite(y).all():
             self.failures += 1
             return PenetrationResult(v.copy(), np.zeros(m + m_eq), ok=False, status=status_text,
                                      solved=True, solve_time=dt, max_violation=viol0)
