@@ -31,9 +31,10 @@ the BlazePose way, per person:
   number) frames and the finer squares, many more, are all scanned only every
   ``detection_interval`` x (their number + twice that of the coarse regions) frames: about
   5 s on a 640 x 360 video while nobody is followed, over a minute at the longest interval
-  while somebody is. While whole rounds of the coarse regions find nobody new
-  the interval doubles, up to ``max_detection_interval``, and it drops back as soon as someone
-  new is found or a window ends. Once a whole round of regions at the longest interval has
+  while somebody is. While whole rounds of the coarse regions find nobody new (the looks where
+  the picture changed, below, are not searches of such a round) the interval doubles, up to
+  ``max_detection_interval``, and it drops back as soon as someone new is found or a window
+  ends. Once a whole round of regions at the longest interval has
   found nobody new, a due search is skipped while nothing has changed outside the people
   followed since the last search (:func:`changed_outside`: a grey copy of the image about
   160 px wide, the people's boxes then and now left out), but one is made at least every
@@ -170,10 +171,11 @@ CHANGE_WIDTH = 160
 #: clothes change when they move (measured on rendered walkers 180 px high in a 1280 x 720
 #: video, five frames apart: patches 50-90 px high).
 GUIDED_GROWTH = (1.0, 2.0, 3.0)
-#: After this many such looks in a row that found nobody new, the search keeps to its cycle
-#: for a round of the coarse regions (twice their number where finer squares take turns) and
-#: one search more, so that something moving that is nobody (leaves, a screen) takes at most
-#: this many of every ``2 x this + round + 1`` searches.
+#: After this many such looks that found nobody new (with no search finding anyone in between),
+#: the search keeps to its cycle for a round of the coarse regions (twice their number where
+#: finer squares take turns) and one search more, so that something moving that is nobody
+#: (leaves, a screen) takes at most this many of every ``2 x this + round + 1`` searches while
+#: nobody new comes.
 GUIDED_MAX_MISSES = 2 * len(GUIDED_GROWTH)
 #: A change over more than this share of that whole grey copy (counted outside the people
 #: followed) has no one place to look at (:func:`changed_patch`): the camera moved or the
@@ -436,10 +438,12 @@ class BlazePoseMultiDetector:
         #: the last search looked where the picture changed (the next keeps to the cycle)
         self._guided_last = False
         #: the next such search's region, as a multiple of the size the change asks for
-        #: (:data:`GUIDED_GROWTH`: grown after each look that found nobody new)
+        #: (:data:`GUIDED_GROWTH`: grown after each look that found nobody new; back to the
+        #: first when any search finds someone new or the last window ends)
         self._growth = 0
-        #: such looks in a row that found nobody new, and the searches left that keep to the
-        #: cycle after :data:`GUIDED_MAX_MISSES` of them (something that moves is no person)
+        #: such looks that found nobody new since any search last found someone (or the last
+        #: window ended), and the searches left that keep to the cycle after
+        #: :data:`GUIDED_MAX_MISSES` of them (something that moves is no person)
         self._misses = 0
         self._guided_pause = 0
         #: this frame's small grey image and its scale (:meth:`_small`; cleared each frame)
@@ -586,11 +590,17 @@ class BlazePoseMultiDetector:
                 if len(self._windows) + len(new) >= self.max_persons:
                     break
                 new.append(kp)
+            if new:
+                # whoever found them, the next change is another person's: its looks start
+                # at the patch's own size and with no misses counted (a pause under way goes
+                # on: what moved and was nobody is still there)
+                self._growth = self._misses = 0
             if region is not None:
                 self.guided_searches += 1
                 self.found_guided += len(new)
-                self._growth = 0 if new else (self._growth + 1) % len(GUIDED_GROWTH)
-                self._misses = 0 if new else self._misses + 1
+                if not new:
+                    self._growth = (self._growth + 1) % len(GUIDED_GROWTH)
+                    self._misses += 1
                 if self._misses >= GUIDED_MAX_MISSES:
                     # a change that is nobody (leaves, a screen, a reflection): a round of
                     # the cycle's regions before the next such look
@@ -603,7 +613,7 @@ class BlazePoseMultiDetector:
             for kp in new:
                 self._open(kp, w, h, whole=alone and self._large(kp, w, h))
             people += new
-            self._back_off(len(new), self.search_regions(w, h)[1])
+            self._back_off(len(new), self.search_regions(w, h)[1], guided=region is not None)
             self._searched(rgb)
         self._settle_whole(w, h)
         self._frame += 1
@@ -727,14 +737,18 @@ class BlazePoseMultiDetector:
                 best, key = r, k
         return best
 
-    def _back_off(self, opened: int, regions: int) -> None:
+    def _back_off(self, opened: int, regions: int, guided: bool = False) -> None:
         """After a detection: someone new resets the interval to ``detection_interval``; a
-        whole round of regions with nobody new doubles it, up to ``max_detection_interval``
-        (a scene that stays the same costs little; a window that ends resets it too). A round
-        is counted in searches, the looks where the picture changed among them, so with those
-        looks it covers fewer of the cycle's regions."""
+        whole round of the coarse regions (``regions`` searches of the cycle, twice their
+        number where finer squares take turns: :meth:`search_regions`) with nobody new doubles
+        it, up to ``max_detection_interval`` (a scene that stays the same costs little; a
+        window that ends resets it too). A look where the picture changed (``guided``) that
+        found nobody is not one of the round's searches: the round covers every coarse
+        region however many such looks come between them."""
         if opened:
             self._search_soon()
+            return
+        if guided:
             return
         self._quiet += 1
         if self._quiet >= regions:
@@ -937,6 +951,10 @@ class BlazePoseMultiDetector:
         win.landmarker.close()
         self._windows.remove(win)
         self._search_soon()
+        if not self._windows:
+            # nobody followed: the looks where the picture changed start afresh with the
+            # next person (their sizes, misses and pause were about the scene before)
+            self._growth = self._misses = self._guided_pause = 0
 
     def _search_soon(self) -> None:
         """Back to the shortest search interval, and a full round of regions before any

@@ -385,3 +385,38 @@ def test_something_that_moves_and_is_nobody_takes_few_searches(clip_frames):
         assert det.guided_searches <= GUIDED_MAX_MISSES * cycles, \
             (det.guided_searches, det.detections, per_round)
         assert np.mean(np.array(followed[5:]) == 1) >= 0.95
+
+
+def test_looks_where_the_picture_changed_are_not_searches_of_the_round():
+    """The interval doubles after a whole round of the coarse regions found nobody new; the
+    looks where the picture changed that come between them (every other search at most) do
+    not count as the round's searches, so a round still covers every coarse region."""
+    with BlazePoseMultiDetector() as det:
+        regions = det.search_regions(640, 360)[1]
+        start = det._interval
+        for _ in range(regions - 1):
+            det._back_off(0, regions)
+            det._back_off(0, regions, guided=True)
+        assert det._interval == start              # one region of the round still to come
+        det._back_off(0, regions, guided=True)
+        assert det._interval == start
+        det._back_off(0, regions)
+        assert det._interval == min(2 * start, det.max_detection_interval)
+        det._back_off(1, regions, guided=True)     # someone new, however found
+        assert det._interval == det.detection_interval
+
+
+def test_the_looks_start_afresh_when_nobody_is_followed(clip_frames):
+    """The sizes, misses and pause of the looks where the picture changed were about the
+    scene before: when the last window ends they start afresh."""
+    frames = [f.image for f in clip_frames]
+    with BlazePoseMultiDetector() as det:
+        for image in frames[:10]:
+            det.detect(image)
+        assert len(det._windows) == 1
+        det._growth, det._misses, det._guided_pause = 2, 3, 5
+        grey = np.full_like(frames[0], 110)
+        for _ in range(det.max_missed + 2):
+            det.detect(grey)
+        assert not det._windows
+        assert (det._growth, det._misses, det._guided_pause) == (0, 0, 0)
