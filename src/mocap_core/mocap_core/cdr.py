@@ -33,8 +33,9 @@ from std_msgs.msg import Header
 from .pose import Pose
 from .rotations import matrix_to_quat
 from .ros_conversions import (KEYPOINT_ID_FIELD, POSITION_FIELDS, DecodedMotion, MessageError,
-                              bodies_cloud_values, cloud_values, contact_values,
-                              effort_values, pose_marker_specs, positions_cloud_values)
+                              bodies_cloud_values, bone_lengths_values, cloud_values,
+                              contact_values, effort_values, pose_marker_specs,
+                              positions_cloud_values)
 from .skeleton import CONTACT_POINT_NAMES
 from .topics import body_name
 from .urdf import revolute_joint_names
@@ -316,17 +317,8 @@ def pose_to_joint_state(pose: Pose, header, efforts: Optional[np.ndarray] = None
 def bodies_bone_lengths_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header) -> bytes:
     """As :func:`mocap_core.ros_conversions.bodies_bone_lengths_to_msg`, serialised (the
     same ValueError for a wrong number of lengths)."""
-    from .skeleton import BONE_GROUP_NAMES
-    names: list = []
-    values: list = []
-    for pid, lengths in bodies:
-        lengths = np.asarray(lengths, dtype=np.float64).ravel()
-        if len(lengths) != len(BONE_GROUP_NAMES):
-            raise ValueError(f'expected {len(BONE_GROUP_NAMES)} bone-group lengths, got '
-                             f'{len(lengths)}')
-        names += [f'{body_name(pid)}/{n}' for n in BONE_GROUP_NAMES]
-        values.append(lengths)
-    return _joint_state(header, names, np.concatenate(values) if values else np.zeros(0))
+    names, values = bone_lengths_values(bodies)
+    return _joint_state(header, names, values)
 
 
 def contacts_to_msg(probabilities, header) -> bytes:

@@ -548,17 +548,29 @@ def bodies_bone_lengths_to_msg(bodies: Sequence[Tuple[int, np.ndarray]], header:
     -> one JointState: names ``body_<id>/<group>``, ``position`` the lengths. The lifter's
     held skeletons, the signature by which the keypoint node's tracker names a returning
     person (:data:`topics.BODIES_BONE_LENGTHS`)."""
-    from .skeleton import BONE_GROUP_NAMES
+    names, values = bone_lengths_values(bodies)
     msg = JointState()
     msg.header = header
+    msg.name = names
+    msg.position = [float(x) for x in values]
+    return msg
+
+
+def bone_lengths_values(bodies: Sequence[Tuple[int, np.ndarray]]
+                        ) -> Tuple[List[str], np.ndarray]:
+    """The names ``body_<id>/<group>`` and (N,) lengths (m) of
+    :func:`bodies_bone_lengths_to_msg`; ValueError for a wrong number of lengths."""
+    from .skeleton import BONE_GROUP_NAMES
+    names: List[str] = []
+    values = []
     for pid, lengths in bodies:
         lengths = np.asarray(lengths, dtype=np.float64).ravel()
         if len(lengths) != len(BONE_GROUP_NAMES):
             raise ValueError(f'expected {len(BONE_GROUP_NAMES)} bone-group lengths, got '
                              f'{len(lengths)}')
-        msg.name.extend(_body_prefix(pid) + n for n in BONE_GROUP_NAMES)
-        msg.position.extend(float(x) for x in lengths)
-    return msg
+        names += [_body_prefix(pid) + n for n in BONE_GROUP_NAMES]
+        values.append(lengths)
+    return names, (np.concatenate(values) if values else np.zeros(0))
 
 
 def msg_to_bodies_bone_lengths(msg: JointState) -> List[Tuple[int, np.ndarray]]:

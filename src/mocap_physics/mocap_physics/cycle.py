@@ -89,7 +89,7 @@ from .foot import TEMPLATE_FLAT_FOOT_PITCH_DEG
 from .model import GRAVITY, PhysicsModel
 from .qp import GrfQP, PenetrationQP
 from .results import CycleStats, FootWrench, FrameResult
-from .wbid import WholeBodyID
+from .wbid import WholeBodyID, across_line
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -1049,11 +1049,10 @@ def stick_rows(contact_feet: Sequence[str], Jc: np.ndarray, xy: np.ndarray,
         for k in held:
             if k == c or feet[k] != feet[c] or k in done:
                 continue
-            lx, ly = float(xy[k, 0] - xy[c, 0]), float(xy[k, 1] - xy[c, 1])
-            length = (lx * lx + ly * ly) ** 0.5
-            if length < 1e-3:
+            n = across_line(xy, c, k)
+            if n is None:
                 continue
-            px, py = -ly / length, lx / length
+            px, py = n
             rows.append(px * Jc[k, 0] + py * Jc[k, 1])
             vals.append(px * target[k, 0] + py * target[k, 1])
             done.add(k)

@@ -127,6 +127,16 @@ class WbidResult:
 _EX, _EY, _EZ = np.eye(3)
 
 
+def across_line(xy: np.ndarray, c: int, k: int) -> Optional[Tuple[float, float]]:
+    """The horizontal unit normal (x, y) of the line from point ``c`` to point ``k`` of one
+    foot (``xy``: (C, 2) m), or None when they are less than 1 mm apart horizontally."""
+    lx, ly = float(xy[k, 0] - xy[c, 0]), float(xy[k, 1] - xy[c, 1])
+    length = (lx * lx + ly * ly) ** 0.5
+    if length < 1e-3:
+        return None
+    return -ly / length, lx / length
+
+
 def stance_rows(feet: Sequence[str], stance: np.ndarray, xy: np.ndarray,
                 free_tangent: np.ndarray) -> Tuple[list, list]:
     """The (point, direction) pairs of the stance acceleration rows.
@@ -165,12 +175,11 @@ def stance_rows(feet: Sequence[str], stance: np.ndarray, xy: np.ndarray,
                 idx += [k, k]
                 dirs += [ex, ey]
                 continue
-            lx, ly = float(xy[k, 0] - xy[c, 0]), float(xy[k, 1] - xy[c, 1])
-            length = (lx * lx + ly * ly) ** 0.5
-            if length < 1e-3:
+            n = across_line(xy, c, k)
+            if n is None:
                 continue
             idx.append(k)
-            dirs.append(np.array([-ly / length, lx / length, 0.0]))
+            dirs.append(np.array([n[0], n[1], 0.0]))
     return idx, dirs
 
 
@@ -212,11 +221,10 @@ class _Rows:
         than 1 mm horizontally (stance_rows then leaves that row out)."""
         out = np.zeros((len(self.normal_pos), 3))
         for i, (k, c) in enumerate(zip(self.normal_k, self.normal_ref)):
-            lx, ly = float(xy[k, 0] - xy[c, 0]), float(xy[k, 1] - xy[c, 1])
-            length = (lx * lx + ly * ly) ** 0.5
-            if length < 1e-3:
+            n = across_line(xy, c, k)
+            if n is None:
                 return None
-            out[i, 0], out[i, 1] = -ly / length, lx / length
+            out[i, :2] = n
         return out
 
 
